@@ -1,0 +1,182 @@
+"""Artifact checks and atomic output writing.
+
+Every figure rule writes ``paper_figures/<artifact>.json``::
+
+    {"artifact": "fig03_residual_acf", "files": ["fig03_residual_acf.png", ...],
+     "metrics": {...}, "checks": [{"id": ..., "kind": ..., "statement": ..., "expected": ...,
+                                   "observed": ..., "passed": ...}]}
+
+``kind`` is ``validity`` (the artifact is sound; a failure fails the rule), ``claim`` (a
+statement of the paper, reported honestly, never failing the run) or ``crosscheck`` (agreement
+with the authors' R code on the same inputs).
+
+Writes are atomic: a temporary file in the target folder, then :func:`os.replace`, so a
+killed job never leaves a half-written output behind.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dtwin._validation import DtwinValueError
+
+__all__ = [
+    "CHECK_KINDS",
+    "Check",
+    "ArtifactValidityError",
+    "validity_finite",
+    "validity_files_nonempty",
+    "atomic_write",
+    "write_csv",
+    "write_json",
+    "write_artifact",
+    "to_jsonable",
+]
+
+CHECK_KINDS: tuple[str, ...] = ("validity", "claim", "crosscheck")
+
+
+class ArtifactValidityError(DtwinValueError):
+    """An artifact failed one of its validity checks."""
+
+
+@dataclass(frozen=True)
+class Check:
+    """One check of an artifact (see the module docstring for the JSON shape)."""
+
+    id: str
+    kind: str
+    statement: str
+    expected: Any
+    observed: Any
+    passed: bool
+
+    def __post_init__(self) -> None:
+        if self.kind not in CHECK_KINDS:
+            raise DtwinValueError(f"check kind must be one of {CHECK_KINDS} (got {self.kind!r})")
+
+
+def validity_finite(check_id: str, what: str, values: Any) -> Check:
+    """Return a validity check that ``values`` (array-like or DataFrame) are all finite."""
+    array = np.asarray(values, dtype=float)
+    n_bad = int((~np.isfinite(array)).sum())
+    return Check(
+        id=check_id,
+        kind="validity",
+        statement=f"{what} are all finite",
+        expected="0 non-finite values",
+        observed=f"{n_bad} non-finite of {array.size}",
+        passed=n_bad == 0 and array.size > 0,
+    )
+
+
+def validity_files_nonempty(paths: Iterable[str | os.PathLike]) -> Check:
+    """Return a validity check that every file exists and is non-empty."""
+    sizes = {Path(p).name: (Path(p).stat().st_size if Path(p).exists() else 0) for p in paths}
+    return Check(
+        id="files_nonempty",
+        kind="validity",
+        statement="every output file exists and is non-empty",
+        expected="size > 0 bytes",
+        observed=sizes,
+        passed=bool(sizes) and all(size > 0 for size in sizes.values()),
+    )
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[str], None]) -> None:
+    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it to ``path``.
+
+    The temporary file keeps ``path``'s suffix so writers that infer the format from the
+    name (matplotlib) behave. On any error the temporary file is removed.
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    handle, tmp_path = tempfile.mkstemp(
+        dir=target.parent, prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}"
+    )
+    os.close(handle)
+    try:
+        write(tmp_path)
+        os.replace(tmp_path, target)
+    except BaseException:
+        if os.path.exists(tmp_path):
+            os.remove(tmp_path)
+        raise
+
+
+def write_csv(table: pd.DataFrame, path: str | os.PathLike, float_format: str = "%.12g") -> None:
+    """Write ``table`` as CSV atomically, without index, floats with 12 significant digits."""
+    atomic_write(path, lambda tmp: table.to_csv(tmp, index=False, float_format=float_format))
+
+
+def to_jsonable(value: Any) -> Any:
+    """Convert numpy scalars/arrays, tuples and non-finite floats to plain JSON values.
+
+    Non-finite floats become ``None`` (JSON has no NaN), so the files stay strict JSON.
+    """
+    if isinstance(value, Mapping):
+        return {str(key): to_jsonable(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_jsonable(item) for item in value]
+    if isinstance(value, np.ndarray):
+        return to_jsonable(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        return value if math.isfinite(value) else None
+    return value
+
+
+def write_json(payload: Mapping[str, Any], path: str | os.PathLike) -> None:
+    """Write ``payload`` as indented, key-ordered strict JSON, atomically."""
+    text = json.dumps(to_jsonable(payload), indent=2, allow_nan=False) + "\n"
+
+    def write(tmp: str) -> None:
+        Path(tmp).write_text(text, encoding="utf-8")
+
+    atomic_write(path, write)
+
+
+def write_artifact(
+    path: str | os.PathLike,
+    artifact: str,
+    files: Sequence[str | os.PathLike],
+    metrics: Mapping[str, Any],
+    checks: Sequence[Check],
+) -> dict[str, Any]:
+    """Write the artifact JSON and raise if a validity check failed.
+
+    A files-non-empty validity check is appended automatically. The JSON is written in every
+    case (so the failing numbers can be read), then :class:`ArtifactValidityError` is raised
+    for failed validity checks, which makes Snakemake fail the job and remove its outputs.
+
+    Returns
+    -------
+    dict
+        The payload that was written.
+    """
+    all_checks = [*checks, validity_files_nonempty(files)]
+    payload = {
+        "artifact": artifact,
+        "files": [Path(f).name for f in files],
+        "metrics": dict(metrics),
+        "checks": [asdict(check) for check in all_checks],
+    }
+    write_json(payload, path)
+    failed = [c.id for c in all_checks if c.kind == "validity" and not c.passed]
+    if failed:
+        raise ArtifactValidityError(f"{artifact}: validity check(s) failed: {', '.join(failed)}")
+    return to_jsonable(payload)

@@ -1,0 +1,252 @@
+"""The physical asset: five discrete modules and the simulator (paper §3.1; REFERENCE.md §1).
+
+Every module applies its input with a one-sample delay (``u[k-1]`` drives step ``k``), as the
+paper's equations and the authors' R code do. Arrays are time-first, shape ``(n_steps,)``.
+
+Random draws happen in module order with one generator, always as standard normals scaled by
+the noise standard deviation, so the stream does not depend on the noise levels:
+M0 ``n−1`` draws, M1 ``n−1``, M2a ``n``, M2b ``n`` (the R code's order; numpy cannot replay
+R's stream itself).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+import pandas as pd
+from scipy.signal import lfilter
+
+from dtwin._validation import DtwinValueError, require_finite_array, require_min_length
+from dtwin.command import time_axis
+from dtwin.params import TwinParams
+from dtwin.wiring import MODULES, SIGNALS
+
+__all__ = [
+    "lag_coefficient",
+    "actuator_lpf",
+    "plant_msd",
+    "PlantTrajectory",
+    "sensor_first_order",
+    "fuse",
+    "kpi",
+    "backward_velocity",
+    "simulate_physics",
+]
+
+
+class PlantTrajectory(NamedTuple):
+    """Plant states, each shape ``(n_steps,)``: position ``x`` (m) and velocity ``v`` (m/s)."""
+
+    x: np.ndarray
+    v: np.ndarray
+
+
+def lag_coefficient(tau: float, dt: float) -> float:
+    """Return the exact-discrete first-order lag coefficient ``a = exp(−dt/τ)``."""
+    return float(np.exp(-dt / tau))
+
+
+def _noise_or_zeros(noise: np.ndarray | None, n_steps: int, name: str) -> np.ndarray:
+    if noise is None:
+        return np.zeros(n_steps)
+    noise = require_finite_array(name, noise)
+    if noise.shape != (n_steps,):
+        raise DtwinValueError(f"{name} must have shape ({n_steps},) (got {noise.shape})")
+    return noise
+
+
+def _delayed_lowpass(u: np.ndarray, a: float) -> np.ndarray:
+    """``y[0] = 0``, ``y[k] = a·y[k−1] + (1−a)·u[k−1]``, as one linear filter."""
+    return lfilter([0.0, 1.0 - a], [1.0, -a], u)
+
+
+def actuator_lpf(
+    u_cmd: np.ndarray, tau: float, dt: float, process_noise: np.ndarray | None = None
+) -> np.ndarray:
+    """Return the realised actuation ``u_act`` of M0, shape ``(n_steps,)``.
+
+    Parameters
+    ----------
+    u_cmd : array, shape (n_steps,)
+        Command.
+    tau : float
+        Time constant, s.
+    dt : float
+        Sample period, s.
+    process_noise : array, shape (n_steps,), optional
+        ``w_k`` added at step k (element 0 is unused because ``u_act[0] = 0``).
+
+    Notes
+    -----
+    Paper §3.1 M0: ``u_act,k = a·u_act,k−1 + (1−a)·u_cmd,k−1 + w_k``, ``a = exp(−dt/τ)``,
+    ``u_act,1 = 0``.
+
+    Examples
+    --------
+    >>> y = actuator_lpf(np.ones(4), tau=0.15, dt=0.02)
+    >>> np.round(y, 4).tolist()
+    [0.0, 0.1248, 0.2341, 0.3297]
+    """
+    u_cmd = require_finite_array("u_cmd", u_cmd)
+    noise = _noise_or_zeros(process_noise, len(u_cmd), "process_noise").copy()
+    noise[0] = 0.0
+    a = lag_coefficient(tau, dt)
+    return _delayed_lowpass(u_cmd, a) + lfilter([1.0], [1.0, -a], noise)
+
+
+def plant_msd(
+    u_act: np.ndarray,
+    m: float,
+    c: float,
+    k: float,
+    dt: float,
+    accel_noise: np.ndarray | None = None,
+) -> PlantTrajectory:
+    """Return position and velocity of the M1 mass-spring-damper under explicit Euler.
+
+    Parameters
+    ----------
+    u_act : array, shape (n_steps,)
+        Force input (N).
+    m, c, k : float
+        Mass (kg), viscous damping (N·s/m), stiffness (N/m).
+    dt : float
+        Sample period, s.
+    accel_noise : array, shape (n_steps,), optional
+        ``ξ_k`` added to the acceleration of step k (element 0 unused), m/s².
+
+    Notes
+    -----
+    Paper §3.1 M1: ``a_{k−1} = (u_{k−1} − c·v_{k−1} − k·x_{k−1})/m + ξ_k``,
+    ``v_k = v_{k−1} + dt·a_{k−1}``, ``x_k = x_{k−1} + dt·v_{k−1}`` (position uses the old
+    velocity), ``x_1 = v_1 = 0``. Noise-free this is the difference equation
+    ``x_k = (2 − c·dt/m)·x_{k−1} − (1 − c·dt/m + k·dt²/m)·x_{k−2} + dt²/m·u_{k−2}``.
+    """
+    u_act = require_finite_array("u_act", u_act)
+    n_steps = len(u_act)
+    noise = _noise_or_zeros(accel_noise, n_steps, "accel_noise")
+    x = np.zeros(n_steps)
+    v = np.zeros(n_steps)
+    for step in range(1, n_steps):
+        accel = (u_act[step - 1] - c * v[step - 1] - k * x[step - 1]) / m + noise[step]
+        v[step] = v[step - 1] + dt * accel
+        x[step] = x[step - 1] + dt * v[step - 1]
+    return PlantTrajectory(x=x, v=v)
+
+
+def sensor_first_order(
+    x: np.ndarray,
+    tau: float,
+    dt: float,
+    bias: float = 0.0,
+    measurement_noise: np.ndarray | None = None,
+) -> np.ndarray:
+    """Return a sensor reading of M2a/M2b, shape ``(n_steps,)``.
+
+    Notes
+    -----
+    Paper §3.1 M2: ``ỹ_k = a_s·ỹ_{k−1} + (1−a_s)·x_{k−1}``, ``ỹ_1 = 0``, then
+    ``y_k = ỹ_k + b_s + ε_k`` (so ``y_1 = b_s + ε_1``).
+    """
+    x = require_finite_array("x", x)
+    noise = _noise_or_zeros(measurement_noise, len(x), "measurement_noise")
+    return _delayed_lowpass(x, lag_coefficient(tau, dt)) + bias + noise
+
+
+def fuse(y_a: np.ndarray, y_b: np.ndarray, alpha: float) -> np.ndarray:
+    """Return the M3 fused measurement ``α·y_A + (1−α)·y_B`` (paper §3.1 M3)."""
+    return alpha * np.asarray(y_a, dtype=float) + (1.0 - alpha) * np.asarray(y_b, dtype=float)
+
+
+def kpi(x: np.ndarray, v: np.ndarray, w1: float, w2: float) -> np.ndarray:
+    """Return the M4 KPI ``z = w1·x + w2·v`` (paper §3.1 M4)."""
+    return w1 * np.asarray(x, dtype=float) + w2 * np.asarray(v, dtype=float)
+
+
+def backward_velocity(x: np.ndarray, dt: float) -> np.ndarray:
+    """Return ``ẋ_k ≈ (x_k − x_{k−1})/dt`` with ``ẋ_1 = 0`` (the surrogate's velocity, §3.1 M4)."""
+    x = np.asarray(x, dtype=float)
+    velocity = np.zeros_like(x)
+    velocity[1:] = np.diff(x) / dt
+    return velocity
+
+
+# --- the simulator: one step function per module, dispatched through the wiring table ------
+
+Signals = dict[str, np.ndarray]
+_Step = Callable[[Signals, TwinParams, np.random.Generator], Signals]
+
+
+def _step_actuator(s: Signals, twin: TwinParams, rng: np.random.Generator) -> Signals:
+    n_steps = len(s["u_cmd"])
+    noise = np.concatenate([[0.0], twin.noise.actuator * rng.standard_normal(n_steps - 1)])
+    return {"u_act": actuator_lpf(s["u_cmd"], twin.actuator.tau, twin.dt, noise)}
+
+
+def _step_plant(s: Signals, twin: TwinParams, rng: np.random.Generator) -> Signals:
+    n_steps = len(s["u_act"])
+    noise = np.concatenate([[0.0], twin.noise.plant * rng.standard_normal(n_steps - 1)])
+    p = twin.plant
+    trajectory = plant_msd(s["u_act"], p.m, p.c, p.k, twin.dt, noise)
+    return {"x": trajectory.x, "v": trajectory.v}
+
+
+def _sensor_step(which: str) -> _Step:
+    def step(s: Signals, twin: TwinParams, rng: np.random.Generator) -> Signals:
+        sensor = getattr(twin, f"sensor_{which}")
+        noise = getattr(twin.noise, f"sensor_{which}") * rng.standard_normal(len(s["x"]))
+        return {f"y_{which}": sensor_first_order(s["x"], sensor.tau, twin.dt, sensor.bias, noise)}
+
+    return step
+
+
+def _step_fusion(s: Signals, twin: TwinParams, rng: np.random.Generator) -> Signals:
+    return {"y_fused": fuse(s["y_A"], s["y_B"], twin.fusion.alpha)}
+
+
+def _step_kpi(s: Signals, twin: TwinParams, rng: np.random.Generator) -> Signals:
+    return {"z": kpi(s["x"], s["v"], twin.kpi.w1, twin.kpi.w2)}
+
+
+PHYSICS_STEPS: dict[str, _Step] = {
+    "M0": _step_actuator,
+    "M1": _step_plant,
+    "M2a": _sensor_step("A"),
+    "M2b": _sensor_step("B"),
+    "M3": _step_fusion,
+    "M4": _step_kpi,
+}
+
+
+def simulate_physics(twin: TwinParams, u_cmd: np.ndarray, rng: np.random.Generator) -> pd.DataFrame:
+    """Run the physical asset on a command and return every signal.
+
+    Parameters
+    ----------
+    twin : TwinParams
+        Complete twin parameters (every section present).
+    u_cmd : array, shape (n_steps,)
+        Command (see :func:`dtwin.command.make_command`).
+    rng : numpy.random.Generator
+        Source of the process and measurement noise (draw order in the module docstring).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per sample; columns ``t`` (s) and :data:`dtwin.wiring.SIGNALS`
+        (``u_cmd, u_act, x, v, y_A, y_B, y_fused, z``).
+    """
+    u_cmd = require_finite_array("u_cmd", u_cmd)
+    require_min_length("u_cmd", u_cmd, 3)
+    missing = [module.name for module in MODULES if getattr(twin, module.params) is None]
+    if missing or twin.noise is None:
+        raise DtwinValueError("simulate_physics needs every twin section (twin.noise included)")
+    signals: Signals = {"u_cmd": u_cmd}
+    for module in MODULES:
+        signals.update(PHYSICS_STEPS[module.name](signals, twin, rng))
+    table = pd.DataFrame({"t": time_axis(len(u_cmd), twin.dt)})
+    for name in SIGNALS:
+        table[name] = signals[name]
+    return table

@@ -1,0 +1,79 @@
+"""The wiring table of the six-module twin (paper §3, Fig. 1).
+
+One table says which signals each module reads and writes. The simulator, the surrogate
+chain, the residual definitions and ``fig01_pipeline`` all read it, so the picture and the
+loops cannot drift from each other.
+
+Signals keep the paper's names: ``u_cmd`` (command), ``u_act`` (realised actuation),
+``x`` (position), ``v`` (velocity), ``y_A``/``y_B`` (sensor readings), ``y_fused``
+(fused measurement) and ``z`` (KPI). Residual ``e<id>`` belongs to module ``M<id>``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["Module", "MODULES", "SIGNALS", "RESIDUALS", "module_by_name"]
+
+
+@dataclass(frozen=True)
+class Module:
+    """One module of the pipeline.
+
+    Attributes
+    ----------
+    name : str
+        Paper label, ``"M0"`` … ``"M4"``.
+    title : str
+        Human-readable role (``"Actuator LPF"``).
+    inputs : tuple of str
+        Signals the module reads.
+    outputs : tuple of str
+        Signals the module writes; the first is the module's output proper (the one its
+        residual compares), the plant also writes the velocity ``v``.
+    residual : str
+        Name of its residual channel, surrogate − physics (paper Eq. (1)).
+    params : str
+        Name of its section in :class:`dtwin.params.TwinParams` (``"plant"``).
+    surrogate : str
+        ``"arx"`` when the twin replaces it with an ARX model, ``"algebraic"`` when the
+        twin recomputes it from upstream surrogate signals.
+    """
+
+    name: str
+    title: str
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    residual: str
+    params: str
+    surrogate: str
+
+    @property
+    def output(self) -> str:
+        """The module's output proper (first of :attr:`outputs`)."""
+        return self.outputs[0]
+
+
+MODULES: tuple[Module, ...] = (
+    Module("M0", "Actuator LPF", ("u_cmd",), ("u_act",), "e0", "actuator", "arx"),
+    Module("M1", "Plant (mass-spring-damper)", ("u_act",), ("x", "v"), "e1", "plant", "arx"),
+    Module("M2a", "Sensor A", ("x",), ("y_A",), "e2a", "sensor_A", "arx"),
+    Module("M2b", "Sensor B", ("x",), ("y_B",), "e2b", "sensor_B", "arx"),
+    Module("M3", "Fusion", ("y_A", "y_B"), ("y_fused",), "e3", "fusion", "algebraic"),
+    Module("M4", "KPI", ("x", "v"), ("z",), "e4", "kpi", "algebraic"),
+)
+
+#: Every signal of the pipeline, in data-flow order (the columns of the physics table).
+SIGNALS: tuple[str, ...] = ("u_cmd", "u_act", "x", "v", "y_A", "y_B", "y_fused", "z")
+
+#: Residual channel names in module order.
+RESIDUALS: tuple[str, ...] = tuple(module.residual for module in MODULES)
+
+
+def module_by_name(name: str) -> Module:
+    """Return the :class:`Module` called ``name`` (``"M0"`` … ``"M4"``)."""
+    for module in MODULES:
+        if module.name == name:
+            return module
+    known = ", ".join(module.name for module in MODULES)
+    raise KeyError(f"unknown module {name!r}; known modules: {known}")
