@@ -1,0 +1,68 @@
+"""dtwin: find, explain and mitigate error in modular digital twins.
+
+Reproduces "Hidden Markov Inference Framework for Error Propagation Mitigation in Modular
+Digital Twins" (six-module twin, ARX surrogates, residual regimes) as a library and a
+Snakemake workflow.
+
+Conventions: arrays are time-first everywhere, shape ``(T,)`` or ``(T, n_channels)``; signals
+keep the paper's names (``u_cmd, u_act, x, v, y_A, y_B, y_fused, z``) and residuals are
+``e0, e1, e2a, e2b, e3, e4`` (surrogate − physics). Errors are :class:`DtwinValueError` /
+:class:`DtwinTypeError`, subclasses of the builtin ``ValueError`` / ``TypeError``.
+
+Public names are re-exported lazily (PEP 562), so ``import dtwin`` stays cheap and a script
+pays only for the modules it uses.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+__version__ = "0.1.0"
+
+_EXPORTS: dict[str, str] = {
+    # errors
+    "DtwinValueError": "dtwin._validation",
+    "DtwinTypeError": "dtwin._validation",
+    # wiring and parameters (paper §3)
+    "MODULES": "dtwin.wiring",
+    "SIGNALS": "dtwin.wiring",
+    "RESIDUALS": "dtwin.wiring",
+    "Module": "dtwin.wiring",
+    "TwinParams": "dtwin.params",
+    "CommandParams": "dtwin.params",
+    "twin_params_from_mapping": "dtwin.params",
+    "command_params_from_mapping": "dtwin.params",
+    # physics (paper §3.1)
+    "make_command": "dtwin.command",
+    "actuator_lpf": "dtwin.physics",
+    "plant_msd": "dtwin.physics",
+    "sensor_first_order": "dtwin.physics",
+    "fuse": "dtwin.physics",
+    "kpi": "dtwin.physics",
+    "backward_velocity": "dtwin.physics",
+    "simulate_physics": "dtwin.physics",
+    # surrogates and residuals (paper §3.2, Eq. (1))
+    "ArxOrders": "dtwin.arx",
+    "ArxFit": "dtwin.arx",
+    "fit_arx": "dtwin.arx",
+    "simulate_arx": "dtwin.arx",
+    "fit_surrogates": "dtwin.surrogate",
+    "run_surrogate_chain": "dtwin.surrogate",
+    "compute_residuals": "dtwin.surrogate",
+    # structured residuals (paper §4.1)
+    "acf_table": "dtwin.residual_stats",
+    "ljung_box_table": "dtwin.residual_stats",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'dtwin' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

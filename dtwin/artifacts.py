@@ -21,7 +21,7 @@ import math
 import os
 import tempfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +33,7 @@ from dtwin._validation import DtwinValueError
 __all__ = [
     "CHECK_KINDS",
     "Check",
+    "FigureArtifact",
     "ArtifactValidityError",
     "validity_finite",
     "validity_files_nonempty",
@@ -41,6 +42,7 @@ __all__ = [
     "write_json",
     "write_artifact",
     "to_jsonable",
+    "load_yaml",
 ]
 
 CHECK_KINDS: tuple[str, ...] = ("validity", "claim", "crosscheck")
@@ -48,6 +50,16 @@ CHECK_KINDS: tuple[str, ...] = ("validity", "claim", "crosscheck")
 
 class ArtifactValidityError(DtwinValueError):
     """An artifact failed one of its validity checks."""
+
+
+@dataclass
+class FigureArtifact:
+    """A drawn figure (a matplotlib Figure) with the numbers behind it and its checks."""
+
+    name: str
+    figure: Any
+    metrics: dict[str, Any]
+    checks: list[Check] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -180,3 +192,11 @@ def write_artifact(
     if failed:
         raise ArtifactValidityError(f"{artifact}: validity check(s) failed: {', '.join(failed)}")
     return to_jsonable(payload)
+
+
+def load_yaml(path: str | os.PathLike) -> Any:
+    """Return the parsed content of a YAML file (a reference-number file, a twin file)."""
+    import yaml
+
+    with open(path, encoding="utf-8") as handle:
+        return yaml.safe_load(handle)

@@ -8,7 +8,9 @@ which REFERENCE.md §2 calls "input delay 1").
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.signal import lfilter, lfiltic
@@ -19,7 +21,14 @@ from dtwin._validation import (
     require_min_length,
 )
 
-__all__ = ["ArxOrders", "ArxFit", "arx_regressors", "fit_arx", "simulate_arx"]
+__all__ = [
+    "ArxOrders",
+    "ArxFit",
+    "arx_orders_from_mapping",
+    "arx_regressors",
+    "fit_arx",
+    "simulate_arx",
+]
 
 
 @dataclass(frozen=True)
@@ -174,3 +183,8 @@ def simulate_arx(fit: ArxFit, u: np.ndarray, initial_y: np.ndarray) -> np.ndarra
     state = lfiltic(numerator, denominator, past_y, past_u)
     y_hat[p:], _ = lfilter(numerator, denominator, u[p:], zi=state)
     return y_hat
+
+
+def arx_orders_from_mapping(arx: Mapping[str, Any]) -> dict[str, ArxOrders]:
+    """Return ``{module: ArxOrders}`` from the ``arx`` config section's ``orders`` mapping."""
+    return {str(name): ArxOrders(**spec) for name, spec in arx["orders"].items()}

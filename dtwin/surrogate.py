@@ -28,6 +28,7 @@ __all__ = [
     "run_surrogate_chain",
     "compute_residuals",
     "theta_table",
+    "fits_from_theta_table",
 ]
 
 #: Modules the twin replaces with an ARX model.
@@ -172,3 +173,22 @@ def theta_table(fits: Mapping[str, ArxFit]) -> pd.DataFrame:
                 }
             )
     return pd.DataFrame(rows)
+
+
+def fits_from_theta_table(table: pd.DataFrame) -> dict[str, ArxFit]:
+    """Rebuild the fits written by :func:`theta_table` (the inverse of that function)."""
+    required = {"module", "na", "nb", "d", "n_train", "coef", "value"}
+    missing = sorted(required - set(table.columns))
+    if missing:
+        raise DtwinValueError(f"ARX coefficient table is missing column(s): {', '.join(missing)}")
+    fits = {}
+    for name, rows in table.groupby("module", sort=False):
+        first = rows.iloc[0]
+        orders = ArxOrders(int(first["na"]), int(first["nb"]), int(first["d"]))
+        theta = rows["value"].to_numpy(dtype=float)
+        if len(theta) != orders.na + orders.nb:
+            raise DtwinValueError(
+                f"module {name}: {len(theta)} coefficients for na={orders.na}, nb={orders.nb}"
+            )
+        fits[str(name)] = ArxFit(orders=orders, theta=theta, n_train=int(first["n_train"]))
+    return fits

@@ -1,0 +1,20 @@
+"""dtwin: reproduce "Hidden Markov Inference Framework for Error Propagation Mitigation in
+Modular Digital Twins" as a DAG. `snakemake --cores 2` regenerates every figure into
+paper_figures/. Rules live in workflow/rules/, one file per paper stage."""
+
+from snakemake.utils import min_version
+
+min_version("9.0")
+
+
+configfile: "config/config.yaml"
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/twin.smk"
+
+
+rule all:
+    default_target: True
+    input:
+        ALL_TARGETS,

@@ -1,0 +1,25 @@
+"""Shared fixtures: the repository root, the default config and its twin parameters."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from dtwin.params import twin_params_from_mapping
+
+REPO = Path(__file__).resolve().parents[1]
+REFERENCE = REPO / "config" / "reference"
+
+
+@pytest.fixture(scope="session")
+def config() -> dict:
+    """The default config/config.yaml."""
+    return yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+
+
+@pytest.fixture(scope="session")
+def twin(config):
+    """The default twin parameters."""
+    return twin_params_from_mapping(config["twin"])

@@ -1,0 +1,105 @@
+"""The physical modules follow the paper's discrete equations exactly (paper §3.1)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from dtwin.command import make_command, n_steps_for
+from dtwin.params import command_params_from_mapping
+from dtwin.physics import (
+    actuator_lpf,
+    backward_velocity,
+    lag_coefficient,
+    plant_msd,
+    sensor_first_order,
+    simulate_physics,
+)
+from dtwin.wiring import SIGNALS
+from tests.conftest import REFERENCE
+
+
+def test_noise_free_plant_is_the_exact_difference_equation():
+    rng = np.random.default_rng(1)
+    u = rng.standard_normal(400)
+    m, c, k, dt = 1.0, 0.4, 4.0, 0.02
+    x = plant_msd(u, m, c, k, dt).x
+    expected = np.zeros_like(x)
+    for step in range(2, len(u)):
+        expected[step] = (
+            (2 - c * dt) * expected[step - 1]
+            - (1 - c * dt + k * dt**2) * expected[step - 2]
+            + dt**2 * u[step - 2]
+        )
+    np.testing.assert_allclose(x, expected, rtol=0, atol=1e-12)
+
+
+def test_plant_velocity_is_explicit_euler_with_old_velocity():
+    u = np.ones(50)
+    trajectory = plant_msd(u, 2.0, 0.5, 3.0, 0.1)
+    x, v = trajectory.x, trajectory.v
+    np.testing.assert_allclose(x[1:], x[:-1] + 0.1 * v[:-1])
+    accel = (u[:-1] - 0.5 * v[:-1] - 3.0 * x[:-1]) / 2.0
+    np.testing.assert_allclose(v[1:], v[:-1] + 0.1 * accel)
+    assert x[0] == v[0] == x[1] == 0.0
+
+
+def test_actuator_step_response_matches_closed_form():
+    a = lag_coefficient(0.15, 0.02)
+    y = actuator_lpf(np.ones(100), tau=0.15, dt=0.02)
+    steps = np.arange(100)
+    np.testing.assert_allclose(y, 1.0 - a**steps, atol=1e-13)
+
+
+def test_sensor_lag_closed_form_bias_and_first_sample():
+    a = lag_coefficient(0.25, 0.02)
+    y = sensor_first_order(np.ones(60), tau=0.25, dt=0.02, bias=0.01)
+    np.testing.assert_allclose(y, 1.0 - a ** np.arange(60) + 0.01, atol=1e-13)
+    assert y[0] == pytest.approx(0.01)  # y_1 = bias (+ noise): the lag state starts at 0
+
+
+def test_one_sample_input_delays():
+    impulse = np.zeros(20)
+    impulse[5] = 1.0
+    u_act = actuator_lpf(impulse, 0.15, 0.02)
+    assert np.flatnonzero(u_act)[0] == 6
+    y = sensor_first_order(impulse, 0.08, 0.02)
+    assert np.flatnonzero(y)[0] == 6
+    x = plant_msd(impulse, 1.0, 0.4, 4.0, 0.02).x
+    assert np.flatnonzero(x)[0] == 7  # force -> velocity (1 sample) -> position (1 more)
+
+
+def test_backward_velocity():
+    np.testing.assert_allclose(backward_velocity(np.array([0.0, 1.0, 3.0]), 0.5), [0.0, 2.0, 4.0])
+
+
+def test_simulation_is_seeded_and_noise_levels_do_not_shift_the_stream(config, twin):
+    command = command_params_from_mapping(config["command"])
+    n = n_steps_for(config["simulation"]["T"], twin.dt)
+    u = make_command(n, twin.dt, command, np.random.default_rng(5))
+    first = simulate_physics(twin, u, np.random.default_rng(7))
+    again = simulate_physics(twin, u, np.random.default_rng(7))
+    pd.testing.assert_frame_equal(first, again)
+    assert list(first.columns) == ["t", *SIGNALS]
+    assert len(first) == n == 1000
+    # Doubling sensor B's noise changes only y_B's noise, not the draws of the other modules.
+    from dataclasses import replace
+
+    louder = replace(twin, noise=replace(twin.noise, sensor_B=2 * twin.noise.sensor_B))
+    other = simulate_physics(louder, u, np.random.default_rng(7))
+    np.testing.assert_array_equal(first["y_A"], other["y_A"])
+    np.testing.assert_allclose(
+        other["y_B"] - first["y_B"], first["y_B"] - sensor_first_order(first["x"], 0.25, 0.02, 0.01)
+    )
+
+
+def test_command_deterministic_part_matches_r(config):
+    """R's u_cmd minus our step-free command is piecewise constant, jumping every 125 samples."""
+    r = pd.read_csv(REFERENCE / "faulted_pipeline_seed11_rerun.csv")
+    params = command_params_from_mapping({**config["command"], "step_std": 0.0})
+    base = make_command(len(r), 0.02, params, np.random.default_rng(0))
+    offsets = r["u_cmd"].to_numpy() - base
+    jumps = np.flatnonzero(np.abs(np.diff(offsets)) > 1e-9) + 1
+    assert set(jumps) <= set(range(125, 1000, 125))
+    assert np.ptp(offsets[:125]) < 1e-9

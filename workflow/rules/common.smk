@@ -1,0 +1,76 @@
+"""Helpers shared by the stage files (config validation, library inputs, target lists)."""
+
+import ast
+import os
+
+import jsonschema
+import yaml
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
+
+CONFIG_SCHEMA = os.path.join(workflow.basedir, "workflow", "schemas", "config.schema.yaml")
+
+
+def config_errors(config, schema_path):
+    """Every schema violation as 'key.path: message' (Snakemake's validate shows only one)."""
+    with open(schema_path) as handle:
+        schema = yaml.safe_load(handle)
+    validator = jsonschema.Draft202012Validator(schema)
+    errors = sorted(validator.iter_errors(config), key=lambda e: list(e.absolute_path))
+    return [
+        f"{'.'.join(str(p) for p in e.absolute_path) or '<top level>'}: {e.message}"
+        for e in errors
+    ]
+
+
+try:
+    validate(config, CONFIG_SCHEMA)
+except WorkflowError as error:
+    problems = "\n  ".join(config_errors(config, CONFIG_SCHEMA)) or str(error)
+    raise WorkflowError(f"invalid configuration:\n  {problems}") from None
+
+
+REFERENCE_DIR = "config/reference"
+FIGURE_FORMATS = ("png", "pdf")
+
+
+def dtwin_sources(script):
+    """The dtwin library files a script imports, transitively, as rule inputs.
+
+    Snakemake does not track imports, so without this an edit to dtwin/hmm.py would rerun
+    nothing. Imports are read from the source (ast), including ones inside functions, and
+    every package __init__.py on the way is added because it runs on import.
+    """
+    seen, pending = set(), [script]
+    while pending:
+        path = pending.pop()
+        with open(os.path.join(workflow.basedir, path)) as handle:
+            tree = ast.parse(handle.read(), filename=path)
+        for node in ast.walk(tree):
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            for name in names:
+                if name.split(".")[0] != "dtwin":
+                    continue
+                parts = name.split(".")
+                for depth in range(1, len(parts) + 1):
+                    stem = os.path.join(*parts[:depth])
+                    for candidate in (f"{stem}.py", os.path.join(stem, "__init__.py")):
+                        full = os.path.join(workflow.basedir, candidate)
+                        if os.path.exists(full) and candidate not in seen:
+                            seen.add(candidate)
+                            pending.append(candidate)
+    return sorted(seen)
+
+
+def figure_outputs(artifact):
+    """The PNG, PDF and JSON of one paper artifact."""
+    return [f"paper_figures/{artifact}.{ext}" for ext in (*FIGURE_FORMATS, "json")]
+
+
+PAPER_ARTIFACTS = ["fig01_pipeline", "fig02_arx_vs_physics", "fig03_residual_acf"]
+
+ALL_TARGETS = [path for artifact in PAPER_ARTIFACTS for path in figure_outputs(artifact)]
