@@ -1,4 +1,4 @@
-"""Posterior-weighted bias correction of the surrogate chain (paper §4.3 Eq. (25); §5.4).
+"""Posterior-weighted bias correction of the surrogate chain (paper §4.3 Eq. (25); §5 Eq. (27)).
 
 The correction of the authors' ``TargetedIntervention.R`` (REFERENCE.md §7A):
 

@@ -1,4 +1,4 @@
-"""Gaussian hidden Markov model of the residual regimes (paper §2.1 Eqs. (2)–(10), §4.2, §5.3).
+"""Gaussian hidden Markov model of the residual regimes (paper §2.1 Eqs. (2)–(10), §4.2, §5).
 
 A K-state HMM with diagonal-covariance Gaussian emissions (paper Eq. (3); depmixS4's
 independent ``gaussian()`` responses, REFERENCE.md §4) is fitted by EM to z-scored residual
@@ -178,6 +178,14 @@ def zscore(features: Any) -> ZScored:
                 f"(got sd {sd[j]:.3g} around mean {mean[j]:.6g}); z-scoring would divide by zero"
             )
     return ZScored(values=(array - mean) / sd, mean=mean, sd=sd, columns=columns)
+
+
+def _require_count(name: str, value: Any, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise DtwinTypeError(f"{name} must be an integer (got {type(value).__name__}: {value!r})")
+    if value < minimum:
+        raise DtwinValueError(f"{name} must be >= {minimum} (got {value})")
+    return int(value)
 
 
 # --- the fitted model -----------------------------------------------------------------------
@@ -607,14 +615,6 @@ def fit_hmm(
     )
 
 
-def _require_count(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise DtwinTypeError(f"{name} must be an integer (got {type(value).__name__}: {value!r})")
-    if value < minimum:
-        raise DtwinValueError(f"{name} must be >= {minimum} (got {value})")
-    return int(value)
-
-
 # --- filtering ------------------------------------------------------------------------------
 
 
@@ -708,7 +708,7 @@ def bic_sweep(
     seed: int = 0,
     **fit_options: Any,
 ) -> pd.DataFrame:
-    """Fit one HMM per number of states and tabulate the BIC (paper §5.3, Eq. (26)).
+    """Fit one HMM per number of states and tabulate the BIC (paper §5, Eq. (26)).
 
     Parameters
     ----------

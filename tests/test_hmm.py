@@ -242,3 +242,17 @@ def test_best_of_ten_reaches_depmix_loglik_and_regime_accuracy(r_pipeline, r_fea
     scores = classification_scores(mapping.predicted, r_pipeline["regime"])
     assert scores.accuracy == pytest.approx(0.85, abs=1e-3)
     assert elapsed < 5.0  # target < 0.5 s on two cores; generous for loaded CI machines
+
+
+def test_scaling_underflow_falls_back_to_log_implementation():
+    # 200 dimensions and one far-out row: every state's emission density of that row
+    # underflows exp(), so hmmlearn's scaling forward pass fails and the start reruns in log.
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(100, 200))
+    X[50] = 5.0
+    fit = fit_hmm(X, 2, n_restarts=2, seed=0)
+    assert set(fit.restarts["implementation"]) == {"log"}
+    assert fit.restarts["message"].str.contains("scaling: .*underflow").all()
+    assert set(fit.restarts["status"]) == {"ok"}
+    np.testing.assert_allclose(fit.smoothed.sum(axis=1), 1.0)
+    np.testing.assert_allclose(fit.filtered.sum(axis=1), 1.0)
