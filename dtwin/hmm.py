@@ -1,0 +1,760 @@
+"""Gaussian hidden Markov model of the residual regimes (paper §2.1 Eqs. (2)–(10), §4.2, §5).
+
+A K-state HMM with diagonal-covariance Gaussian emissions (paper Eq. (3); depmixS4's
+independent ``gaussian()`` responses, REFERENCE.md §4) is fitted by EM to z-scored residual
+features, arrays time-first ``(T, D)``. EM runs in :class:`hmmlearn.hmm.GaussianHMM` through its
+public methods only (``fit``, ``score``, ``decode``, ``predict_proba``); dtwin adds what
+depmixS4 did and hmmlearn does not:
+
+- z-scoring with the sample standard deviation (R's ``scale``), :func:`zscore`;
+- depmixS4's random start: per-sample state weights drawn from Dirichlet(0.01) (almost a hard
+  random assignment), emission parameters fitted to those weights, uniform initial and
+  transition probabilities; several starts, best log-likelihood kept, every start recorded;
+- a variance floor applied after every M-step (hmmlearn 0.3.3 applies ``min_covar`` only when
+  it initialises covariances itself), which is the exact constrained M-step, so EM stays
+  monotone;
+- an honest convergence verdict and depmixS4's relative stopping rule
+  ``(LL − LL_old)/|LL_old| < tol``;
+- the filtered (causal) posteriors ``P(S_t = k | e_1:t)``, the normalised forward variables of
+  Eq. (4), computed in log space by :func:`filtered_posteriors`;
+- BIC with depmixS4's parameter count ``p = (K−1) + K(K−1) + 2DK`` (Eq. (26)), :func:`bic_sweep`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from hmmlearn.base import ConvergenceMonitor
+from hmmlearn.hmm import GaussianHMM
+from threadpoolctl import threadpool_limits
+
+from dtwin._validation import (
+    DtwinTypeError,
+    DtwinValueError,
+    require_finite_array,
+    require_positive,
+)
+
+__all__ = [
+    "HmmFitError",
+    "ZScored",
+    "zscore",
+    "HmmFit",
+    "fit_hmm",
+    "n_hmm_params",
+    "filtered_posteriors",
+    "to_hmmlearn",
+    "bic_sweep",
+]
+
+logger = logging.getLogger(__name__)
+
+#: Concentration of the Dirichlet draw of per-sample state weights (depmixS4 random start).
+DIRICHLET_ALPHA = 0.01
+
+#: A state whose expected occupancy ``Σ_t γ_t(k)`` falls below this many samples is "empty"
+#: (half a sample, so that a state holding one outlier sample is not flagged by round-off).
+MIN_OCCUPANCY = 0.5
+
+#: Log-likelihood drops smaller than this times ``max(1, |LL|)`` count as round-off.
+_LL_DROP_RTOL = 1e-9
+
+_RESTART_COLUMNS = (
+    "restart",
+    "seed",
+    "log_likelihood",
+    "n_iter",
+    "converged",
+    "status",
+    "implementation",
+    "min_occupancy",
+    "message",
+)
+
+
+class HmmFitError(DtwinValueError):
+    """Every EM start failed or ended with an empty state."""
+
+
+# --- z-scoring ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ZScored:
+    """Column-wise z-scored features (R's ``scale``: mean and sample sd, ``ddof=1``).
+
+    Attributes
+    ----------
+    values : ndarray, shape (T, D)
+        ``(features − mean) / sd``.
+    mean, sd : ndarray, shape (D,)
+        Column means and sample standard deviations, in the features' units.
+    columns : tuple of str
+        Column names (the DataFrame's columns, or ``"0"``, ``"1"``, … for arrays).
+    """
+
+    values: np.ndarray
+    mean: np.ndarray
+    sd: np.ndarray
+    columns: tuple[str, ...]
+
+    def transform(self, features: Any) -> np.ndarray:
+        """Return new ``features`` (shape ``(T', D)``) scaled with this mean and sd."""
+        array = require_finite_array("features", features, ndim=2)
+        if array.shape[1] != len(self.mean):
+            raise DtwinValueError(
+                f"features must have {len(self.mean)} columns (got {array.shape[1]})"
+            )
+        return (array - self.mean) / self.sd
+
+    def to_frame(self) -> pd.DataFrame:
+        """Return :attr:`values` as a DataFrame with :attr:`columns`."""
+        return pd.DataFrame(self.values, columns=list(self.columns))
+
+
+def _column_label(columns: Sequence[str], index: int, named: bool) -> str:
+    return f"column {columns[index]!r} (index {index})" if named else f"column {index}"
+
+
+def zscore(features: Any) -> ZScored:
+    """Return the column-wise z-scores of ``features`` (R's ``scale``).
+
+    Parameters
+    ----------
+    features : array-like or DataFrame, shape (T, D)
+        One row per sample, one column per feature; at least 2 rows.
+
+    Returns
+    -------
+    ZScored
+        Scaled values, the column means and sample standard deviations (``ddof=1``).
+
+    Raises
+    ------
+    DtwinValueError
+        If a column holds NaN/inf or has zero variance (the message names the column).
+
+    Examples
+    --------
+    >>> z = zscore(np.array([[1.0, 10.0], [2.0, 20.0], [3.0, 30.0]]))
+    >>> z.values[:, 0].tolist(), z.sd.tolist()
+    ([-1.0, 0.0, 1.0], [1.0, 10.0])
+    """
+    named = isinstance(features, pd.DataFrame)
+    if named:
+        columns = tuple(str(c) for c in features.columns)
+        raw = features.to_numpy()
+    else:
+        raw = features
+    try:
+        array = np.asarray(raw, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise DtwinTypeError(f"features must be numeric (got {type(features).__name__})") from error
+    if array.ndim != 2:
+        raise DtwinValueError(f"features must be 2-dimensional (T, D) (got shape {array.shape})")
+    if not named:
+        columns = tuple(str(i) for i in range(array.shape[1]))
+    if array.shape[0] < 2:
+        raise DtwinValueError(f"features must have at least 2 rows (got {array.shape[0]})")
+    bad = ~np.isfinite(array)
+    for j in np.flatnonzero(bad.any(axis=0)):
+        rows = np.flatnonzero(bad[:, j])
+        raise DtwinValueError(
+            f"features {_column_label(columns, j, named)} must be finite "
+            f"(got {len(rows)} NaN/inf values, first at row {rows[0]})"
+        )
+    mean = array.mean(axis=0)
+    sd = array.std(axis=0, ddof=1)
+    for j in range(array.shape[1]):
+        if sd[j] <= 1e-12 * max(1.0, abs(mean[j])):
+            raise DtwinValueError(
+                f"features {_column_label(columns, j, named)} must have non-zero variance "
+                f"(got sd {sd[j]:.3g} around mean {mean[j]:.6g}); z-scoring would divide by zero"
+            )
+    return ZScored(values=(array - mean) / sd, mean=mean, sd=sd, columns=columns)
+
+
+def _require_count(name: str, value: Any, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise DtwinTypeError(f"{name} must be an integer (got {type(value).__name__}: {value!r})")
+    if value < minimum:
+        raise DtwinValueError(f"{name} must be >= {minimum} (got {value})")
+    return int(value)
+
+
+# --- the fitted model -----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class HmmFit:
+    """A fitted diagonal-Gaussian HMM and its posteriors on the training sequence.
+
+    Attributes
+    ----------
+    startprob : ndarray, shape (K,)
+        Initial state distribution π (Eq. (8)).
+    transmat : ndarray, shape (K, K)
+        Transition matrix, ``transmat[i, j] = P(S_t = j | S_t−1 = i)``.
+    means, sds : ndarray, shape (K, D)
+        Emission means and standard deviations (z-units of the training features).
+    log_likelihood : float
+        ``log p(X)`` at the returned parameters.
+    n_params : int
+        ``(K−1) + K(K−1) + 2DK`` (REFERENCE.md §4).
+    bic : float
+        ``−2·log_likelihood + n_params·log(T)``.
+    n_iter : int
+        EM iterations (M-steps) of the best start.
+    converged : bool
+        Honest verdict for the best start: stopped by the tolerance before the iteration cap,
+        finite parameters, log-likelihood never decreasing beyond round-off.
+    restarts : DataFrame
+        One row per start: ``restart`` (1-based), ``seed`` (integer seed of its generator),
+        ``log_likelihood`` (NaN if it failed), ``n_iter``, ``converged``, ``status``
+        (``ok``, ``max_iter``, ``not_monotone``, ``degenerate``, ``failed``),
+        ``implementation`` (hmmlearn's ``scaling`` or ``log``), ``min_occupancy`` (smallest
+        expected state occupancy, samples) and ``message``.
+    best_restart : int
+        ``restart`` number of the returned start.
+    smoothed : ndarray, shape (T, K)
+        Smoothed posteriors γ_t(k) = P(S_t = k | e_1:T) (Eq. (6)).
+    filtered : ndarray, shape (T, K)
+        Filtered (causal) posteriors P(S_t = k | e_1:t), the normalised α_t of Eq. (4).
+    viterbi : ndarray of int, shape (T,)
+        Viterbi path, states numbered 0 … K−1 (Eq. (10)).
+    """
+
+    startprob: np.ndarray
+    transmat: np.ndarray
+    means: np.ndarray
+    sds: np.ndarray
+    log_likelihood: float
+    n_params: int
+    bic: float
+    n_iter: int
+    converged: bool
+    restarts: pd.DataFrame
+    best_restart: int
+    smoothed: np.ndarray
+    filtered: np.ndarray
+    viterbi: np.ndarray
+
+    @property
+    def n_states(self) -> int:
+        """Number of hidden states K."""
+        return len(self.startprob)
+
+    @property
+    def n_features(self) -> int:
+        """Number of emission dimensions D."""
+        return self.means.shape[1]
+
+
+def n_hmm_params(n_states: int, n_features: int) -> int:
+    """Return the free-parameter count ``(K−1) + K(K−1) + 2·D·K`` of a diagonal Gaussian HMM.
+
+    Examples
+    --------
+    >>> n_hmm_params(4, 10)
+    95
+    """
+    return (n_states - 1) + n_states * (n_states - 1) + 2 * n_features * n_states
+
+
+def _new_model(n_states: int, implementation: str, n_iter: int = 1) -> GaussianHMM:
+    # Priors switched off (covars_prior=0, covars_weight=1, means_weight=0, Dirichlet priors 1):
+    # the M-step is plain maximum likelihood, as depmixS4's.
+    return GaussianHMM(
+        n_components=n_states,
+        covariance_type="diag",
+        startprob_prior=1.0,
+        transmat_prior=1.0,
+        means_prior=0.0,
+        means_weight=0.0,
+        covars_prior=0.0,
+        covars_weight=1.0,
+        algorithm="viterbi",
+        n_iter=n_iter,
+        tol=0.0,
+        params="stmc",
+        init_params="",
+        implementation=implementation,
+    )
+
+
+def _set_params(
+    model: GaussianHMM,
+    startprob: np.ndarray,
+    transmat: np.ndarray,
+    means: np.ndarray,
+    variances: np.ndarray,
+) -> GaussianHMM:
+    model.startprob_ = np.array(startprob, dtype=float)
+    model.transmat_ = np.array(transmat, dtype=float)
+    model.means_ = np.array(means, dtype=float)
+    model.covars_ = np.array(variances, dtype=float)
+    return model
+
+
+def _variances(model: GaussianHMM) -> np.ndarray:
+    # The public ``covars_`` of a diagonal model is the full (K, D, D) matrix.
+    return np.diagonal(model.covars_, axis1=1, axis2=2).copy()
+
+
+def to_hmmlearn(fit: HmmFit, implementation: str = "scaling") -> GaussianHMM:
+    """Return an :class:`hmmlearn.hmm.GaussianHMM` holding the parameters of ``fit``.
+
+    Use its public ``score``, ``decode`` and ``predict_proba`` on new z-scored data (z-scored
+    with the training mean and sd, :meth:`ZScored.transform`).
+    """
+    model = _new_model(fit.n_states, implementation)
+    model.n_features = fit.n_features
+    return _set_params(model, fit.startprob, fit.transmat, fit.means, fit.sds**2)
+
+
+class _EmError(Exception):
+    """EM produced non-finite values for one start."""
+
+
+def _random_start(
+    X: np.ndarray, n_states: int, rng: np.random.Generator, var_floor: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """depmixS4's random start: Dirichlet(0.01) sample weights, weighted ML emissions."""
+    weights = rng.dirichlet(np.full(n_states, DIRICHLET_ALPHA), size=len(X))  # (T, K)
+    occupancy = weights.sum(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        means = (weights.T @ X) / occupancy[:, None]
+        variances = np.stack(
+            [(weights[:, k] @ (X - means[k]) ** 2) / occupancy[k] for k in range(n_states)]
+        )
+    return means, np.maximum(variances, var_floor), occupancy
+
+
+class _DepmixMonitor(ConvergenceMonitor):
+    """hmmlearn convergence monitor with depmixS4's rule and a variance floor.
+
+    hmmlearn documents subclassing :class:`~hmmlearn.base.ConvergenceMonitor` to change the
+    stopping rule. ``report`` runs once per EM iteration, right after the M-step: it records
+    the log-likelihood of the parameters that entered the iteration and floors the new
+    variances (the exact M-step under ``σ² ≥ var_floor``, so EM stays monotone). ``converged``
+    stops on ``(LL − LL_old)/|LL_old| < tol``, at the iteration cap, or on non-finite values.
+    """
+
+    def __init__(self, model: GaussianHMM, tol: float, n_iter: int, var_floor: float):
+        super().__init__(tol, n_iter, verbose=False)
+        self.model = model
+        self.var_floor = var_floor
+        self.log_likelihoods: list[float] = []
+        self.stopped_by_tol = False
+        self.non_finite = False
+
+    def report(self, log_prob: float) -> None:
+        super().report(log_prob)
+        self.log_likelihoods.append(float(log_prob))
+        model = self.model
+        variances = _variances(model)
+        finite = (
+            np.isfinite(log_prob)
+            and np.isfinite(variances).all()
+            and np.isfinite(model.means_).all()
+            and np.isfinite(model.transmat_).all()
+            and np.isfinite(model.startprob_).all()
+        )
+        if not finite:
+            self.non_finite = True
+            return
+        model.covars_ = np.maximum(variances, self.var_floor)
+
+    @property
+    def converged(self) -> bool:
+        history = self.log_likelihoods
+        if self.non_finite or self.iter >= self.n_iter:
+            return True
+        if len(history) >= 2 and (history[-1] - history[-2]) < self.tol * abs(history[-2]):
+            self.stopped_by_tol = True
+            return True
+        return False
+
+
+def _run_em(
+    X: np.ndarray,
+    means: np.ndarray,
+    variances: np.ndarray,
+    implementation: str,
+    max_iter: int,
+    tol: float,
+    var_floor: float,
+) -> tuple[GaussianHMM, list[float], bool]:
+    """Run EM in one hmmlearn ``fit`` from the given emission start, π and A uniform.
+
+    Returns the model, the log-likelihood history (LL of the parameters entering each
+    iteration, then of the final parameters) and whether the tolerance stopped it.
+    """
+    n_states = len(means)
+    model = _new_model(n_states, implementation, n_iter=max_iter)
+    uniform = np.full(n_states, 1.0 / n_states)
+    _set_params(model, uniform, np.tile(uniform, (n_states, 1)), means, variances)
+    monitor = _DepmixMonitor(model, tol, max_iter, var_floor)
+    model.monitor_ = monitor
+    model.fit(X)
+    if monitor.non_finite:
+        raise _EmError(f"non-finite log-likelihood or parameters ({implementation})")
+    final = float(model.score(X))
+    if not np.isfinite(final):
+        raise _EmError(f"non-finite final log-likelihood ({implementation})")
+    return model, [*monitor.log_likelihoods, final], monitor.stopped_by_tol
+
+
+def _monotone(history: Sequence[float]) -> bool:
+    steps = np.diff(history)
+    if steps.size == 0:
+        return True
+    allowed = _LL_DROP_RTOL * max(1.0, float(np.max(np.abs(history))))
+    return bool(steps.min() >= -allowed)
+
+
+def _fit_one_start(
+    X: np.ndarray,
+    n_states: int,
+    seed: int,
+    max_iter: int,
+    tol: float,
+    var_floor: float,
+) -> tuple[dict[str, Any], GaussianHMM | None]:
+    row: dict[str, Any] = {
+        "seed": seed,
+        "log_likelihood": math.nan,
+        "n_iter": 0,
+        "converged": False,
+        "status": "failed",
+        "implementation": "",
+        "min_occupancy": math.nan,
+        "message": "",
+    }
+    means, variances, occupancy = _random_start(X, n_states, np.random.default_rng(seed), var_floor)
+    if not np.all(occupancy >= MIN_OCCUPANCY) or not np.isfinite(means).all():
+        row.update(status="degenerate", min_occupancy=float(np.min(occupancy)))
+        row["message"] = f"random start left a state with < {MIN_OCCUPANCY} samples of weight"
+        return row, None
+    messages = []
+    for implementation in ("scaling", "log"):
+        try:
+            model, history, stopped = _run_em(
+                X, means, variances, implementation, max_iter, tol, var_floor
+            )
+        except (_EmError, ValueError, FloatingPointError, RuntimeError) as error:
+            messages.append(f"{implementation}: {error}")
+            continue
+        break
+    else:
+        row["message"] = "; ".join(messages)
+        return row, None
+    occupancy = model.predict_proba(X).sum(axis=0)
+    monotone = _monotone(history)
+    row.update(
+        log_likelihood=history[-1],
+        n_iter=len(history) - 1,
+        implementation=implementation,
+        min_occupancy=float(occupancy.min()),
+        message="; ".join(messages),
+    )
+    if occupancy.min() < MIN_OCCUPANCY:
+        row["status"] = "degenerate"
+        row["message"] = (row["message"] + "; " if messages else "") + "a state emptied"
+    elif not monotone:
+        row["status"] = "not_monotone"
+    elif not stopped:
+        row["status"] = "max_iter"
+    else:
+        row.update(status="ok", converged=True)
+    return row, model
+
+
+def _restart_seeds(seed: int | Sequence[int], n_restarts: int) -> list[int]:
+    children = np.random.SeedSequence(seed).spawn(n_restarts)
+    return [int(child.generate_state(1, dtype=np.uint32)[0]) for child in children]
+
+
+def _freeze(array: np.ndarray) -> np.ndarray:
+    array = np.array(array)
+    array.setflags(write=False)
+    return array
+
+
+def fit_hmm(
+    X: Any,
+    n_states: int,
+    *,
+    n_restarts: int = 10,
+    seed: int | Sequence[int] = 0,
+    max_iter: int = 500,
+    tol: float = 1e-8,
+    var_floor: float = 1e-3,
+) -> HmmFit:
+    """Fit a diagonal Gaussian HMM by EM from several random starts and return the best.
+
+    Parameters
+    ----------
+    X : array-like, shape (T, D)
+        z-scored features (see :func:`zscore`); one row per sample.
+    n_states : int
+        Number of hidden states K (paper: 4).
+    n_restarts : int, default 10
+        Random starts; start ``i`` uses the generator seeded with the ``i``-th child of
+        ``numpy.random.SeedSequence(seed)``.
+    seed : int or sequence of int, default 0
+        Entropy of the seed sequence; the same seed gives the same fit.
+    max_iter : int, default 500
+        EM iteration cap per start (depmixS4 ``maxit``).
+    tol : float, default 1e-8
+        Relative stopping tolerance: stop when ``(LL − LL_old)/|LL_old| < tol`` (depmixS4
+        ``crit="relative"``).
+    var_floor : float, default 1e-3
+        Lower bound on every emission variance, z-units²; applied after each M-step.
+
+    Returns
+    -------
+    HmmFit
+        Parameters, log-likelihood and BIC of the best start, the table of all starts, and
+        the smoothed, filtered and Viterbi decodings of ``X``.
+
+    Raises
+    ------
+    HmmFitError
+        If no start produced a usable model (all failed or ended with an empty state).
+
+    Notes
+    -----
+    Each start draws per-sample state weights ~ Dirichlet(0.01) (almost a hard random
+    assignment), fits means and ML standard deviations to those weights, and sets π and A
+    uniform (depmixS4's ``random.start``). EM (Eqs. (4)–(9)) runs in hmmlearn with
+    ``implementation="scaling"``, restarting from the same point with ``"log"`` if scaling
+    fails; BLAS is held to one thread. A start is ``ok`` when the tolerance stopped it, its
+    parameters are finite and its log-likelihood never fell by more than round-off;
+    ``max_iter`` starts are usable but not converged; ``degenerate`` (a state with expected
+    occupancy below :data:`MIN_OCCUPANCY` samples) and ``failed`` starts are recorded and skipped.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> X = np.concatenate([rng.normal(-2, 1, (100, 2)), rng.normal(2, 1, (100, 2))])
+    >>> fit = fit_hmm(X, 2, n_restarts=3, seed=1)
+    >>> fit.smoothed.shape, sorted(np.round(fit.means[:, 0]).tolist())
+    ((200, 2), [-2.0, 2.0])
+    """
+    X = require_finite_array("X", X, ndim=2)
+    n_states = _require_count("n_states", n_states, 1)
+    n_restarts = _require_count("n_restarts", n_restarts, 1)
+    max_iter = _require_count("max_iter", max_iter, 1)
+    tol = require_positive("tol", tol)
+    var_floor = require_positive("var_floor", var_floor)
+    if len(X) <= n_states:
+        raise DtwinValueError(f"X must have more rows than n_states={n_states} (got {len(X)})")
+
+    rows = []
+    models: dict[int, GaussianHMM] = {}
+    with threadpool_limits(limits=1):
+        for restart, start_seed in enumerate(_restart_seeds(seed, n_restarts), start=1):
+            row, model = _fit_one_start(X, n_states, start_seed, max_iter, tol, var_floor)
+            rows.append({"restart": restart, **row})
+            logger.debug(
+                "restart %d/%d: status=%s logL=%.4f n_iter=%d",
+                restart,
+                n_restarts,
+                row["status"],
+                row["log_likelihood"],
+                row["n_iter"],
+            )
+            if model is not None and row["status"] != "degenerate":
+                models[restart] = model
+        restarts = pd.DataFrame(rows, columns=list(_RESTART_COLUMNS))
+        if not models:
+            raise HmmFitError(
+                f"fit_hmm: all {n_restarts} starts failed or degenerated (K={n_states}); "
+                f"statuses: {', '.join(restarts['status'])}"
+            )
+        usable = restarts[restarts["restart"].isin(models)]
+        best = int(usable.loc[usable["log_likelihood"].idxmax(), "restart"])
+        model = models[best]
+        best_row = restarts.loc[restarts["restart"] == best].iloc[0]
+        log_likelihood = float(model.score(X))
+        smoothed = model.predict_proba(X)
+        viterbi = model.decode(X, algorithm="viterbi")[1]
+        variances = _variances(model)
+        filtered, _ = _forward_filter(X, model.startprob_, model.transmat_, model.means_, variances)
+    n_params = n_hmm_params(n_states, X.shape[1])
+    logger.info(
+        "fit_hmm K=%d: best logL=%.4f (restart %d of %d; %d usable)",
+        n_states,
+        log_likelihood,
+        best,
+        n_restarts,
+        len(models),
+    )
+    return HmmFit(
+        startprob=_freeze(model.startprob_),
+        transmat=_freeze(model.transmat_),
+        means=_freeze(model.means_),
+        sds=_freeze(np.sqrt(variances)),
+        log_likelihood=log_likelihood,
+        n_params=n_params,
+        bic=-2.0 * log_likelihood + n_params * math.log(len(X)),
+        n_iter=int(best_row["n_iter"]),
+        converged=bool(best_row["converged"]),
+        restarts=restarts,
+        best_restart=best,
+        smoothed=_freeze(smoothed),
+        filtered=_freeze(filtered),
+        viterbi=_freeze(viterbi.astype(int)),
+    )
+
+
+# --- filtering ------------------------------------------------------------------------------
+
+
+def _log_emission(X: np.ndarray, means: np.ndarray, variances: np.ndarray) -> np.ndarray:
+    """``log N(x_t | μ_k, diag σ_k²)``, shape (T, K), as two matrix products.
+
+    ``−½[Σ_d x²/σ² − 2 x·(μ/σ²) + Σ_d μ²/σ² + Σ_d log(2πσ²)]``.
+    """
+    precision = 1.0 / variances
+    quadratic = (X**2) @ precision.T - 2.0 * X @ (means * precision).T
+    constant = (means**2 * precision).sum(axis=1) + np.log(2.0 * np.pi * variances).sum(axis=1)
+    return -0.5 * (quadratic + constant)
+
+
+def _forward_filter(
+    X: np.ndarray,
+    startprob: np.ndarray,
+    transmat: np.ndarray,
+    means: np.ndarray,
+    variances: np.ndarray,
+) -> tuple[np.ndarray, float]:
+    """Normalised forward recursion (Eq. (4)) in log space; returns (filtered, log p(X))."""
+    log_b = _log_emission(X, means, variances)
+    with np.errstate(divide="ignore"):
+        log_a = np.log(transmat)
+        log_alpha = np.log(startprob) + log_b[0]
+    filtered = np.empty_like(log_b)
+    log_likelihood = 0.0
+    for t in range(len(log_b)):
+        if t > 0:
+            joint = log_alpha[:, None] + log_a  # (K, K): previous i → next j
+            peak = joint.max(axis=0)
+            finite_peak = np.where(np.isfinite(peak), peak, 0.0)
+            with np.errstate(divide="ignore"):
+                log_alpha = finite_peak + np.log(np.exp(joint - finite_peak).sum(axis=0)) + log_b[t]
+        peak = log_alpha.max()
+        log_norm = peak + math.log(np.exp(log_alpha - peak).sum())
+        log_alpha = log_alpha - log_norm
+        log_likelihood += log_norm
+        filtered[t] = np.exp(log_alpha)
+    return filtered, log_likelihood
+
+
+def filtered_posteriors(fit: HmmFit, X: Any) -> np.ndarray:
+    """Return the filtered (causal) posteriors ``P(S_t = k | e_1:t)`` of ``X`` under ``fit``.
+
+    Parameters
+    ----------
+    fit : HmmFit
+        A fitted model.
+    X : array-like, shape (T, D)
+        Features z-scored like the training data.
+
+    Returns
+    -------
+    ndarray, shape (T, K)
+        Row t depends on rows ``0 … t`` of ``X`` only; rows sum to 1.
+
+    Notes
+    -----
+    The normalised forward variables of Eq. (4),
+    ``α_t(j) ∝ (Σ_i α_t−1(i) A_ij) b_j(e_t)``, ``α_1(j) ∝ π_j b_j(e_1)``, computed in log
+    space so that no state underflows; the emission log-densities come from two matrix
+    products, so only the K×K recursion loops over time.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> X = np.concatenate([rng.normal(-2, 1, (50, 1)), rng.normal(2, 1, (50, 1))])
+    >>> fit = fit_hmm(X, 2, n_restarts=2, seed=0)
+    >>> bool(np.allclose(filtered_posteriors(fit, X).sum(axis=1), 1.0))
+    True
+    """
+    X = require_finite_array("X", X, ndim=2)
+    if X.shape[1] != fit.n_features:
+        raise DtwinValueError(f"X must have {fit.n_features} columns (got {X.shape[1]})")
+    if len(X) == 0:
+        raise DtwinValueError("X must have at least 1 row (got 0)")
+    filtered, _ = _forward_filter(X, fit.startprob, fit.transmat, fit.means, fit.sds**2)
+    return filtered
+
+
+# --- model order ----------------------------------------------------------------------------
+
+
+def bic_sweep(
+    X: Any,
+    ks: Sequence[int],
+    *,
+    n_restarts: int = 5,
+    seed: int = 0,
+    **fit_options: Any,
+) -> pd.DataFrame:
+    """Fit one HMM per number of states and tabulate the BIC (paper §5, Eq. (26)).
+
+    Parameters
+    ----------
+    X : array-like, shape (T, D)
+        z-scored features.
+    ks : sequence of int
+        Numbers of states to try (paper: 2 … 9).
+    n_restarts : int, default 5
+        Random starts per K (CovarianceAnalysis.Rmd: 5).
+    seed : int, default 0
+        K's starts derive from ``SeedSequence([seed, K])``, so a K's result does not depend
+        on which other K are swept.
+    **fit_options
+        Passed to :func:`fit_hmm` (``max_iter``, ``tol``, ``var_floor``).
+
+    Returns
+    -------
+    DataFrame
+        One row per K: ``K``, ``log_likelihood``, ``n_params``, ``bic``
+        (``−2·logL + n_params·log T``), ``converged`` and ``n_usable`` (starts that were
+        neither failed nor degenerate).
+    """
+    X = require_finite_array("X", X, ndim=2)
+    ks = [_require_count("ks[]", k, 1) for k in ks]
+    if not ks:
+        raise DtwinValueError("ks must list at least one number of states (got none)")
+    rows = []
+    for k in ks:
+        fit = fit_hmm(X, k, n_restarts=n_restarts, seed=[int(seed), k], **fit_options)
+        usable = int((~fit.restarts["status"].isin(["failed", "degenerate"])).sum())
+        rows.append(
+            {
+                "K": k,
+                "log_likelihood": fit.log_likelihood,
+                "n_params": fit.n_params,
+                "bic": fit.bic,
+                "converged": fit.converged,
+                "n_usable": usable,
+            }
+        )
+        logger.info(
+            "bic_sweep K=%d: logL=%.3f BIC=%.3f (%d/%d usable starts)",
+            k,
+            fit.log_likelihood,
+            fit.bic,
+            usable,
+            n_restarts,
+        )
+    return pd.DataFrame(rows)
