@@ -64,7 +64,12 @@ class FigureArtifact:
 
 @dataclass(frozen=True)
 class Check:
-    """One check of an artifact (see the module docstring for the JSON shape)."""
+    """One check of an artifact (see the module docstring for the JSON shape).
+
+    ``reference`` optionally holds the authors' R number for the same quantity and ``note`` a
+    one-line reason (why a claim does not reproduce, or what a deviation means); both are
+    shown in ``paper_figures/CLAIMS.md``.
+    """
 
     id: str
     kind: str
@@ -72,6 +77,8 @@ class Check:
     expected: Any
     observed: Any
     passed: bool
+    reference: Any = None
+    note: str | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in CHECK_KINDS:

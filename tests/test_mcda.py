@@ -23,6 +23,7 @@ REGIMES = ("Nominal", "SensorNoisy", "DynamicsOff", "Drift")
 
 
 @pytest.mark.parametrize("seed", range(20))
+@pytest.mark.filterwarnings("ignore::UserWarning")
 def test_topsis_matches_pymcdm_on_random_matrices(seed):
     rng = np.random.default_rng(seed)
     matrix = rng.uniform(-2, 3, size=(rng.integers(2, 8), rng.integers(2, 7)))

@@ -92,6 +92,8 @@ def test_every_artifact_is_produced_with_passing_validity_checks(workflow_copy):
     fig02 = json.loads((workflow_copy / "paper_figures" / "fig02_arx_vs_physics.json").read_text())
     crosschecks = {c["id"]: c["passed"] for c in fig02["checks"] if c["kind"] == "crosscheck"}
     assert crosschecks == {"arx_theta_matches_r": True, "arx_rollout_matches_r": True}
+    claims = (workflow_copy / "paper_figures" / "CLAIMS.md").read_text()
+    assert "## Claims of the paper" in claims and "fig03_residual_acf" in claims
     residuals = (workflow_copy / "results" / "residuals.csv").read_text().splitlines()
     assert residuals[0] == "t,e0,e1,e2a,e2b,e3,e4"
     assert len(residuals) == 1 + 400
@@ -103,13 +105,14 @@ def test_nothing_to_do_after_a_complete_run(workflow_copy):
 
 def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     edit_config(workflow_copy, lambda c: c["acf"].update(nlags=20))
-    assert planned_rules(workflow_copy) == {"fig03_residual_acf"}
+    assert planned_rules(workflow_copy) == {"fig03_residual_acf", "claims"}
     edit_config(workflow_copy, lambda c: c["acf"].update(nlags=30))
     edit_config(workflow_copy, lambda c: c["arx"].update(rollout_init="zeros"))
     assert planned_rules(workflow_copy) == {
         "residuals",
         "fig02_arx_vs_physics",
         "fig03_residual_acf",
+        "claims",
     }
     edit_config(workflow_copy, lambda c: c["arx"].update(rollout_init="physics"))
     edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.5))
@@ -119,6 +122,7 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
         "residuals",
         "fig02_arx_vs_physics",
         "fig03_residual_acf",
+        "claims",
     }
     edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.0))
     assert planned_rules(workflow_copy) == set()
@@ -129,18 +133,18 @@ def test_a_library_edit_reruns_the_rules_that_import_it(workflow_copy):
     original = module.read_text()
     try:
         module.write_text(original + "\n# edited\n")
-        assert planned_rules(workflow_copy) == {"fig03_residual_acf"}
+        assert planned_rules(workflow_copy) == {"fig03_residual_acf", "claims"}
         style = workflow_copy / "dtwin" / "figures" / "pipeline.py"
         style_text = style.read_text()
         style.write_text(style_text + "\n# edited\n")
-        assert planned_rules(workflow_copy) == {"fig01_pipeline", "fig03_residual_acf"}
+        assert planned_rules(workflow_copy) == {"fig01_pipeline", "fig03_residual_acf", "claims"}
     finally:
         snakemake(workflow_copy, "--cores", "2")
 
 
 def test_rerun_gives_byte_identical_tables_and_figures(workflow_copy):
     outputs = sorted((workflow_copy / "results").glob("*.csv")) + sorted(
-        (workflow_copy / "paper_figures").glob("fig0*.*")
+        (workflow_copy / "paper_figures").glob("*.*")
     )
     before = {path.name: path.read_bytes() for path in outputs}
     snakemake(workflow_copy, "--cores", "2", "--forceall")

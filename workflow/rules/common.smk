@@ -73,4 +73,7 @@ def figure_outputs(artifact):
 
 PAPER_ARTIFACTS = ["fig01_pipeline", "fig02_arx_vs_physics", "fig03_residual_acf"]
 
-ALL_TARGETS = [path for artifact in PAPER_ARTIFACTS for path in figure_outputs(artifact)]
+ALL_TARGETS = [path for artifact in PAPER_ARTIFACTS for path in figure_outputs(artifact)] + [
+    "paper_figures/CLAIMS.md",
+    "paper_figures/claims.json",
+]

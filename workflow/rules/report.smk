@@ -1,0 +1,24 @@
+"""Stage "report": one page of truth gathered from every artifact's checks."""
+
+
+rule claims:
+    message:
+        "Gathering every artifact's claims, crosschecks and validity checks into CLAIMS.md"
+    input:
+        lib=dtwin_sources("scripts/claims.py"),
+        artifacts=[f"paper_figures/{artifact}.json" for artifact in PAPER_ARTIFACTS],
+    output:
+        markdown="paper_figures/CLAIMS.md",
+        json="paper_figures/claims.json",
+    log:
+        "logs/claims.log",
+    benchmark:
+        "benchmarks/rules/claims.tsv"
+    threads: 1
+    resources:
+        mem_mb=300,
+        runtime=2,
+    conda:
+        "../envs/dtwin.yaml"
+    script:
+        "../../scripts/claims.py"
