@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.dtwin-installed
 
-.PHONY: figures test lint report clean-results venv
+.PHONY: figures test lint report bench clean-results venv
 
 venv: $(STAMP)
 
@@ -24,6 +24,9 @@ test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/python -m pytest
+
+report: figures
+	$(BIN)/snakemake --report paper_figures/report.html
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
