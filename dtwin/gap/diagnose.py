@@ -41,6 +41,7 @@ from dtwin.gap.effects import (
     Effect,
     Scales,
     effects_for_module,
+    quantization_variance,
 )
 from dtwin.gap.fit import CandidateFit, calibrate_linear, fit_candidate, linear_typical
 from dtwin.gap.localise import (
@@ -394,7 +395,17 @@ def _score_candidates(work: _ModuleWork, n_train: int, settings: GapSettings):
     floor = work.floor.rms / work.norm
     excess_before = _excess(work.gap_before, floor)
     reports = []
+    held = slice(n_train, work.data.n_samples)
     for effect, fitted, _, gap in work.candidates:
+        floor_c = floor
+        if effect.name == "sensor_quantization":
+            # a quantizer after noise makes part of the noise unpredictable; its variance is
+            # the floor of this candidate (see dtwin.gap.effects.quantization_variance)
+            step, offset, before = fitted.theta
+            noise = work.floor.rms
+            clean = simulate_module(work.data, fitted.lin)[held] - offset
+            extra = quantization_variance(clean, step, before)
+            floor_c = math.sqrt(max(noise**2 - before**2, 0.0) + extra) / work.norm
         mse = max(gap * gap, 1e-300)
         score = n_eff * math.log(mse) + fitted.n_free * math.log(max(n_eff, 2.0))
         reports.append(
@@ -407,7 +418,7 @@ def _score_candidates(work: _ModuleWork, n_train: int, settings: GapSettings):
                 lin=dict(fitted.lin),
                 n_params=fitted.n_free,
                 gap_after=gap,
-                heldout_shrink_pct=_shrink(excess_before, _excess(gap, floor)),
+                heldout_shrink_pct=_shrink(excess_before, _excess(gap, floor_c)),
                 raw_shrink_pct=_shrink(work.gap_before, gap),
                 score=score,
                 weight=0.0,

@@ -45,6 +45,8 @@ __all__ = [
     "deadzone",
     "fractional_delay",
     "smooth_quantize",
+    "quantization_variance",
+    "find_lattice",
 ]
 
 NONE = "none"
@@ -187,6 +189,49 @@ def smooth_quantize(s: np.ndarray, step: float, noise_std: float) -> np.ndarray:
     return out
 
 
+def quantization_variance(s: np.ndarray, step: float, noise_std: float) -> float:
+    """Return the mean over ``s`` of ``Var(q·round((s + ε)/q) | s)``, ``ε ~ N(0, σ²)``.
+
+    The part of a quantizer's output that no prediction can remove: with noise before the
+    quantizer the quantization error is itself random. Exact sum over the nearby levels.
+    """
+    from scipy.special import ndtr
+
+    if noise_std <= 0 or step <= 0:
+        return 0.0
+    reach = int(math.ceil(5 * noise_std / step)) + 1
+    base = np.round(s / step)
+    levels = base[:, None] + np.arange(-reach, reach + 1)[None, :]
+    upper = ndtr(((levels + 0.5) * step - s[:, None]) / noise_std)
+    lower = ndtr(((levels - 0.5) * step - s[:, None]) / noise_std)
+    prob = upper - lower
+    values = levels * step
+    mean = np.sum(prob * values, axis=1)
+    return float(np.mean(np.sum(prob * values**2, axis=1) - mean**2))
+
+
+def find_lattice(y: np.ndarray, low: float, high: float, n_grid: int = 400):
+    """Return ``(q, offset, concentration)`` of the coarsest lattice the values ``y`` sit on.
+
+    For each step ``q`` on a log grid in ``[low, high]`` the concentration
+    ``R(q) = |mean(exp(2πi·y/q))|`` is 1 when every value is a multiple of ``q`` (plus an
+    offset), ``exp(−2π²σ²/q²)`` when noise of std σ is added after the quantizer, and about
+    ``1/√n`` for values on no lattice. The coarsest step whose concentration is at least half
+    the best is returned (a lattice of step q also lies on q/2, q/3, …), refined locally.
+    """
+    grid = np.geomspace(low, high, n_grid)
+    sample = y[:: max(1, len(y) // 5000)]
+    conc = np.array([abs(np.mean(np.exp(2j * np.pi * sample / q))) for q in grid])
+    best = conc.max()
+    index = int(np.flatnonzero(conc >= 0.5 * best)[-1])
+    index = max(range(max(0, index - 3), min(n_grid, index + 4)), key=lambda i: conc[i])
+    fine = np.linspace(grid[max(0, index - 1)], grid[min(n_grid - 1, index + 1)], 41)
+    fine_conc = [abs(np.mean(np.exp(2j * np.pi * sample / q))) for q in fine]
+    q = float(fine[int(np.argmax(fine_conc))])
+    phase = np.angle(np.mean(np.exp(2j * np.pi * y / q)))
+    return q, float(phase * q / (2 * np.pi)), float(max(fine_conc))
+
+
 # --- the catalogue ----------------------------------------------------------------------
 
 
@@ -200,11 +245,6 @@ def _delay_bounds(s: Scales) -> Bounds:
 
 def _delay_starts(s: Scales) -> list[list[float]]:
     return [[(d + 0.5) * s.dt] for d in range(MAX_DELAY_SAMPLES)]
-
-
-def _quantization_starts(s: Scales) -> list[list[float]]:
-    low = max(s.noise_std, 1e-3 * s.output_std)
-    return [[float(q)] for q in np.geomspace(low, 2.0 * s.output_std, 8)]
 
 
 EFFECTS: tuple[Effect, ...] = (
@@ -280,13 +320,13 @@ EFFECTS: tuple[Effect, ...] = (
     Effect(
         "sensor_quantization",
         ("M2a", "M2b"),
-        ("q",),
-        ("output units",),
+        ("q", "offset", "noise_before"),
+        ("output units", "output units", "output units"),
         "output",
-        "y = E[q·round((lag + bias + noise)/q)]  (quantizer after the sensor noise)",
-        lambda s: [(0.2 * max(s.noise_std, 1e-3 * s.output_std), 4.0 * s.output_std)],
-        _quantization_starts,
-        lambda s: [max(s.noise_std, 0.01 * s.output_std)],
+        "y = offset + q·round((lag + bias − offset + e)/q) + e',  e ~ N(0, noise_before²)",
+        lambda s: [(1e-12, 4.0 * s.output_std), (-np.inf, np.inf), (0.0, np.inf)],
+        lambda s: [[]],
+        lambda s: [max(s.noise_std, 0.01 * s.output_std), s.output_std, s.noise_std or 1.0],
     ),
     Effect(
         "sensor_scale_error",

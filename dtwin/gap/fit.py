@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from dtwin.gap.effects import MAX_DELAY_SAMPLES, Effect, Scales
+from dtwin.gap.effects import MAX_DELAY_SAMPLES, Effect, Scales, find_lattice
 from dtwin.gap.models import LINEAR_PARAMS, ModuleData, first_order_lag, simulate_module
 
 __all__ = [
@@ -167,6 +167,8 @@ def fit_candidate(
     CandidateFit
     """
     scales = data.scales
+    if effect is not None and effect.name == "sensor_quantization":
+        return _fit_quantization(data, effect, lin_start, n_train, free, lin_bounds)
     lin_start = dict(lin_start)
     if free is None:
         free = [k for k in (*LINEAR_PARAMS[data.name], "u_offset") if k in lin_start]
@@ -216,6 +218,28 @@ def fit_candidate(
     theta = tuple(float(v) for v in best_x[len(free) :])
     n_used = max(1, sum(b - a - 1 for a, b in segments or [(0, n_train)]))
     return CandidateFit(lin, theta, len(best_x), math.sqrt(best_cost / n_used) * scale)
+
+
+def _fit_quantization(data, effect, lin_start, n_train, free, lin_bounds) -> CandidateFit:
+    """Quantizer: its step from the lattice the recorded values sit on, then the linear twin.
+
+    A quantizer after noise barely changes the *mean* output, so its step is not identifiable
+    by least squares; the lattice of the recorded values identifies it directly
+    (:func:`~dtwin.gap.effects.find_lattice`). The lattice's blur gives the noise after the
+    quantizer; the rest of the module's noise is put before it.
+    """
+    scales = data.scales
+    y = data.output[:n_train]
+    low = max(1e-9 * scales.output_std, 0.25 * scales.noise_std, 1e-3 * scales.output_std)
+    q, offset, conc = find_lattice(y, low, 2.0 * scales.output_std)
+    after = q * math.sqrt(max(-math.log(max(conc, 1e-12)), 0.0) / (2 * math.pi**2))
+    before = math.sqrt(max(scales.noise_std**2 - after**2, 0.0))
+    fitted = fit_candidate(data, None, lin_start, n_train=n_train, free=free, lin_bounds=lin_bounds)
+    lin = fitted.lin
+    theta = (q, offset, before)
+    residual, scale = _residual_fn(data, effect, lin, [], n_train, None)
+    rms = float(np.sqrt(np.mean(residual(np.array(theta)) ** 2))) * scale
+    return CandidateFit(lin, theta, fitted.n_free + 2, rms)
 
 
 # --- calibration from data --------------------------------------------------------------

@@ -449,7 +449,7 @@ def generate_case(
         floor = {
             "M0": noise_true["actuator"]
             / math.sqrt(1 - math.exp(-2 * dt / asset["actuator"]["tau"])),
-            "M1": None,
+            "M1": noise_true["plant"] * plant_noise_gain(**asset["plant"], dt=dt)[0],
             "M2a": noise_true["sensor_A"],
             "M2b": noise_true["sensor_B"],
         }.get(module)

@@ -140,7 +140,8 @@ def _simulate_sensor(data, lin, effect, theta, stop):
     if effect.name == "sensor_bias_drift":
         return lag + bias + theta[0] * data.t[:stop]
     if effect.name == "sensor_quantization":
-        return smooth_quantize(lag + bias, theta[0], data.scales.noise_std)
+        step, offset, before = theta
+        return offset + smooth_quantize(lag + bias - offset, step, before)
     raise ValueError(f"effect {effect.name} cannot act on a sensor")
 
 
