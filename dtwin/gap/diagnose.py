@@ -92,8 +92,8 @@ class GapSettings:
     calibration_tolerance : float, default 0.05
         Relative band around each nominal linear parameter that counts as "calibrated"
         (a bias's band is this fraction of the output's standard deviation).
-    significance_z : float, default 2.33
-        One-sided normal quantile for "noise alone would not give this gap" (99 %).
+    significance : float, default 0.01
+        Probability that noise alone exceeds the threshold (a one-sided test).
     min_gap : float, default 0.005
         Smallest normalised gap worth reporting, whatever the noise.
     min_share : float, default 0.5
@@ -102,14 +102,14 @@ class GapSettings:
 
     noise_tolerance: float = 0.10
     calibration_tolerance: float = 0.05
-    significance_z: float = 2.33
+    significance: float = 0.01
     min_gap: float = 0.005
     min_share: float = 0.5
 
     def __post_init__(self) -> None:
         require_in_range("gap.noise_tolerance", self.noise_tolerance, 0.0, 1.0)
         require_in_range("gap.calibration_tolerance", self.calibration_tolerance, 0.0, 1.0)
-        require_in_range("gap.significance_z", self.significance_z, 0.0, 10.0)
+        require_in_range("gap.significance", self.significance, 1e-9, 0.5)
         require_in_range("gap.min_gap", self.min_gap, 0.0, 1.0)
         require_in_range("gap.min_share", self.min_share, 0.0, 1.0)
 
@@ -358,7 +358,7 @@ def _analyse_module(name, rec, twin, t, n_train, calibrate, settings) -> _Module
         floor.rms / norm,
         n_eff,
         noise_tolerance=settings.noise_tolerance,
-        z=settings.significance_z,
+        significance=settings.significance,
         min_gap=settings.min_gap,
     )
     return _ModuleWork(
@@ -381,8 +381,11 @@ def _analyse_module(name, rec, twin, t, n_train, calibrate, settings) -> _Module
 
 def _fit_candidates(work: _ModuleWork, n_train: int) -> None:
     held = slice(n_train, work.data.n_samples)
+    start = work.lin_base
     for effect in effects_for_module(work.name, include_mismatch=not work.calibrated):
-        fitted = fit_candidate(work.data, effect, work.lin_base, n_train=n_train)
+        fitted = fit_candidate(work.data, effect, start, n_train=n_train)
+        if effect.name == PARAMETER_MISMATCH:
+            start = fitted.lin  # the effects start from the re-fitted linear twin
         predicted = simulate_module(work.data, fitted.lin, effect, fitted.theta)
         gap = normalised_rms(work.data.output, predicted, held, work.norm)
         gap = gap if math.isfinite(gap) else math.inf

@@ -289,7 +289,7 @@ EFFECTS: tuple[Effect, ...] = (
         "force",
         "F = Fc·tanh(v / v_s),  v_s = 0.01·std(v)",
         lambda s: [(0.0, 3.0 * s.input_max)],
-        lambda s: [[0.02 * s.input_std], [0.2 * s.input_std]],
+        lambda s: [[0.05 * s.input_std]],
         lambda s: [0.1 * s.input_std],
     ),
     Effect(
@@ -300,7 +300,7 @@ EFFECTS: tuple[Effect, ...] = (
         "force",
         "F = k3·x^3",
         lambda s: [(-50.0 * s.stiffness / s.output_std**2, 50.0 * s.stiffness / s.output_std**2)],
-        lambda s: [[0.1 * s.stiffness / s.output_std**2], [-0.1 * s.stiffness / s.output_std**2]],
+        lambda s: [[0.0]],
         lambda s: [0.1 * s.stiffness / s.output_std**2],
     ),
     Effect(
@@ -311,10 +311,7 @@ EFFECTS: tuple[Effect, ...] = (
         "force",
         "F = c2·v·|v|",
         lambda s: [(0.0, 50.0 * s.input_std / s.velocity_std**2)],
-        lambda s: [
-            [0.05 * s.input_std / s.velocity_std**2],
-            [0.5 * s.input_std / s.velocity_std**2],
-        ],
+        lambda s: [[0.05 * s.input_std / s.velocity_std**2]],
         lambda s: [0.1 * s.input_std / s.velocity_std**2],
     ),
     Effect(

@@ -67,16 +67,22 @@ class CandidateFit:
     train_rms: float
 
 
+#: Most training samples the plant's fit simulates (longer recordings are sampled in segments).
+MAX_FIT_SAMPLES = 16000
+
+
 def train_segments(name: str, n_train: int) -> list[tuple[int, int]] | None:
     """Return the plant's multiple-shooting segments over the training part (None elsewhere).
 
-    Up to four equal segments of at least 200 samples each.
+    Up to four equal segments of at least 200 samples each; on long recordings each segment
+    keeps only its first ``MAX_FIT_SAMPLES / 4`` samples, spread over the whole training part.
     """
     if name != "M1":
         return None
     n_segments = max(1, min(4, n_train // 200))
     edges = np.linspace(0, n_train, n_segments + 1).astype(int)
-    return [(int(a), int(b)) for a, b in itertools.pairwise(edges)]
+    longest = MAX_FIT_SAMPLES // n_segments
+    return [(int(a), int(min(b, a + longest))) for a, b in itertools.pairwise(edges)]
 
 
 def linear_typical(name: str, lin: Mapping[str, float], scales: Scales) -> dict[str, float]:
@@ -206,6 +212,9 @@ def fit_candidate(
                 x_scale=x_scale,
                 method="trf",
                 max_nfev=_MAX_NFEV,
+                ftol=1e-6,
+                xtol=1e-6,
+                gtol=1e-8,
             )
         except (ValueError, FloatingPointError) as error:  # pragma: no cover - defensive
             logger.debug("fit of %s failed from start %d: %s", effect, index, error)

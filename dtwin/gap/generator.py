@@ -415,7 +415,8 @@ def generate_case(
     baseline = _run_asset(asset, u_cmd, noises, clean_specs, t)
     sigma = noise_true["sensor_A"] if module == "M2a" else noise_true["sensor_B"]
     scale = {
-        "u_max": float(np.max(np.abs(u_cmd if module == "M0" else baseline["u_act"]))),
+        # sizes from the first half, so that the effect shows in a default training part
+        "u_max": float(np.max(np.abs((u_cmd if module == "M0" else baseline["u_act"])[: n // 2]))),
         "u_std": float(np.std(u_cmd)),
         "x_max": float(np.max(np.abs(baseline["x"]))),
         "v_max": float(np.max(np.abs(baseline["v"]))),

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 from scipy.optimize import nnls
+from scipy.stats import chi2
 
 from dtwin.params import NoiseParams
 
@@ -219,14 +220,15 @@ def gap_threshold(
     n_eff: float,
     *,
     noise_tolerance: float,
-    z: float,
+    significance: float,
     min_gap: float,
 ) -> float:
     """Return the largest gap noise alone explains, normalised like the gap.
 
-    ``floor·(1 + noise_tolerance)·√(1 + z·√(2/n_eff))``, at least ``min_gap``: the floor with
-    its level uncertain by ``noise_tolerance`` and the one-sided ``z`` quantile of a mean square
-    over ``n_eff`` effective samples.
+    ``floor·(1 + noise_tolerance)·√(χ²_{n_eff}(1 − significance)/n_eff)``, at least
+    ``min_gap``: the floor with its level uncertain by ``noise_tolerance``, and the upper
+    quantile of a mean square of Gaussian noise over ``n_eff`` effective samples.
     """
-    sampling = math.sqrt(1.0 + z * math.sqrt(2.0 / max(n_eff, 1.0)))
+    n_eff = max(n_eff, 1.0)
+    sampling = math.sqrt(chi2.ppf(1.0 - significance, n_eff) / n_eff)
     return max(min_gap, floor_rms * (1.0 + noise_tolerance) * sampling)
