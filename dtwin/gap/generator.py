@@ -21,7 +21,7 @@ holding the truth, which the diagnoser never reads. It is deliberately unkind:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -41,6 +41,7 @@ __all__ = [
     "GeneratedCase",
     "generate_case",
     "case_plan",
+    "case_spec",
 ]
 
 #: Effects of the catalogue the generator can inject, with the module(s) they may sit in.
@@ -537,3 +538,20 @@ def case_plan(
                 }
             )
     return plan
+
+
+def case_spec(case: str, effects: Sequence[str], first_seed: int = 1000) -> dict[str, Any]:
+    """Return ``{"case", "effect", "seed"}`` of a case name ``<effect>_<NN>`` (see case_plan).
+
+    Raises
+    ------
+    DtwinValueError
+        If the name does not end in ``_<number>`` or its effect is not in ``effects``.
+    """
+    effect, _, number = case.rpartition("_")
+    if not number.isdigit() or effect not in effects:
+        raise DtwinValueError(
+            f"case must be <effect>_<number> with effect in {', '.join(effects)} (got {case!r})"
+        )
+    index = list(effects).index(effect)
+    return {"case": case, "effect": effect, "seed": int(first_seed) + 1000 * index + int(number)}
