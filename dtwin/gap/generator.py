@@ -154,7 +154,12 @@ def _draw_effect(effect, module, level, rng, scale) -> dict[str, Any]:
         }
     if effect == "cubic_stiffness":
         power = float(rng.choice([2.0, rng.uniform(1.6, 2.4)]))
-        ratio = _log_between(0.06, 0.8, level) * (1 if rng.uniform() < 0.75 else -0.5)
+        # softening is capped so that the spring stays stiff over the whole run
+        ratio = (
+            _log_between(0.06, 0.8, level)
+            if rng.uniform() < 0.75
+            else -_log_between(0.04, 0.2, level)
+        )
         return {
             "form": f"|x|^{power:.2f} hardening" if ratio > 0 else f"|x|^{power:.2f} softening",
             "power": power,

@@ -181,23 +181,46 @@ def data_noise_floor(
     return NoiseFloor(sigma, "data", _white_acf())
 
 
-def _plant_data_floor(u: np.ndarray, x: np.ndarray, lin: dict, dt: float) -> NoiseFloor:
+def _plant_noise_moments(u, x, lin, dt):
+    """Return ``(var_process, var_meas, process_share)`` of the one-step error's differences."""
     m, c, k = lin["m"], lin["c"], lin["k"]
     delay = int(lin.get("delay_samples", 0))
     a1, a2 = -(2 - c * dt / m), 1 - c * dt / m + k * dt * dt / m
-    u = u - lin.get("u_offset", 0.0)
     lag = 2 + delay
-    step_error = (
-        x[lag:] + a1 * x[lag - 1 : -1] + a2 * x[lag - 2 : -2] - dt * dt / m * u[: len(x) - lag]
-    )
+    rows = len(x) - lag
+    step_error = x[lag:] + a1 * x[lag - 1 : -1] + a2 * x[lag - 2 : -2] - dt * dt / m * u[:rows]
     diffs = _winsorize(np.diff(step_error))
     n_lags = 4
     observed = _autocov(diffs, n_lags)
     process = _filter_autocov(np.array([1.0, -1.0]), n_lags)
     measurement = _filter_autocov(np.convolve([1.0, -1.0], [1.0, a1, a2]), n_lags)
     (var_process, var_meas), _ = nnls(np.column_stack([process, measurement]), observed)
-    sigma_accel = math.sqrt(var_process) / (dt * dt)
-    gain, acf = plant_noise_gain(m, c, k, dt)
+    total = var_process * process[0] + var_meas * measurement[0]
+    return var_process, var_meas, (var_process * process[0] / total if total > 0 else 1.0)
+
+
+def _plant_data_floor(u: np.ndarray, x: np.ndarray, lin: dict, dt: float) -> NoiseFloor:
+    """Process and measurement noise of the plant from the one-step error (method of moments).
+
+    When measurement noise dominates the one-step error (fast sampling), the process noise is
+    read on block averages of 2, 4, 8, … samples: over a step h its share grows like h⁴. The
+    per-sample acceleration noise at dt is ``σ_h·√(h/dt)`` (white noise of fixed intensity).
+    """
+    u = u - lin.get("u_offset", 0.0)
+    _, var_meas, _ = _plant_noise_moments(u, x, lin, dt)
+    factor, sigma_accel = 1, 0.0
+    while len(x) // factor >= 200:
+        n_blocks = len(x) // factor
+        xs = x[: n_blocks * factor].reshape(n_blocks, factor).mean(axis=1)
+        us = u[: n_blocks * factor].reshape(n_blocks, factor).mean(axis=1)
+        lin_h = dict(lin, delay_samples=int(lin.get("delay_samples", 0)) // factor)
+        step = dt * factor
+        var_process, _, share = _plant_noise_moments(us, xs, lin_h, step)
+        sigma_accel = math.sqrt(var_process) / (step * step) * math.sqrt(step / dt)
+        if share >= 0.5:
+            break
+        factor *= 2
+    gain, acf = plant_noise_gain(lin["m"], lin["c"], lin["k"], dt)
     total = (sigma_accel * gain) ** 2 + var_meas
     weight = (sigma_accel * gain) ** 2 / total if total > 0 else 1.0
     mixed = weight * acf + (1 - weight) * np.r_[1.0, np.zeros(len(acf) - 1)]
