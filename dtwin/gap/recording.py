@@ -94,7 +94,7 @@ def _decimals(text: str) -> int:
 
 def _time_resolution(raw: pd.Series) -> float:
     """Return the rounding step implied by the printed time stamps (0 if they are not text)."""
-    if raw.dtype != object:
+    if pd.api.types.is_numeric_dtype(raw):
         return 0.0
     decimals = max((_decimals(str(value)) for value in raw.iloc[: min(len(raw), 2000)]), default=0)
     return 10.0 ** (-decimals) if decimals < 15 else 0.0
@@ -103,7 +103,7 @@ def _time_resolution(raw: pd.Series) -> float:
 def _numeric_column(name: str, raw: pd.Series) -> np.ndarray:
     values = pd.to_numeric(raw, errors="coerce")
     text_bad = values.isna().to_numpy() & raw.notna().to_numpy()
-    if raw.dtype == object:
+    if not pd.api.types.is_numeric_dtype(raw):
         stripped = raw.astype(str).str.strip().str.lower()
         text_bad &= ~stripped.isin(["nan", "inf", "-inf", "+inf", "infinity", "-infinity", ""])
     if text_bad.any():
@@ -130,10 +130,16 @@ def _check_time(t: np.ndarray, resolution: float) -> float:
             f"at row {row})"
         )
     dt = float((t[-1] - t[0]) / (len(t) - 1))
-    allowed = STEP_TOLERANCE * dt + resolution * (1.0 + 1e-9) + 1e-12 * abs(t).max()
-    off = np.abs(steps - dt) > allowed
-    if off.any():
-        row = int(np.argmax(np.abs(steps - dt))) + 2
+    eps = 1e-12 * abs(t).max()
+    # rounded stamps: a step may be off by one rounding step, a stamp (dt fitted) by one too
+    off_step = np.abs(steps - dt) > STEP_TOLERANCE * dt + resolution * (1.0 + 1e-9) + eps
+    grid_error = np.abs(t - (t[0] + dt * np.arange(len(t))))
+    off_grid = grid_error > STEP_TOLERANCE * dt + resolution * (1.0 + 1e-9) + eps
+    if off_step.any() or off_grid.any():
+        if off_step.any():
+            row = int(np.argmax(np.abs(steps - dt))) + 2
+        else:
+            row = max(2, int(np.argmax(grid_error)) + 1)
         raise DtwinValueError(
             f"recording column 't' must have a uniform step (dt = {dt:.6g} s): steps vary by "
             f"more than 1 % of dt beyond the stamps' rounding (got a step of "
