@@ -1,0 +1,202 @@
+"""The ``dtwin`` command line: a thin front end over the library (issue #5).
+
+Subcommands::
+
+    dtwin diagnose RECORDING.csv --twin TWIN.yaml --out DIR [--calibrate] [--train-frac 0.5]
+    dtwin generate EFFECT --seed N --out DIR [--magnitude M] [--n-samples N] [--module M]
+
+Bad input gets a one-line message on stderr and exit status 2, never a traceback; an unexpected
+failure gets exit status 3 (set ``DTWIN_DEBUG=1`` for the traceback). Output folders are written
+into a temporary folder beside ``DIR`` and renamed into place, so ``DIR`` is never half-written.
+This is the only place besides the Snakemake scripts that reads files into the library.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import shutil
+import sys
+import tempfile
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+__all__ = ["main", "build_parser", "load_twin_file", "write_folder_atomically"]
+
+EXIT_BAD_INPUT = 2
+EXIT_FAILURE = 3
+
+logger = logging.getLogger("dtwin.cli")
+
+
+class CliError(Exception):
+    """A bad input, reported in one line."""
+
+
+def load_twin_file(path: str | os.PathLike):
+    """Return the parsed YAML content of a twin file (any YAML value; validated later)."""
+    import yaml
+
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError as error:
+        raise CliError(f"twin file not found: {path}") from error
+    except (OSError, UnicodeDecodeError) as error:
+        raise CliError(f"twin file could not be read: {path}: {error}") from error
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        first = str(error).strip().splitlines()[0]
+        raise CliError(f"twin file is not valid YAML: {path}: {first}") from error
+
+
+def write_folder_atomically(out_dir: str | os.PathLike, write: Callable[[Path], object]) -> None:
+    """Call ``write(tmp_dir)`` on a fresh folder beside ``out_dir``, then rename it into place.
+
+    An existing ``out_dir`` is replaced only if it holds nothing but files this tool writes
+    (``allowed``); otherwise :class:`CliError`. On any error the temporary folder is removed.
+    """
+    target = Path(out_dir)
+    if target.exists() and not target.is_dir():
+        raise CliError(f"--out {target} exists and is not a folder")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp"))
+    try:
+        write(tmp)
+        produced = {p.name for p in tmp.iterdir()}
+        if target.exists():
+            foreign = {p.name for p in target.iterdir()} - produced
+            if foreign:
+                raise CliError(
+                    f"--out {target} exists and holds other files ({', '.join(sorted(foreign))}); "
+                    "choose a new folder"
+                )
+            backup = target.with_name(f".{target.name}.old")
+            shutil.rmtree(backup, ignore_errors=True)
+            os.replace(target, backup)
+            os.replace(tmp, target)
+            shutil.rmtree(backup, ignore_errors=True)
+        else:
+            os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _diagnose(args: argparse.Namespace) -> int:
+    from dtwin.gap.diagnose import diagnose, twin_from_mapping
+    from dtwin.gap.recording import read_recording
+    from dtwin.gap.report import write_report
+
+    twin_content = load_twin_file(args.twin)
+    recording = read_recording(args.recording)
+    twin = twin_from_mapping(twin_content, dt=recording.dt)
+    result = diagnose(recording, twin, calibrate=args.calibrate, train_frac=args.train_frac)
+    write_folder_atomically(args.out, lambda tmp: write_report(result, tmp))
+    shrink = f", excess gap −{result.shrink_pct:.0f} %" if result.shrink_pct is not None else ""
+    print(f"{result.module or '-'}: {result.effect}{shrink} -> {args.out}")
+    return 0
+
+
+def _generate(args: argparse.Namespace) -> int:
+    import yaml
+
+    from dtwin.artifacts import write_csv, write_json
+    from dtwin.gap.generator import generate_case
+
+    case = generate_case(
+        args.effect,
+        args.seed,
+        magnitude=args.magnitude,
+        module=args.module,
+        n_samples=args.n_samples,
+    )
+
+    def write(folder: Path) -> None:
+        write_csv(case.recording, folder / "recording.csv")
+        (folder / "twin.yaml").write_text(yaml.safe_dump(case.twin, sort_keys=False))
+        write_json(case.key, folder / "key.json")
+
+    write_folder_atomically(args.out, write)
+    print(f"{args.effect} (seed {args.seed}) -> {args.out}")
+    return 0
+
+
+def _fraction(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(f"must be a number (got {text!r})") from error
+    if not 0.05 <= value <= 0.95:
+        raise argparse.ArgumentTypeError(f"must be in [0.05, 0.95] (got {value})")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the ``dtwin`` argument parser (one subparser per subcommand)."""
+    from dtwin.gap.generator import ALL_CASE_EFFECTS
+
+    parser = argparse.ArgumentParser(
+        prog="dtwin", description="Find, explain and mitigate error in modular digital twins."
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    diag = sub.add_parser(
+        "diagnose",
+        help="diagnose the sim-to-real gap of a recording",
+        description="Where the gap lies, which unmodelled effect causes it, how far it shrinks.",
+    )
+    diag.add_argument("recording", help="RECORDING.csv: column t and module signals")
+    diag.add_argument("--twin", required=True, help="TWIN.yaml: the twin's parameters")
+    diag.add_argument("--out", required=True, help="output folder (written atomically)")
+    diag.add_argument(
+        "--calibrate", action="store_true", help="fit each module's linear twin first"
+    )
+    diag.add_argument(
+        "--train-frac", type=_fraction, default=0.5, help="training fraction (default 0.5)"
+    )
+    diag.set_defaults(run=_diagnose)
+
+    gen = sub.add_parser(
+        "generate",
+        help="generate a recording with a withheld effect (recording.csv, twin.yaml, key.json)",
+    )
+    gen.add_argument("effect", choices=ALL_CASE_EFFECTS)
+    gen.add_argument("--seed", type=int, required=True)
+    gen.add_argument("--out", required=True)
+    gen.add_argument("--magnitude", type=float, default=None, help="0 (faint) to 1 (strong)")
+    gen.add_argument("--module", default=None, help="module for multi-module effects")
+    gen.add_argument("--n-samples", type=int, default=None)
+    gen.set_defaults(run=_generate)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``dtwin`` command line and return its exit status."""
+    from dtwin._validation import DtwinTypeError, DtwinValueError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        return args.run(args)
+    except (CliError, DtwinValueError, DtwinTypeError) as error:
+        print(f"dtwin {args.command}: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as error:
+        print(f"dtwin {args.command}: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except Exception as error:  # a bug: still one line, unless debugging
+        if os.environ.get("DTWIN_DEBUG"):
+            raise
+        print(
+            f"dtwin {args.command}: internal error: {type(error).__name__}: {error} "
+            "(set DTWIN_DEBUG=1 for the traceback)",
+            file=sys.stderr,
+        )
+        return EXIT_FAILURE

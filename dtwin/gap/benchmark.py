@@ -1,0 +1,201 @@
+"""Scoring diagnoses against the withheld truth: the ``gap_benchmark`` artifact (issue #5).
+
+:func:`score_cases` joins each case's key (the truth from :mod:`dtwin.gap.generator`) with its
+``diagnosis.json`` and returns one row per case; :func:`benchmark_metrics` gives the accuracies
+the issue sets targets for; :func:`benchmark_checks` states them as checks;
+:func:`draw_benchmark` draws the confusion matrix, accuracy vs magnitude and the shrinks per
+effect.
+
+Table columns (:func:`score_cases`): ``case, effect, module, expected_effect, in_list,
+magnitude, snr, n_samples, diagnosed_module, diagnosed_effect, shrink_pct, raw_shrink_pct,
+kpi_shrink_pct, module_ok, effect_ok``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dtwin.artifacts import Check
+from dtwin.gap.effects import NONE, UNEXPLAINED
+
+__all__ = ["TARGETS", "score_cases", "benchmark_metrics", "benchmark_checks", "draw_benchmark"]
+
+#: The issue's targets on the full benchmark (≥ 10 cases per effect).
+TARGETS: dict[str, float] = {
+    "module_accuracy": 0.95,
+    "effect_accuracy": 0.90,
+    "none_accuracy": 0.90,
+    "unexplained_accuracy": 0.80,
+    "median_shrink_pct": 85.0,
+}
+
+
+def score_cases(cases: Iterable[tuple[str, Mapping[str, Any], Mapping[str, Any]]]) -> pd.DataFrame:
+    """Return one row per case from ``(case name, key, diagnosis)`` triples (see the columns)."""
+    rows = []
+    for name, key, diagnosis in cases:
+        expected = key["expected_effect"]
+        truth_module = key["module"] if expected != NONE else None
+        module_ok = diagnosis["module"] == truth_module
+        rows.append(
+            {
+                "case": name,
+                "effect": key["effect"],
+                "module": truth_module,
+                "expected_effect": expected,
+                "in_list": bool(key["in_list"]),
+                "magnitude": float(key["magnitude"]),
+                "snr": key.get("snr"),
+                "n_samples": int(key["n_samples"]),
+                "diagnosed_module": diagnosis["module"],
+                "diagnosed_effect": diagnosis["effect"],
+                "shrink_pct": diagnosis["shrink_pct"],
+                "raw_shrink_pct": diagnosis["raw_shrink_pct"],
+                "kpi_shrink_pct": diagnosis["kpi_shrink_pct"],
+                "module_ok": bool(module_ok),
+                "effect_ok": bool(module_ok and diagnosis["effect"] == expected),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def _mean(values: pd.Series) -> float | None:
+    return float(values.mean()) if len(values) else None
+
+
+def benchmark_metrics(table: pd.DataFrame) -> dict[str, Any]:
+    """Return the benchmark's accuracies and shrink statistics.
+
+    ``module_accuracy``: right module (or null for ``none``) over cases with an effect;
+    ``effect_accuracy``: right module and effect over in-list cases; ``none_accuracy``;
+    ``unexplained_accuracy``: out-of-list cases answered ``unexplained`` in the right module;
+    ``median_shrink_pct``: median held-out excess shrink over in-list cases diagnosed right.
+    """
+    with_effect = table[table.expected_effect != NONE]
+    in_list = table[table.in_list]
+    none = table[table.expected_effect == NONE]
+    out = table[(table.expected_effect == UNEXPLAINED)]
+    right = in_list[in_list.effect_ok]
+    shrinks = pd.to_numeric(right.shrink_pct, errors="coerce").dropna()
+    per_effect = table.groupby("effect").effect_ok.mean().round(3).to_dict()
+    bins = pd.cut(table.magnitude, [0, 0.25, 0.5, 0.75, 1.0], include_lowest=True)
+    by_magnitude = table[table.expected_effect != NONE].groupby(bins, observed=False).effect_ok
+    return {
+        "n_cases": len(table),
+        "cases_per_effect": table.groupby("effect").size().to_dict(),
+        "module_accuracy": _mean(with_effect.module_ok),
+        "effect_accuracy": _mean(in_list.effect_ok),
+        "none_accuracy": _mean(none.effect_ok),
+        "unexplained_accuracy": _mean(out.effect_ok),
+        "median_shrink_pct": float(shrinks.median()) if len(shrinks) else None,
+        "median_raw_shrink_pct": float(pd.to_numeric(right.raw_shrink_pct).median())
+        if len(right)
+        else None,
+        "median_kpi_shrink_pct": float(pd.to_numeric(right.kpi_shrink_pct).dropna().median())
+        if right.kpi_shrink_pct.notna().any()
+        else None,
+        "accuracy_by_effect": per_effect,
+        "accuracy_by_magnitude": {
+            str(k): (None if np.isnan(v) else round(float(v), 3))
+            for k, v in by_magnitude.mean().items()
+        },
+    }
+
+
+def benchmark_checks(table: pd.DataFrame, metrics: Mapping[str, Any]) -> list[Check]:
+    """Return the artifact's checks: validity (cases scored) and the issue's targets as claims."""
+    checks = [
+        Check(
+            "cases_scored",
+            "validity",
+            "every generated case has a diagnosis",
+            "n_cases > 0",
+            int(len(table)),
+            bool(len(table) > 0),
+        )
+    ]
+    for name, target in TARGETS.items():
+        observed = metrics.get(name)
+        checks.append(
+            Check(
+                f"target_{name}",
+                "claim",
+                f"issue #5 target: {name} >= {target}",
+                target,
+                observed,
+                bool(observed is not None and observed >= target),
+            )
+        )
+    return checks
+
+
+def draw_benchmark(
+    table: pd.DataFrame, metrics: Mapping[str, Any], paths: Iterable[str | os.PathLike]
+) -> None:
+    """Draw the benchmark figure (confusion matrix, accuracy vs magnitude, shrinks) to ``paths``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from dtwin.artifacts import atomic_write
+
+    fig, axes = plt.subplots(1, 3, figsize=(18, 6), gridspec_kw={"width_ratios": [1.4, 1, 1.2]})
+    truths = sorted(table.expected_effect.unique())
+    answers = sorted(set(table.diagnosed_effect) | set(truths))
+    matrix = pd.crosstab(table.expected_effect, table.diagnosed_effect).reindex(
+        index=truths, columns=answers, fill_value=0
+    )
+    ax = axes[0]
+    ax.imshow(matrix.to_numpy(), cmap="Blues")
+    ax.set_xticks(range(len(answers)), answers, rotation=60, ha="right", fontsize=8)
+    ax.set_yticks(range(len(truths)), truths, fontsize=8)
+    for (i, j), value in np.ndenumerate(matrix.to_numpy()):
+        if value:
+            ax.text(j, i, str(value), ha="center", va="center", fontsize=8)
+    ax.set_xlabel("diagnosed effect")
+    ax.set_ylabel("true effect (out-of-list → unexplained)")
+    ax.set_title("Confusion matrix")
+    ax = axes[1]
+    scored = table[table.expected_effect != NONE].copy()
+    scored["bin"] = pd.cut(scored.magnitude, [0, 0.25, 0.5, 0.75, 1.0], include_lowest=True)
+    grouped = scored.groupby("bin", observed=False)
+    centres = [0.125, 0.375, 0.625, 0.875]
+    ax.plot(centres, grouped.effect_ok.mean().to_numpy(), "o-", label="effect right")
+    ax.plot(centres, grouped.module_ok.mean().to_numpy(), "s--", label="module right")
+    ax.set_ylim(0, 1.05)
+    ax.set_xlabel("effect magnitude (0 = barely above noise, 1 = strong)")
+    ax.set_ylabel("accuracy")
+    ax.set_title("Accuracy vs magnitude")
+    ax.legend()
+    ax = axes[2]
+    right = table[table.in_list & table.effect_ok]
+    effects = sorted(right.effect.unique())
+    data = [pd.to_numeric(right[right.effect == e].shrink_pct).dropna().to_numpy() for e in effects]
+    if effects:
+        ax.boxplot(data, vert=False)
+        ax.set_yticks(range(1, len(effects) + 1), effects, fontsize=8)
+    ax.axvline(85, color="k", ls="--", lw=1)
+    ax.set_xlabel("held-out excess gap removed, % (right diagnoses)")
+    ax.set_title("Shrink per effect")
+
+    def fmt(value):
+        return "–" if value is None else f"{100 * value:.0f} %"
+
+    fig.suptitle(
+        f"Gap diagnoser on {metrics['n_cases']} withheld-effect cases: "
+        f"module {fmt(metrics['module_accuracy'])}, effect {fmt(metrics['effect_accuracy'])}, "
+        f"none {fmt(metrics['none_accuracy'])}, "
+        f"out-of-list → unexplained {fmt(metrics['unexplained_accuracy'])}, "
+        f"median excess shrink {metrics['median_shrink_pct'] or 0:.0f} %",
+        fontsize=11,
+    )
+    fig.tight_layout()
+    for path in paths:
+        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110))
+    plt.close(fig)

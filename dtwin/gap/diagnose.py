@@ -1,0 +1,676 @@
+"""The sim-to-real gap diagnoser: where the gap lies, which effect causes it, how far it shrinks.
+
+:func:`diagnose` implements issue #5 in three steps.
+
+1. **Where.** Each module whose input and output are recorded is driven with its *recorded*
+   input; its local gap (:mod:`dtwin.gap.localise`) is compared with the largest gap its noise
+   explains (:mod:`dtwin.gap.noise`). Twins are never calibrated exactly, so the comparison
+   uses the gap left after re-fitting the module's own linear parameters inside
+   ``calibration_tolerance`` of their nominal values on the training part: a gap such a
+   re-fit removes is calibration slack, not a sim-to-real gap. A module above its threshold has
+   a gap; the *source* is the one furthest above. The chain shows which other gaps are only
+   inherited.
+2. **Which.** Every candidate of a module with a gap (:mod:`dtwin.gap.effects`, plus
+   ``parameter_mismatch``) is fitted on the training part together with the module's linear
+   parameters (:mod:`dtwin.gap.fit`), then scored on the held-out part by
+   ``n_eff·ln(MSE) + p·ln(n_eff)`` (BIC with the effective sample size of the module's noise,
+   so that slowly varying noise is not counted as independent evidence). The lowest score
+   wins; ``unexplained`` if it removes less than ``min_share`` of the held-out excess gap;
+   ``none`` if no module has a gap. ``confidence`` is the winner's BIC weight.
+3. **How far.** The held-out gap of the winner gives ``shrink_pct`` (of the excess gap, the
+   part above the noise floor: ``√(gap² − floor²)``) and ``raw_shrink_pct`` (of the whole gap);
+   the chain re-run with the effect added gives ``kpi_shrink_pct`` (end-to-end KPI ``z``, or the
+   most downstream recorded signal when ``z`` is not recorded).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from dtwin._validation import DtwinTypeError, DtwinValueError, require_in_range
+from dtwin.gap.effects import (
+    NONE,
+    PARAMETER_MISMATCH,
+    UNEXPLAINED,
+    Effect,
+    Scales,
+    effects_for_module,
+    quantization_variance,
+)
+from dtwin.gap.fit import CandidateFit, calibrate_linear, fit_candidate, linear_typical
+from dtwin.gap.localise import (
+    ModuleModel,
+    module_inputs,
+    normalised_rms,
+    run_chain,
+    upstream_modules,
+)
+from dtwin.gap.models import LINEAR_PARAMS, ModuleData, simulate_module, velocity_from_position
+from dtwin.gap.noise import (
+    NoiseFloor,
+    data_noise_floor,
+    effective_samples,
+    gap_threshold,
+    twin_noise_floor,
+)
+from dtwin.gap.recording import Recording, diagnosable_modules
+from dtwin.params import TwinParams, twin_params_from_mapping
+from dtwin.wiring import MODULES
+
+__all__ = [
+    "GapSettings",
+    "ModuleReport",
+    "CandidateReport",
+    "Diagnosis",
+    "DT_TOLERANCE",
+    "twin_from_mapping",
+    "diagnose",
+]
+
+logger = logging.getLogger(__name__)
+
+#: Largest relative disagreement between the recording's dt and ``twin.dt``.
+DT_TOLERANCE = 0.01
+
+STATUSES = ("source", "gap", "inherited", "clean", "skipped")
+
+
+@dataclass(frozen=True)
+class GapSettings:
+    """Decision constants of the diagnoser (the ``gap.diagnose`` config section).
+
+    Attributes
+    ----------
+    noise_tolerance : float, default 0.10
+        Relative uncertainty of the twin's noise levels.
+    calibration_tolerance : float, default 0.05
+        Relative band around each nominal linear parameter that counts as "calibrated"
+        (a bias's band is this fraction of the output's standard deviation).
+    significance : float, default 0.01
+        Probability that noise alone exceeds the threshold (a one-sided test).
+    min_gap : float, default 0.005
+        Smallest normalised gap worth reporting, whatever the noise.
+    min_share : float, default 0.5
+        Share of the held-out excess gap the best candidate must remove to explain it.
+    """
+
+    noise_tolerance: float = 0.10
+    calibration_tolerance: float = 0.05
+    significance: float = 0.01
+    min_gap: float = 0.005
+    min_share: float = 0.5
+
+    def __post_init__(self) -> None:
+        require_in_range("gap.noise_tolerance", self.noise_tolerance, 0.0, 1.0)
+        require_in_range("gap.calibration_tolerance", self.calibration_tolerance, 0.0, 1.0)
+        require_in_range("gap.significance", self.significance, 1e-9, 0.5)
+        require_in_range("gap.min_gap", self.min_gap, 0.0, 1.0)
+        require_in_range("gap.min_share", self.min_share, 0.0, 1.0)
+
+    @classmethod
+    def from_mapping(cls, mapping: Mapping[str, Any] | None) -> GapSettings:
+        """Return settings from a mapping of the attribute names (missing keys keep defaults)."""
+        mapping = dict(mapping or {})
+        unknown = sorted(set(mapping) - set(cls.__dataclass_fields__))
+        if unknown:
+            raise DtwinValueError(f"gap.diagnose has unknown key(s): {', '.join(unknown)}")
+        return cls(**{k: float(v) for k, v in mapping.items()})
+
+
+@dataclass(frozen=True)
+class ModuleReport:
+    """What the diagnoser found for one module (gaps normalised as in :mod:`~.localise`)."""
+
+    name: str
+    status: str
+    reason: str
+    calibrated: bool = False
+    gap_before: float | None = None
+    gap_calibrated: float | None = None
+    gap_after: float | None = None
+    chain_gap: float | None = None
+    chain_gap_after: float | None = None
+    noise_floor: float | None = None
+    noise_floor_twin: float | None = None
+    noise_floor_data: float | None = None
+    threshold: float | None = None
+    n_eff: float | None = None
+    lin_nominal: dict[str, float] | None = None
+    lin_used: dict[str, float] | None = None
+
+
+@dataclass(frozen=True)
+class CandidateReport:
+    """One fitted candidate, scored on the held-out part."""
+
+    module: str
+    effect: str
+    params: dict[str, float]
+    lin: dict[str, float]
+    n_params: int
+    gap_after: float
+    heldout_shrink_pct: float
+    raw_shrink_pct: float
+    score: float
+    weight: float
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """The diagnosis of one recording (the content of ``diagnosis.json``).
+
+    ``module`` is the source module or None; ``effect`` an effect name, ``"none"`` or
+    ``"unexplained"``; shrinks are percentages on the held-out part (None when no effect
+    was added). ``series`` holds held-out time series of the source module for the figure.
+    """
+
+    module: str | None
+    effect: str
+    params: dict[str, float]
+    confidence: float | None
+    shrink_pct: float | None
+    raw_shrink_pct: float | None
+    kpi_shrink_pct: float | None
+    kpi_signal: str | None
+    modules: dict[str, ModuleReport]
+    candidates: list[CandidateReport]
+    n_samples: int
+    n_train: int
+    dt: float
+    train_frac: float
+    calibrated: tuple[str, ...]
+    notes: tuple[str, ...]
+    settings: GapSettings
+    series: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+
+def twin_from_mapping(mapping: Any, dt: float | None = None) -> TwinParams:
+    """Return :class:`TwinParams` from a twin file's content (bare, or under a ``twin:`` key).
+
+    Sections may be missing (the diagnoser then calibrates that module); ``dt`` may be missing
+    if given here (the recording's). An empty file is an empty mapping.
+    """
+    if mapping is None:
+        mapping = {}
+    if not isinstance(mapping, Mapping):
+        raise DtwinTypeError(f"twin file must be a mapping (got {type(mapping).__name__})")
+    if "twin" in mapping:
+        if set(mapping) - {"twin"}:
+            extra = ", ".join(sorted(set(mapping) - {"twin"}))
+            logger.info("twin file: ignoring top-level keys beside 'twin': %s", extra)
+        mapping = mapping["twin"] if mapping["twin"] is not None else {}
+        if not isinstance(mapping, Mapping):
+            raise DtwinTypeError(f"twin must be a mapping (got {type(mapping).__name__})")
+    mapping = dict(mapping)
+    if "dt" not in mapping and dt is not None:
+        mapping["dt"] = dt
+    return twin_params_from_mapping(mapping, require_all=False)
+
+
+# --- helpers ----------------------------------------------------------------------------
+
+
+def _nominal_lin(name: str, twin: TwinParams) -> dict[str, float] | None:
+    section = getattr(twin, next(m.params for m in MODULES if m.name == name))
+    if section is None:
+        return None
+    return {key: float(getattr(section, key)) for key in LINEAR_PARAMS[name]}
+
+
+def _module_data(name: str, rec: Recording, t: np.ndarray) -> ModuleData:
+    inputs = module_inputs(name, rec.signals, rec.dt)
+    module = next(m for m in MODULES if m.name == name)
+    output = rec.signals[module.output]
+    velocity = velocity_from_position(output, rec.dt) if name == "M1" else inputs.get("v")
+    return ModuleData(name, inputs, output, rec.dt, t, velocity, None)
+
+
+def _scales(data: ModuleData, n_train: int, noise_std: float, lin: Mapping[str, float]) -> Scales:
+    first_input = next(iter(data.inputs.values()))[:n_train]
+    output = data.output
+    velocity_std = float(np.std(data.velocity)) if data.name == "M1" else 0.0
+    return Scales(
+        input_max=float(np.max(np.abs(first_input))) or 1.0,
+        input_std=float(np.std(first_input)) or 1.0,
+        output_std=float(np.std(output)) or 1.0,
+        velocity_std=velocity_std or 1.0,
+        duration=float(data.t[-1] - data.t[0]) or 1.0,
+        dt=data.dt,
+        noise_std=float(noise_std),
+        stiffness=float(lin.get("k", 0.0)) or 1.0,
+        mass=float(lin.get("m", 0.0)) or 1.0,
+    )
+
+
+def _check_inputs_vary(rec: Recording, names: list[str], n_train: int) -> None:
+    for name in names:
+        module = next(m for m in MODULES if m.name == name)
+        for signal in module.inputs:
+            if signal not in rec.signals:
+                continue
+            values = rec.signals[signal]
+            for label, part in (("recording", values), ("training part", values[:n_train])):
+                spread = float(np.ptp(part))
+                if spread <= 1e-12 * max(1.0, float(np.max(np.abs(part)))):
+                    raise DtwinValueError(
+                        f"recording column '{signal}' (input of {name}) must vary over the "
+                        f"{label} (got the constant {part[0]:g}); nothing can be identified"
+                    )
+
+
+def _in_band_bounds(lin: Mapping[str, float], typical: Mapping[str, float], tol: float) -> dict:
+    bounds = {}
+    for key, value in lin.items():
+        half = tol * (abs(value) if key != "bias" and value != 0 else typical[key])
+        half = max(half, 1e-12 * typical[key])
+        low, high = value - half, value + half
+        if key == "alpha":
+            low, high = max(low, 0.0), min(high, 1.0)
+            if high <= low:
+                low, high = max(0.0, high - 1e-9), min(1.0, low + 1e-9)
+        bounds[key] = (low, high)
+    return bounds
+
+
+def _excess(gap: float, floor: float) -> float:
+    return math.sqrt(max(gap * gap - floor * floor, 0.0))
+
+
+def _shrink(before: float, after: float) -> float:
+    if before <= 0:
+        return 0.0
+    return 100.0 * (1.0 - after / before)
+
+
+def _effect_params(effect: Effect | None, fit: CandidateFit, nominal, tol) -> dict[str, float]:
+    if effect is not None and effect.name != PARAMETER_MISMATCH:
+        return dict(zip(effect.params, fit.theta, strict=True))
+    if nominal is None:
+        return dict(fit.lin)
+    moved = {}
+    for key, value in nominal.items():
+        fitted = fit.lin[key]
+        scale = abs(value) if value != 0 else 1.0
+        moved[key] = abs(fitted - value) / scale
+    beyond = {k: fit.lin[k] for k, r in moved.items() if r > tol}
+    if not beyond and moved:
+        key = max(moved, key=moved.get)
+        beyond = {key: fit.lin[key]}
+    return beyond
+
+
+# --- the per-module analysis ----------------------------------------------------------
+
+
+@dataclass
+class _ModuleWork:
+    name: str
+    data: ModuleData
+    calibrated: bool
+    lin_nominal: dict[str, float] | None
+    lin_base: dict[str, float]
+    norm: float
+    sim_before: np.ndarray
+    gap_before: float
+    floor: NoiseFloor
+    floor_twin: float | None
+    floor_data: float
+    gap_cal: float
+    threshold: float
+    n_eff: float
+    candidates: list[tuple[Effect, CandidateFit, np.ndarray, float]] = field(default_factory=list)
+
+
+def _analyse_module(name, rec, twin, t, n_train, calibrate, settings) -> _ModuleWork:
+    data = _module_data(name, rec, t)
+    held = slice(n_train, rec.n_samples)
+    norm = float(np.std(data.output)) or 1.0
+    nominal = _nominal_lin(name, twin)
+    calibrated = calibrate or nominal is None
+    provisional = _scales(data, n_train, 0.0, nominal or {})
+    data = replace(data, scales=provisional)
+    lin_base = calibrate_linear(data, n_train) if calibrated else dict(nominal)
+    sim_before = simulate_module(data, lin_base)
+    floor_data = data_noise_floor(name, data.inputs, data.output, sim_before, lin_base, rec.dt)
+    floor_twin = (
+        twin_noise_floor(name, twin.noise, lin_base, rec.dt) if twin.noise is not None else None
+    )
+    floor = floor_twin if floor_twin is not None else floor_data
+    data = replace(data, scales=_scales(data, n_train, floor.rms, lin_base))
+    gap_before = normalised_rms(data.output, sim_before, held, norm)
+    if calibrated:
+        gap_cal = gap_before
+    else:
+        typical = linear_typical(name, lin_base, data.scales)
+        bounds = _in_band_bounds(lin_base, typical, settings.calibration_tolerance)
+        in_band = fit_candidate(
+            data, None, lin_base, n_train=n_train, free=list(bounds), lin_bounds=bounds
+        )
+        gap_cal = normalised_rms(data.output, simulate_module(data, in_band.lin), held, norm)
+    n_eff = effective_samples(floor.acf, rec.n_samples - n_train)
+    threshold = gap_threshold(
+        floor.rms / norm,
+        n_eff,
+        noise_tolerance=settings.noise_tolerance,
+        significance=settings.significance,
+        min_gap=settings.min_gap,
+    )
+    return _ModuleWork(
+        name,
+        data,
+        calibrated,
+        nominal,
+        lin_base,
+        norm,
+        sim_before,
+        gap_before,
+        floor,
+        floor_twin.rms / norm if floor_twin is not None else None,
+        floor_data.rms / norm,
+        min(gap_cal, gap_before),
+        threshold,
+        n_eff,
+    )
+
+
+def _fit_candidates(work: _ModuleWork, n_train: int) -> None:
+    held = slice(n_train, work.data.n_samples)
+    start = work.lin_base
+    for effect in effects_for_module(work.name, include_mismatch=not work.calibrated):
+        fitted = fit_candidate(work.data, effect, start, n_train=n_train)
+        if effect.name == PARAMETER_MISMATCH:
+            start = fitted.lin  # the effects start from the re-fitted linear twin
+        predicted = simulate_module(work.data, fitted.lin, effect, fitted.theta)
+        gap = normalised_rms(work.data.output, predicted, held, work.norm)
+        gap = gap if math.isfinite(gap) else math.inf
+        work.candidates.append((effect, fitted, predicted, gap))
+        logger.debug("%s %s: held-out gap %.4g", work.name, effect.name, gap)
+
+
+def _score_candidates(work: _ModuleWork, n_train: int, settings: GapSettings):
+    n_eff = work.n_eff
+    floor = work.floor.rms / work.norm
+    excess_before = _excess(work.gap_before, floor)
+    reports = []
+    held = slice(n_train, work.data.n_samples)
+    for effect, fitted, _, gap in work.candidates:
+        floor_c = floor
+        if effect.name == "sensor_quantization":
+            # a quantizer after noise makes part of the noise unpredictable; its variance is
+            # the floor of this candidate (see dtwin.gap.effects.quantization_variance)
+            step, offset, before = fitted.theta
+            noise = work.floor.rms
+            clean = simulate_module(work.data, fitted.lin)[held] - offset
+            extra = quantization_variance(clean, step, before)
+            floor_c = math.sqrt(max(noise**2 - before**2, 0.0) + extra) / work.norm
+        mse = max(gap * gap, 1e-300)
+        score = n_eff * math.log(mse) + fitted.n_free * math.log(max(n_eff, 2.0))
+        reports.append(
+            CandidateReport(
+                module=work.name,
+                effect=effect.name,
+                params=_effect_params(
+                    effect, fitted, work.lin_nominal, settings.calibration_tolerance
+                ),
+                lin=dict(fitted.lin),
+                n_params=fitted.n_free,
+                gap_after=gap,
+                heldout_shrink_pct=_shrink(excess_before, _excess(gap, floor_c)),
+                raw_shrink_pct=_shrink(work.gap_before, gap),
+                score=score,
+                weight=0.0,
+            )
+        )
+    best = min(r.score for r in reports)
+    weights = np.array([math.exp(-(r.score - best) / 2.0) for r in reports])
+    weights /= weights.sum()
+    reports = [
+        replace(r, score=r.score - best, weight=float(w))
+        for r, w in zip(reports, weights, strict=True)
+    ]
+    return sorted(reports, key=lambda r: r.score)
+
+
+# --- the entry point -----------------------------------------------------------------
+
+
+def diagnose(
+    recording: Recording,
+    twin: TwinParams,
+    *,
+    calibrate: bool = False,
+    train_frac: float = 0.5,
+    settings: GapSettings | None = None,
+) -> Diagnosis:
+    """Diagnose the sim-to-real gap of a recording against a twin.
+
+    Parameters
+    ----------
+    recording : Recording
+        The validated recording (:func:`dtwin.gap.recording.read_recording`).
+    twin : TwinParams
+        The twin (:func:`twin_from_mapping`); sections may be None (calibrated from data).
+    calibrate : bool, default False
+        Fit every diagnosed module's linear twin on the training part first.
+    train_frac : float, default 0.5
+        Fraction of samples, from the start, used for fitting; the rest is held out.
+    settings : GapSettings, optional
+        Decision constants.
+
+    Returns
+    -------
+    Diagnosis
+
+    Raises
+    ------
+    DtwinValueError
+        If ``twin.dt`` disagrees with the recording's by more than 1 %, ``train_frac`` leaves
+        fewer than 100 samples on either side, or a module input is constant.
+    """
+    settings = settings or GapSettings()
+    if not isinstance(recording, Recording):
+        raise DtwinTypeError(f"recording must be a Recording (got {type(recording).__name__})")
+    if not isinstance(twin, TwinParams):
+        raise DtwinTypeError(f"twin must be TwinParams (got {type(twin).__name__})")
+    train_frac = require_in_range("train_frac", train_frac, 0.05, 0.95)
+    if abs(recording.dt - twin.dt) > DT_TOLERANCE * twin.dt:
+        raise DtwinValueError(
+            f"recording dt ({recording.dt:.6g} s, from column 't') disagrees with twin.dt "
+            f"({twin.dt:.6g} s) by more than {DT_TOLERANCE:.0%}"
+        )
+    n = recording.n_samples
+    n_train = int(round(train_frac * n))
+    if min(n_train, n - n_train) < 100:
+        raise DtwinValueError(
+            f"train_frac must leave at least 100 samples for training and for the held-out "
+            f"part (got {n_train} and {n - n_train} of {n})"
+        )
+    names = diagnosable_modules(recording.signals)
+    _check_inputs_vary(recording, names, n_train)
+    t = recording.t - recording.t[0]
+    held = slice(n_train, n)
+    notes: list[str] = []
+    if recording.ignored:
+        notes.append(f"ignored columns that are not module signals: {', '.join(recording.ignored)}")
+
+    works = {
+        name: _analyse_module(name, recording, twin, t, n_train, calibrate, settings)
+        for name in names
+    }
+    for work in works.values():
+        if work.calibrated:
+            why = "--calibrate" if calibrate else "no nominal parameters in the twin file"
+            notes.append(f"{work.name}: linear twin fitted on the training part ({why})")
+        if work.floor_twin is not None and work.floor_twin > 0:
+            ratio = work.floor_data / work.floor_twin
+            if not 0.67 <= ratio <= 1.5:
+                notes.append(
+                    f"{work.name}: noise floor estimated from the data is {ratio:.2f}× the "
+                    "twin's (coloured noise, or a high-frequency effect)"
+                )
+    flagged = [w for w in works.values() if w.gap_cal > w.threshold]
+    for work in flagged:
+        _fit_candidates(work, n_train)
+    ranked = {w.name: _score_candidates(w, n_train, settings) for w in flagged}
+
+    source = max(flagged, key=lambda w: w.gap_cal / w.threshold) if flagged else None
+    chosen = None
+    if source is not None:
+        best = ranked[source.name][0]
+        chosen = best if best.heldout_shrink_pct >= 100 * settings.min_share else None
+
+    # chain: before (the twin as given / calibrated) and after (source module with the effect)
+    scales = {name: w.data.scales for name, w in works.items()}
+    models = {}
+    for module in MODULES:
+        if module.name in works:
+            models[module.name] = ModuleModel(works[module.name].lin_base)
+        else:
+            nominal = _nominal_lin(module.name, twin)
+            if nominal is not None:
+                models[module.name] = ModuleModel(nominal)
+    chain_before = run_chain(recording.signals, models, recording.dt, t, scales)
+    chain_after = chain_before
+    if chosen is not None:
+        effect = next(e for e, *_ in source.candidates if e.name == chosen.effect)
+        fitted = next(f for e, f, *_ in source.candidates if e.name == chosen.effect)
+        models_after = dict(models)
+        models_after[source.name] = ModuleModel(fitted.lin, effect, fitted.theta)
+        chain_after = run_chain(recording.signals, models_after, recording.dt, t, scales)
+
+    kpi_signal = None
+    for signal in ("z", "y_fused", "y_A", "y_B", "x", "u_act"):
+        if signal in recording.signals and signal in chain_before:
+            kpi_signal = signal
+            break
+    kpi_shrink = None
+    if chosen is not None and kpi_signal is not None:
+        if source.name in upstream_modules(kpi_signal):
+            norm = float(np.std(recording.signals[kpi_signal])) or 1.0
+            before = normalised_rms(
+                recording.signals[kpi_signal], chain_before[kpi_signal], held, norm
+            )
+            after = normalised_rms(
+                recording.signals[kpi_signal], chain_after[kpi_signal], held, norm
+            )
+            kpi_shrink = _shrink(before, after)
+        else:
+            notes.append(f"{source.name} is not upstream of the end-to-end signal {kpi_signal}")
+
+    modules = {}
+    for module in MODULES:
+        name = module.name
+        if name not in works:
+            missing = [
+                s
+                for s in (*module.inputs, module.output)
+                if s not in recording.signals and not (name == "M4" and s == "v")
+            ]
+            modules[name] = ModuleReport(
+                name, "skipped", f"column(s) not in the recording: {', '.join(missing)}"
+            )
+            continue
+        work = works[name]
+        out = module.output
+        chain_gap = chain_gap_after = None
+        if out in chain_before:
+            chain_gap = normalised_rms(work.data.output, chain_before[out], held, work.norm)
+            chain_gap_after = normalised_rms(work.data.output, chain_after[out], held, work.norm)
+        gap_after = work.gap_before
+        if source is not None and name == source.name and chosen is not None:
+            gap_after = chosen.gap_after
+        if work in flagged:
+            status = "source" if work is source else "gap"
+            reason = (
+                f"gap {work.gap_cal:.3g} after in-tolerance calibration exceeds the noise "
+                f"threshold {work.threshold:.3g}"
+            )
+        elif chain_gap is not None and chain_gap > 2 * max(work.gap_before, work.threshold):
+            status, reason = (
+                "inherited",
+                (
+                    f"local gap {work.gap_before:.3g} is within noise; chain gap {chain_gap:.3g} "
+                    "comes from upstream"
+                ),
+            )
+        else:
+            status, reason = (
+                "clean",
+                (f"gap {work.gap_cal:.3g} within the noise threshold {work.threshold:.3g}"),
+            )
+        modules[name] = ModuleReport(
+            name,
+            status,
+            reason,
+            work.calibrated,
+            work.gap_before,
+            work.gap_cal,
+            gap_after,
+            chain_gap,
+            chain_gap_after,
+            work.floor.rms / work.norm,
+            work.floor_twin,
+            work.floor_data,
+            work.threshold,
+            work.n_eff,
+            work.lin_nominal,
+            work.lin_base,
+        )
+
+    candidates = [
+        c
+        for name in sorted(ranked, key=lambda k: k != getattr(source, "name", None))
+        for c in ranked[name]
+    ]
+    series: dict[str, np.ndarray] = {}
+    if source is not None:
+        series = {
+            "t": recording.t[held],
+            "recorded": source.data.output[held],
+            "before": source.sim_before[held],
+        }
+        best_prediction = next(
+            p for e, f, p, g in source.candidates if e.name == ranked[source.name][0].effect
+        )
+        series["after"] = best_prediction[held]
+
+    if source is None:
+        module, effect, params, confidence = None, NONE, {}, None
+        shrink = raw_shrink = None
+    elif chosen is None:
+        module, effect, params, confidence = source.name, UNEXPLAINED, {}, None
+        shrink = raw_shrink = None
+    else:
+        module, effect, params = source.name, chosen.effect, chosen.params
+        confidence, shrink, raw_shrink = (
+            chosen.weight,
+            chosen.heldout_shrink_pct,
+            chosen.raw_shrink_pct,
+        )
+
+    return Diagnosis(
+        module=module,
+        effect=effect,
+        params=params,
+        confidence=confidence,
+        shrink_pct=shrink,
+        raw_shrink_pct=raw_shrink,
+        kpi_shrink_pct=kpi_shrink,
+        kpi_signal=kpi_signal,
+        modules=modules,
+        candidates=candidates,
+        n_samples=n,
+        n_train=n_train,
+        dt=recording.dt,
+        train_frac=train_frac,
+        calibrated=tuple(w.name for w in works.values() if w.calibrated),
+        notes=tuple(notes),
+        settings=settings,
+        series=series,
+    )

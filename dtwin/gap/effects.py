@@ -1,0 +1,391 @@
+"""The catalogue of candidate unmodelled effects of the gap diagnoser (issue #5, "Which").
+
+Each :class:`Effect` names the modules it can belong to, its parameters with units, bounds and
+starting points (scaled from the data, so the catalogue works in any units), and how it enters
+the module's twin:
+
+``input``
+    a static map on the module input before its linear dynamics (Hammerstein form):
+    ``actuator_saturation``, ``actuator_deadzone``.
+``delay``
+    an extra input delay in seconds, fractional (linear interpolation): ``actuator_delay``,
+    ``sensor_delay``.
+``force``
+    an extra force ``F(x, v)`` subtracted in the plant's acceleration (paper §3.1 M1):
+    ``coulomb_friction``, ``cubic_stiffness``, ``quadratic_damping``.
+``output``
+    a map on the sensor output (``lag`` is the sensor's noise-free first-order lag of x, ``bias``
+    its offset): ``sensor_quantization``, ``sensor_scale_error``, ``sensor_bias_drift``.
+``linear``
+    ``parameter_mismatch``: no new term, the module's own linear parameters are re-fitted.
+
+The forms are the textbook ones on purpose; the real ones differ (a Stribeck bump, a smooth
+saturation, a drift that is not linear) and a candidate must still win when it is only close.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "Scales",
+    "Effect",
+    "EFFECTS",
+    "EFFECT_NAMES",
+    "NONE",
+    "UNEXPLAINED",
+    "PARAMETER_MISMATCH",
+    "effects_for_module",
+    "effect_by_name",
+    "soft_saturation",
+    "deadzone",
+    "fractional_delay",
+    "smooth_quantize",
+    "quantization_variance",
+    "find_lattice",
+]
+
+NONE = "none"
+UNEXPLAINED = "unexplained"
+PARAMETER_MISMATCH = "parameter_mismatch"
+
+
+@dataclass(frozen=True)
+class Scales:
+    """Data scales an effect's bounds and starting points are drawn from (recording units).
+
+    Attributes
+    ----------
+    input_max : float
+        ``max |input|`` over the training part.
+    input_std, output_std : float
+        Standard deviations of the module's input and output.
+    velocity_std : float
+        Standard deviation of the plant velocity (M1; else 0).
+    duration : float
+        Length of the recording, s.
+    dt : float
+        Sample period, s.
+    noise_std : float
+        The module's output noise standard deviation (used by quantization), output units.
+    stiffness, mass : float
+        The plant's ``k`` and ``m`` in the twin (M1; else 0).
+    """
+
+    input_max: float
+    input_std: float
+    output_std: float
+    velocity_std: float
+    duration: float
+    dt: float
+    noise_std: float
+    stiffness: float = 0.0
+    mass: float = 0.0
+
+
+Bounds = list[tuple[float, float]]
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One candidate effect.
+
+    Attributes
+    ----------
+    name : str
+        Effect name of the report (``"coulomb_friction"``).
+    modules : tuple of str
+        Modules it can belong to.
+    params : tuple of str
+        Parameter names, in the order of ``theta``.
+    units : tuple of str
+        Unit of each parameter, in words ("input units", "s").
+    stage : str
+        How it enters the twin (see the module docstring).
+    formula : str
+        The form, for the report.
+    bounds : callable
+        ``bounds(scales) -> [(low, high), ...]``.
+    starts : callable
+        ``starts(scales) -> [theta0, ...]``: starting points of the multi-start fit.
+    typical : callable
+        ``typical(scales) -> [scale, ...]``: a typical magnitude of each parameter.
+    """
+
+    name: str
+    modules: tuple[str, ...]
+    params: tuple[str, ...]
+    units: tuple[str, ...]
+    stage: str
+    formula: str
+    bounds: Callable[[Scales], Bounds]
+    starts: Callable[[Scales], list[list[float]]]
+    typical: Callable[[Scales], list[float]]
+
+    @property
+    def n_params(self) -> int:
+        """Number of effect parameters."""
+        return len(self.params)
+
+
+# --- the forms --------------------------------------------------------------------------
+
+
+def soft_saturation(u: np.ndarray, limit: float, sharpness: float) -> np.ndarray:
+    """Return ``u / (1 + |u/U|^p)^(1/p)``: a saturation at ±U, hard as ``p → ∞``."""
+    ratio = np.abs(u / limit)
+    with np.errstate(over="ignore"):
+        return u / np.power(1.0 + np.power(ratio, sharpness), 1.0 / sharpness)
+
+
+def deadzone(u: np.ndarray, width: float) -> np.ndarray:
+    """Return ``sign(u)·max(|u| − D, 0)``: no output inside ``|u| < D``."""
+    return np.sign(u) * np.maximum(np.abs(u) - width, 0.0)
+
+
+def fractional_delay(u: np.ndarray, delay_samples: float) -> np.ndarray:
+    """Return ``u`` delayed by a non-negative, possibly fractional number of samples.
+
+    ``u_d[k] = (1 − f)·u[k − n] + f·u[k − n − 1]`` with ``n + f = delay_samples``; samples
+    before the start repeat ``u[0]``.
+    """
+    delay_samples = max(float(delay_samples), 0.0)
+    whole = int(math.floor(delay_samples))
+    frac = delay_samples - whole
+    n = len(u)
+    if whole >= n:
+        return np.full(n, u[0])
+    padded = np.concatenate([np.full(whole + 1, u[0]), u])
+    shifted = padded[1 : n + 1]  # u[k - whole]
+    shifted_more = padded[:n]  # u[k - whole - 1]
+    return (1.0 - frac) * shifted + frac * shifted_more
+
+
+def smooth_quantize(s: np.ndarray, step: float, noise_std: float) -> np.ndarray:
+    """Return ``E[q·round((s + ε)/q)]`` for ``ε ~ N(0, σ²)``, the MSE-best quantized prediction.
+
+    Notes
+    -----
+    ``q·round(s/q) − s`` is a sawtooth with Fourier series
+    ``Σ_m (q/(π m))·(−1)^m·sin(2π m s/q)``; averaging over Gaussian noise before the quantizer
+    damps term m by ``exp(−2π² m² σ²/q²)``. With ``σ → 0`` this is the hard staircase; with
+    ``σ ≳ q/2`` it is ``s``: a quantizer finer than the noise is invisible in the mean.
+    """
+    step = abs(step)
+    if step <= 0:
+        return s
+    sigma = max(noise_std, step / 60.0)
+    out = s.copy()
+    phase = 2.0 * np.pi * s / step
+    for m in range(1, 61):
+        damp = math.exp(-2.0 * math.pi**2 * m * m * sigma * sigma / (step * step))
+        if damp < 1e-5:
+            break
+        out += (step / (math.pi * m)) * (-1.0) ** m * damp * np.sin(m * phase)
+    return out
+
+
+def quantization_variance(s: np.ndarray, step: float, noise_std: float) -> float:
+    """Return the mean over ``s`` of ``Var(q·round((s + ε)/q) | s)``, ``ε ~ N(0, σ²)``.
+
+    The part of a quantizer's output that no prediction can remove: with noise before the
+    quantizer the quantization error is itself random. Exact sum over the nearby levels.
+    """
+    from scipy.special import ndtr
+
+    if noise_std <= 0 or step <= 0:
+        return 0.0
+    reach = int(math.ceil(5 * noise_std / step)) + 1
+    base = np.round(s / step)
+    levels = base[:, None] + np.arange(-reach, reach + 1)[None, :]
+    upper = ndtr(((levels + 0.5) * step - s[:, None]) / noise_std)
+    lower = ndtr(((levels - 0.5) * step - s[:, None]) / noise_std)
+    prob = upper - lower
+    values = levels * step
+    mean = np.sum(prob * values, axis=1)
+    return float(np.mean(np.sum(prob * values**2, axis=1) - mean**2))
+
+
+def find_lattice(y: np.ndarray, low: float, high: float, n_grid: int = 400):
+    """Return ``(q, offset, concentration)`` of the coarsest lattice the values ``y`` sit on.
+
+    For each step ``q`` on a log grid in ``[low, high]`` the concentration
+    ``R(q) = |mean(exp(2πi·y/q))|`` is 1 when every value is a multiple of ``q`` (plus an
+    offset), ``exp(−2π²σ²/q²)`` when noise of std σ is added after the quantizer, and about
+    ``1/√n`` for values on no lattice. The coarsest step whose concentration is at least half
+    the best is returned (a lattice of step q also lies on q/2, q/3, …), refined locally.
+    """
+    grid = np.geomspace(low, high, n_grid)
+    sample = y[:: max(1, len(y) // 5000)]
+    conc = np.array([abs(np.mean(np.exp(2j * np.pi * sample / q))) for q in grid])
+    best = conc.max()
+    index = int(np.flatnonzero(conc >= 0.5 * best)[-1])
+    index = max(range(max(0, index - 3), min(n_grid, index + 4)), key=lambda i: conc[i])
+    fine = np.linspace(grid[max(0, index - 1)], grid[min(n_grid - 1, index + 1)], 41)
+    fine_conc = [abs(np.mean(np.exp(2j * np.pi * sample / q))) for q in fine]
+    q = float(fine[int(np.argmax(fine_conc))])
+    phase = np.angle(np.mean(np.exp(2j * np.pi * y / q)))
+    return q, float(phase * q / (2 * np.pi)), float(max(fine_conc))
+
+
+# --- the catalogue ----------------------------------------------------------------------
+
+
+#: Longest extra delay a delay candidate may take, in samples.
+MAX_DELAY_SAMPLES = 25
+
+
+def _delay_bounds(s: Scales) -> Bounds:
+    return [(0.0, MAX_DELAY_SAMPLES * s.dt)]
+
+
+def _delay_starts(s: Scales) -> list[list[float]]:
+    return [[(d + 0.5) * s.dt] for d in range(MAX_DELAY_SAMPLES)]
+
+
+EFFECTS: tuple[Effect, ...] = (
+    Effect(
+        "actuator_saturation",
+        ("M0",),
+        ("U", "p"),
+        ("input units", "1"),
+        "input",
+        "u -> u / (1 + |u/U|^p)^(1/p)  (saturation at ±U, sharpness p)",
+        lambda s: [(0.02 * s.input_max, 3.0 * s.input_max), (1.0, 40.0)],
+        lambda s: [[f * s.input_max, p] for f in (0.4, 0.7, 1.0) for p in (3.0, 12.0)],
+        lambda s: [s.input_max, 5.0],
+    ),
+    Effect(
+        "actuator_deadzone",
+        ("M0",),
+        ("D",),
+        ("input units",),
+        "input",
+        "u -> sign(u)·max(|u| − D, 0)",
+        lambda s: [(0.0, 0.9 * s.input_max)],
+        lambda s: [[f * s.input_max] for f in (0.05, 0.2, 0.45)],
+        lambda s: [0.1 * s.input_max],
+    ),
+    Effect(
+        "actuator_delay",
+        ("M0",),
+        ("delay",),
+        ("s",),
+        "delay",
+        "u_cmd[k] -> u_cmd[k − delay/dt]  (fractional, linear interpolation)",
+        _delay_bounds,
+        _delay_starts,
+        lambda s: [s.dt],
+    ),
+    Effect(
+        "coulomb_friction",
+        ("M1",),
+        ("Fc",),
+        ("input units (force)",),
+        "force",
+        "F = Fc·tanh(v / v_s),  v_s = 0.01·std(v)",
+        lambda s: [(0.0, 3.0 * s.input_max)],
+        lambda s: [[0.05 * s.input_std]],
+        lambda s: [0.1 * s.input_std],
+    ),
+    Effect(
+        "cubic_stiffness",
+        ("M1",),
+        ("k3",),
+        ("input units / output units^3",),
+        "force",
+        "F = k3·x^3",
+        lambda s: [(-50.0 * s.stiffness / s.output_std**2, 50.0 * s.stiffness / s.output_std**2)],
+        lambda s: [[0.0]],
+        lambda s: [0.1 * s.stiffness / s.output_std**2],
+    ),
+    Effect(
+        "quadratic_damping",
+        ("M1",),
+        ("c2",),
+        ("input units·s²/output units²",),
+        "force",
+        "F = c2·v·|v|",
+        lambda s: [(0.0, 50.0 * s.input_std / s.velocity_std**2)],
+        lambda s: [[0.05 * s.input_std / s.velocity_std**2]],
+        lambda s: [0.1 * s.input_std / s.velocity_std**2],
+    ),
+    Effect(
+        "sensor_quantization",
+        ("M2a", "M2b"),
+        ("q", "offset", "noise_before"),
+        ("output units", "output units", "output units"),
+        "output",
+        "y = offset + q·round((lag + bias − offset + e)/q) + e',  e ~ N(0, noise_before²)",
+        lambda s: [(1e-12, 4.0 * s.output_std), (-np.inf, np.inf), (0.0, np.inf)],
+        lambda s: [[]],
+        lambda s: [max(s.noise_std, 0.01 * s.output_std), s.output_std, s.noise_std or 1.0],
+    ),
+    Effect(
+        "sensor_scale_error",
+        ("M2a", "M2b"),
+        ("gain",),
+        ("1",),
+        "output",
+        "y = gain·lag + bias",
+        lambda s: [(0.1, 10.0)],
+        lambda s: [[1.0]],
+        lambda s: [0.1],
+    ),
+    Effect(
+        "sensor_bias_drift",
+        ("M2a", "M2b"),
+        ("rate",),
+        ("output units / s",),
+        "output",
+        "y = lag + bias + rate·t",
+        lambda s: [(-100.0 * s.output_std / s.duration, 100.0 * s.output_std / s.duration)],
+        lambda s: [[0.0]],
+        lambda s: [0.1 * s.output_std / s.duration],
+    ),
+    Effect(
+        "sensor_delay",
+        ("M2a", "M2b"),
+        ("delay",),
+        ("s",),
+        "delay",
+        "x[k] -> x[k − delay/dt]  (fractional, linear interpolation)",
+        _delay_bounds,
+        _delay_starts,
+        lambda s: [s.dt],
+    ),
+    Effect(
+        PARAMETER_MISMATCH,
+        ("M0", "M1", "M2a", "M2b", "M3", "M4"),
+        (),
+        (),
+        "linear",
+        "the module's own linear parameters re-fitted (no new term)",
+        lambda s: [],
+        lambda s: [[]],
+        lambda s: [],
+    ),
+)
+
+#: Every name a diagnosis can report as ``effect``.
+EFFECT_NAMES: tuple[str, ...] = (*(effect.name for effect in EFFECTS), NONE, UNEXPLAINED)
+
+
+def effects_for_module(module: str, *, include_mismatch: bool = True) -> list[Effect]:
+    """Return the candidate effects of ``module`` (``parameter_mismatch`` first if included)."""
+    found = [e for e in EFFECTS if module in e.modules and e.name != PARAMETER_MISMATCH]
+    if include_mismatch:
+        found.insert(0, effect_by_name(PARAMETER_MISMATCH))
+    return found
+
+
+def effect_by_name(name: str) -> Effect:
+    """Return the :class:`Effect` called ``name``."""
+    for effect in EFFECTS:
+        if effect.name == name:
+            return effect
+    raise KeyError(f"unknown effect {name!r}; known: {', '.join(e.name for e in EFFECTS)}")

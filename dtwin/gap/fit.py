@@ -1,0 +1,360 @@
+"""Fitting a module's twin, with or without a candidate effect, on the training part (issue #5).
+
+Parameters are fitted by **simulation error**: the module is driven with its recorded input and
+its simulated output is compared with the recorded output over the training samples
+(:func:`scipy.optimize.least_squares`, trust-region reflective with bounds). Simulation error,
+unlike one-step (equation-error) least squares, is not biased by noise on the recorded output
+(a rig's position sensor) and scores the model on what the gap measures. The plant (M1) is
+simulated in a few segments, each restarted from the recorded state (multiple shooting), so
+that its process noise, which an open-loop run integrates into a slow drift, cannot dominate
+the fit. Non-convex parameters (a saturation level, a delay, a quantizer step) are started
+from several points; the few best starts are refined.
+
+Calibration (:func:`calibrate_linear`) fits a module's linear twin from scratch: an ARX
+least-squares estimate (paper Eq. (24)) gives the starting point, then simulation error refines
+it. For the plant it also finds an input offset and an input delay in whole samples, and fits
+the ARX on a decimated signal when the sample rate is high, since ARX on samples much faster
+than the dynamics is ill-conditioned.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from dtwin.gap.effects import MAX_DELAY_SAMPLES, Effect, Scales, find_lattice
+from dtwin.gap.models import LINEAR_PARAMS, ModuleData, first_order_lag, simulate_module
+
+__all__ = [
+    "CandidateFit",
+    "train_segments",
+    "linear_typical",
+    "fit_candidate",
+    "calibrate_linear",
+]
+
+logger = logging.getLogger(__name__)
+
+_N_REFINE = 3
+_MAX_NFEV = 300
+
+
+@dataclass(frozen=True)
+class CandidateFit:
+    """A module's twin fitted on the training part.
+
+    Attributes
+    ----------
+    lin : dict of str to float
+        Linear parameters (fitted or fixed).
+    theta : tuple of float
+        Effect parameters, in the order of ``effect.params`` (empty for the linear twin).
+    n_free : int
+        Number of fitted parameters (linear and effect).
+    train_rms : float
+        RMS simulation error on the training samples, output units.
+    """
+
+    lin: dict[str, float]
+    theta: tuple[float, ...]
+    n_free: int
+    train_rms: float
+
+
+#: Most training samples the plant's fit simulates (longer recordings are sampled in segments).
+MAX_FIT_SAMPLES = 16000
+
+
+def train_segments(name: str, n_train: int) -> list[tuple[int, int]] | None:
+    """Return the plant's multiple-shooting segments over the training part (None elsewhere).
+
+    Up to four equal segments of at least 200 samples each; on long recordings each segment
+    keeps only its first ``MAX_FIT_SAMPLES / 4`` samples, spread over the whole training part.
+    """
+    if name != "M1":
+        return None
+    n_segments = max(1, min(4, n_train // 200))
+    edges = np.linspace(0, n_train, n_segments + 1).astype(int)
+    longest = MAX_FIT_SAMPLES // n_segments
+    return [(int(a), int(min(b, a + longest))) for a, b in itertools.pairwise(edges)]
+
+
+def linear_typical(name: str, lin: Mapping[str, float], scales: Scales) -> dict[str, float]:
+    """Return a typical magnitude of each linear parameter (its nominal size, or a data scale)."""
+    typical = {}
+    for key, value in lin.items():
+        if key == "bias":
+            fallback = scales.output_std
+        elif key == "tau":
+            fallback = 10 * scales.dt
+        elif key == "u_offset":
+            fallback = scales.input_std
+        elif key == "c":
+            fallback = 0.1 * math.sqrt(max(lin.get("k", 0.0), 1e-12) * lin.get("m", 1.0))
+        else:
+            fallback = 1.0
+        typical[key] = max(abs(float(value)), fallback, 1e-12)
+    return typical
+
+
+def _bounds_free(name: str, lin: Mapping[str, float], scales: Scales, typical) -> dict:
+    bounds = {}
+    for key in lin:
+        if key in ("tau", "m"):
+            bounds[key] = (typical[key] * 1e-3, typical[key] * 1e3)
+        elif key in ("c", "k"):
+            bounds[key] = (0.0, typical[key] * 1e3)
+        elif key == "alpha":
+            bounds[key] = (0.0, 1.0)
+        elif key == "delay_samples":
+            continue
+        else:
+            bounds[key] = (-np.inf, np.inf)
+    if "tau" in bounds:
+        bounds["tau"] = (max(bounds["tau"][0], scales.dt / 50), bounds["tau"][1])
+    return bounds
+
+
+def _residual_fn(data, effect, fixed, free_names, n_train, segments):
+    target = data.output[:n_train]
+    mask = np.zeros(n_train, dtype=bool)
+    for start, stop in segments or [(0, n_train)]:
+        mask[start + 1 : stop] = True
+    n_lin = len(free_names)
+    scale = max(float(np.std(data.output)), 1e-300)
+
+    def residual(vector):
+        lin = dict(fixed)
+        lin.update(zip(free_names, vector[:n_lin], strict=True))
+        predicted = simulate_module(
+            data, lin, effect, vector[n_lin:], stop=n_train, segments=segments
+        )
+        error = (predicted - target)[mask] / scale
+        return np.nan_to_num(error, nan=1e6, posinf=1e6, neginf=-1e6)
+
+    return residual, scale
+
+
+def fit_candidate(
+    data: ModuleData,
+    effect: Effect | None,
+    lin_start: Mapping[str, float],
+    *,
+    n_train: int,
+    free: Sequence[str] | None = None,
+    lin_bounds: Mapping[str, tuple[float, float]] | None = None,
+) -> CandidateFit:
+    """Fit a module's linear parameters and an effect's parameters on the training part.
+
+    Parameters
+    ----------
+    data : ModuleData
+        The module's recorded signals.
+    effect : Effect or None
+        The candidate; ``None`` (or ``parameter_mismatch``) fits the linear twin alone.
+    lin_start : mapping
+        Starting (and, for parameters not in ``free``, fixed) linear parameters.
+    n_train : int
+        Number of training samples (from the start).
+    free : sequence of str, optional
+        Linear parameters to fit; default all of :data:`LINEAR_PARAMS` for the module, plus
+        ``u_offset`` when present.
+    lin_bounds : mapping, optional
+        Bounds of the free linear parameters; default a wide physical box.
+
+    Returns
+    -------
+    CandidateFit
+    """
+    scales = data.scales
+    if effect is not None and effect.name == "sensor_quantization":
+        return _fit_quantization(data, effect, lin_start, n_train, free, lin_bounds)
+    lin_start = dict(lin_start)
+    if free is None:
+        free = [k for k in (*LINEAR_PARAMS[data.name], "u_offset") if k in lin_start]
+    free = list(free)
+    typical = linear_typical(data.name, lin_start, scales)
+    bounds_all = dict(_bounds_free(data.name, lin_start, scales, typical))
+    bounds_all.update(lin_bounds or {})
+    effect_params = effect.n_params if effect is not None else 0
+    eff_bounds = effect.bounds(scales) if effect_params else []
+    eff_starts = effect.starts(scales) if effect_params else [[]]
+    eff_typical = effect.typical(scales) if effect_params else []
+    low = np.array([bounds_all[k][0] for k in free] + [b[0] for b in eff_bounds], dtype=float)
+    high = np.array([bounds_all[k][1] for k in free] + [b[1] for b in eff_bounds], dtype=float)
+    x_scale = np.array([typical[k] for k in free] + [abs(v) for v in eff_typical], dtype=float)
+    x_scale = np.where(x_scale > 0, x_scale, 1.0)
+    segments = train_segments(data.name, n_train)
+    residual, scale = _residual_fn(data, effect, lin_start, free, n_train, segments)
+
+    width = np.where(np.isfinite(high - low), high - low, 0.0)
+    starts = []
+    for eff0 in eff_starts:
+        x0 = np.array([lin_start[k] for k in free] + list(eff0), dtype=float)
+        starts.append(np.clip(x0, low + 1e-9 * width, high - 1e-9 * width))
+    if not len(starts[0]):
+        r = residual(starts[0])
+        return CandidateFit(lin_start, (), 0, float(np.sqrt(np.mean(r**2))) * scale)
+    costs = [float(np.sum(residual(x0) ** 2)) for x0 in starts]
+    best_x, best_cost = starts[int(np.argmin(costs))], min(costs)
+    for index in np.argsort(costs)[:_N_REFINE]:
+        try:
+            result = least_squares(
+                residual,
+                starts[index],
+                bounds=(low, high),
+                x_scale=x_scale,
+                method="trf",
+                max_nfev=_MAX_NFEV,
+                ftol=1e-6,
+                xtol=1e-6,
+                gtol=1e-8,
+            )
+        except (ValueError, FloatingPointError) as error:  # pragma: no cover - defensive
+            logger.debug("fit of %s failed from start %d: %s", effect, index, error)
+            continue
+        cost = float(np.sum(result.fun**2))
+        if cost < best_cost:
+            best_x, best_cost = result.x, cost
+    lin = dict(lin_start)
+    lin.update({k: float(v) for k, v in zip(free, best_x[: len(free)], strict=True)})
+    theta = tuple(float(v) for v in best_x[len(free) :])
+    n_used = max(1, sum(b - a - 1 for a, b in segments or [(0, n_train)]))
+    return CandidateFit(lin, theta, len(best_x), math.sqrt(best_cost / n_used) * scale)
+
+
+def _fit_quantization(data, effect, lin_start, n_train, free, lin_bounds) -> CandidateFit:
+    """Quantizer: its step from the lattice the recorded values sit on, then the linear twin.
+
+    A quantizer after noise barely changes the *mean* output, so its step is not identifiable
+    by least squares; the lattice of the recorded values identifies it directly
+    (:func:`~dtwin.gap.effects.find_lattice`). The lattice's blur gives the noise after the
+    quantizer; the rest of the module's noise is put before it.
+    """
+    scales = data.scales
+    y = data.output[:n_train]
+    low = max(1e-9 * scales.output_std, 0.25 * scales.noise_std, 1e-3 * scales.output_std)
+    q, offset, conc = find_lattice(y, low, 2.0 * scales.output_std)
+    after = q * math.sqrt(max(-math.log(max(conc, 1e-12)), 0.0) / (2 * math.pi**2))
+    before = math.sqrt(max(scales.noise_std**2 - after**2, 0.0))
+    fitted = fit_candidate(data, None, lin_start, n_train=n_train, free=free, lin_bounds=lin_bounds)
+    lin = fitted.lin
+    theta = (q, offset, before)
+    residual, scale = _residual_fn(data, effect, lin, [], n_train, None)
+    rms = float(np.sqrt(np.mean(residual(np.array(theta)) ** 2))) * scale
+    return CandidateFit(lin, theta, fitted.n_free + 2, rms)
+
+
+# --- calibration from data --------------------------------------------------------------
+
+
+def _lag_coefficient_to_tau(a: float, dt: float) -> float:
+    a = min(max(a, 1e-6), 1 - 1e-9)
+    return -dt / math.log(a)
+
+
+def _arx_first_order(y: np.ndarray, u: np.ndarray) -> tuple[float, float, float]:
+    phi = np.column_stack([y[:-1], u[:-1], np.ones(len(y) - 1)])
+    coef, *_ = np.linalg.lstsq(phi, y[1:], rcond=None)
+    return float(coef[0]), float(coef[1]), float(coef[2])
+
+
+def _plant_from_arx(x, u, dt, factor, delay):
+    xs, us = x[::factor], u[::factor]
+    step = dt * factor
+    d = delay // factor
+    n = len(xs)
+    if n < 20 + d:
+        return None
+    rows = np.arange(2 + d, n)
+    phi = np.column_stack([xs[rows - 1], xs[rows - 2], us[rows - 2 - d], np.ones(len(rows))])
+    coef, *_ = np.linalg.lstsq(phi, xs[rows], rcond=None)
+    a1, a2, beta, gamma = (float(v) for v in coef)
+    if beta <= 0:
+        return None
+    m = step * step / beta
+    c = (2 - a1) * m / step
+    k = (-a2 - 1 + c * step / m) * m / (step * step)
+    if not (m > 0 and c >= 0 and k >= 0):
+        c, k = max(c, 0.0), max(k, 0.0)
+    # the force units of a decimated fit equal the original ones; only dt changed
+    return {"m": m, "c": c, "k": k, "u_offset": -gamma / beta, "delay_samples": delay}
+
+
+def _calibrate_plant(data: ModuleData, n_train: int) -> dict[str, float]:
+    x, u = data.output[:n_train], data.inputs["u_act"][:n_train]
+    segments = train_segments("M1", n_train)
+    mask = np.zeros(n_train, dtype=bool)
+    for start, stop in segments:
+        mask[start + 1 : stop] = True
+
+    def cost(lin):
+        sim = simulate_module(data, lin, stop=n_train, segments=segments)
+        error = (sim - x)[mask]
+        return float(np.mean(error**2)) if np.all(np.isfinite(error)) else np.inf
+
+    candidates = []
+    factor = 1
+    while n_train // factor >= 100:
+        lin = _plant_from_arx(x, u, data.dt, factor, 0)
+        if lin is not None:
+            candidates.append((cost(lin), lin))
+        factor *= 2
+    if not candidates:
+        guess = {"m": 1.0, "c": 1.0, "k": 1.0, "u_offset": 0.0, "delay_samples": 0}
+        candidates.append((cost(guess), guess))
+    _, best = min(candidates, key=lambda item: item[0])
+    delays = []
+    for delay in range(0, MAX_DELAY_SAMPLES + 1):
+        trial = dict(best, delay_samples=delay)
+        delays.append((cost(trial), delay))
+    best["delay_samples"] = min(delays)[1]
+    fitted = fit_candidate(data, None, best, n_train=n_train)
+    return fitted.lin
+
+
+def calibrate_linear(data: ModuleData, n_train: int) -> dict[str, float]:
+    """Return a module's linear twin parameters fitted from the training part alone.
+
+    Parameters
+    ----------
+    data : ModuleData
+        The module's recorded signals (recording units).
+    n_train : int
+        Number of training samples.
+
+    Returns
+    -------
+    dict of str to float
+        :data:`LINEAR_PARAMS` of the module; the plant adds ``u_offset`` (input units) and
+        ``delay_samples`` (extra whole-sample input delay).
+    """
+    name = data.name
+    y = data.output[:n_train]
+    if name == "M0":
+        a, _, _ = _arx_first_order(y, data.inputs["u_cmd"][:n_train])
+        start = {"tau": _lag_coefficient_to_tau(a, data.dt)}
+    elif name == "M1":
+        return _calibrate_plant(data, n_train)
+    elif name in ("M2a", "M2b"):
+        x = data.inputs["x"][:n_train]
+        a, _, _ = _arx_first_order(y, x)
+        tau = _lag_coefficient_to_tau(a, data.dt)
+        bias = float(np.mean(y - first_order_lag(x, tau, data.dt, x[0])))
+        start = {"tau": tau, "bias": bias}
+    elif name == "M3":
+        y_a, y_b = data.inputs["y_A"][:n_train], data.inputs["y_B"][:n_train]
+        diff = y_a - y_b
+        alpha = float(np.dot(diff, y - y_b) / max(np.dot(diff, diff), 1e-300))
+        return {"alpha": min(max(alpha, 0.0), 1.0)}
+    else:
+        phi = np.column_stack([data.inputs["x"][:n_train], data.velocity[:n_train]])
+        coef, *_ = np.linalg.lstsq(phi, y, rcond=None)
+        return {"w1": float(coef[0]), "w2": float(coef[1])}
+    return fit_candidate(data, None, start, n_train=n_train).lin

@@ -1,0 +1,562 @@
+""" "Real" recordings with a withheld effect, for checking the gap diagnoser (issue #5).
+
+:func:`generate_case` runs the paper's asset (§3.1) with one effect (or none, or one the
+catalogue does not know) and returns the recording, the nominal twin file and a separate key
+holding the truth, which the diagnoser never reads. It is deliberately unkind:
+
+- the asset is slightly miscalibrated against the twin (``m, c, k`` and the three time
+  constants each off by up to ``miscalibration``, 3 % by default) while the effect dominates;
+- the noise levels written into the twin file are right only to ±10 %;
+- the sensor noise is coloured (AR(1), lag-1 correlation up to 0.6);
+- the effects' real forms differ from the catalogue's textbook ones and vary between cases:
+  friction with a Stribeck bump, a smooth (tanh) or asymmetric saturation, an asymmetric dead
+  zone, a stiffness that is not exactly cubic, damping that is not exactly quadratic, drifts
+  that are not linear, fractional delays, a quantizer after the noise;
+- strengths from barely above the noise (``magnitude`` 0) to strong (1), log-uniformly;
+- excitation amplitudes and frequencies, and lengths of 1000–5000 samples, vary by case;
+- out-of-list effects (``stiffness_change``: a mid-run change of k; ``sensor_interference``: a
+  sinusoid on one sensor), which the diagnoser should call ``unexplained``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dtwin._validation import DtwinValueError, require_in_range
+from dtwin.command import make_command, time_axis
+from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED, fractional_delay
+from dtwin.gap.noise import plant_noise_gain
+
+__all__ = [
+    "IN_LIST_EFFECTS",
+    "OUT_OF_LIST_EFFECTS",
+    "ALL_CASE_EFFECTS",
+    "NOMINAL_TWIN",
+    "GeneratedCase",
+    "generate_case",
+    "case_plan",
+    "case_spec",
+]
+
+#: Effects of the catalogue the generator can inject, with the module(s) they may sit in.
+IN_LIST_EFFECTS: dict[str, tuple[str, ...]] = {
+    "actuator_saturation": ("M0",),
+    "actuator_deadzone": ("M0",),
+    "actuator_delay": ("M0",),
+    "coulomb_friction": ("M1",),
+    "cubic_stiffness": ("M1",),
+    "quadratic_damping": ("M1",),
+    "sensor_quantization": ("M2a", "M2b"),
+    "sensor_scale_error": ("M2a", "M2b"),
+    "sensor_bias_drift": ("M2a", "M2b"),
+    "sensor_delay": ("M2a", "M2b"),
+    PARAMETER_MISMATCH: ("M0", "M1", "M2a", "M2b", "M3", "M4"),
+}
+#: Effects outside the catalogue: the right answer is ``unexplained`` in that module.
+OUT_OF_LIST_EFFECTS: dict[str, tuple[str, ...]] = {
+    "stiffness_change": ("M1",),
+    "sensor_interference": ("M2a", "M2b"),
+}
+#: Every case type, ``none`` included.
+ALL_CASE_EFFECTS: tuple[str, ...] = (*IN_LIST_EFFECTS, *OUT_OF_LIST_EFFECTS, NONE)
+
+#: The paper's twin (REFERENCE.md §1), the nominal twin of every generated case.
+NOMINAL_TWIN: dict[str, Any] = {
+    "dt": 0.02,
+    "actuator": {"tau": 0.15},
+    "plant": {"m": 1.0, "c": 0.4, "k": 4.0},
+    "sensor_A": {"tau": 0.08, "bias": 0.0},
+    "sensor_B": {"tau": 0.25, "bias": 0.01},
+    "fusion": {"alpha": 0.6},
+    "kpi": {"w1": 1.0, "w2": 0.2},
+    "noise": {"actuator": 0.005, "plant": 0.04, "sensor_A": 0.03, "sensor_B": 0.02},
+}
+
+_MISMATCH_PARAMS = {
+    "M0": ("actuator", "tau"),
+    "M1": ("plant", ("m", "c", "k")),
+    "M2a": ("sensor_A", ("tau", "bias")),
+    "M2b": ("sensor_B", ("tau", "bias")),
+    "M3": ("fusion", "alpha"),
+    "M4": ("kpi", ("w1", "w2")),
+}
+
+
+@dataclass(frozen=True)
+class GeneratedCase:
+    """One generated case.
+
+    Attributes
+    ----------
+    recording : pandas.DataFrame
+        Columns ``t, u_cmd, u_act, x, v, y_A, y_B, y_fused, z`` (the recording's CSV).
+    twin : dict
+        The nominal twin file content (``{"twin": {...}}``).
+    key : dict
+        The truth: ``effect``, ``module``, ``expected_effect``, ``magnitude`` (0–1),
+        ``snr`` (RMS of the effect's contribution to the module output over its noise floor),
+        ``form`` and ``params`` of the real effect, and the asset's true parameters.
+    """
+
+    recording: pd.DataFrame
+    twin: dict[str, Any]
+    key: dict[str, Any] = field(repr=False)
+
+
+def _log_between(low: float, high: float, level: float) -> float:
+    return float(low * (high / low) ** level)
+
+
+def _ar1(rng: np.random.Generator, n: int, sigma: float, phi: float) -> np.ndarray:
+    white = rng.standard_normal(n)
+    out = np.empty(n)
+    out[0] = white[0]
+    scale = math.sqrt(1 - phi * phi)
+    for k in range(1, n):
+        out[k] = phi * out[k - 1] + scale * white[k]
+    return sigma * out
+
+
+def _draw_effect(effect, module, level, rng, scale) -> dict[str, Any]:
+    """Return the real effect's form and parameters (``scale`` holds signal sizes)."""
+    if effect == "actuator_saturation":
+        form = str(rng.choice(["tanh", "clip", "asymmetric_clip"]))
+        umax = scale["u_max"]
+        if form == "tanh":
+            return {"form": form, "U": _log_between(2.0, 0.55, level) * umax}
+        high = _log_between(0.9, 0.4, level) * umax
+        low = high if form == "clip" else high * rng.uniform(1.1, 1.6)
+        return {"form": form, "U_high": high, "U_low": low}
+    if effect == "actuator_deadzone":
+        form = str(rng.choice(["symmetric", "asymmetric", "smooth"]))
+        width = _log_between(0.05, 0.3, level) * scale["u_std"]
+        ratio = rng.uniform(0.6, 1.0) if form == "asymmetric" else 1.0
+        return {"form": form, "D_high": width, "D_low": width * ratio}
+    if effect == "actuator_delay":
+        return {"form": "fractional", "delay_samples": _log_between(0.8, 6.0, level)}
+    if effect == "sensor_delay":
+        return {"form": "fractional", "delay_samples": _log_between(4.0, 15.0, level)}
+    if effect == "coulomb_friction":
+        fc = _log_between(0.012, 0.2, level) * scale["u_max"]
+        form = str(rng.choice(["stribeck", "coulomb_viscous"]))
+        return {
+            "form": form,
+            "Fc": fc,
+            "Fs": fc * rng.uniform(1.2, 2.0) if form == "stribeck" else fc,
+            "vs": rng.uniform(0.05, 0.3) * scale["v_std"],
+            "extra_c": rng.uniform(0.0, 0.05) if form == "coulomb_viscous" else 0.0,
+        }
+    if effect == "cubic_stiffness":
+        power = float(rng.choice([2.0, rng.uniform(1.6, 2.4)]))
+        # softening is capped so that the spring stays stiff over the whole run
+        ratio = (
+            _log_between(0.06, 0.8, level)
+            if rng.uniform() < 0.75
+            else -_log_between(0.04, 0.2, level)
+        )
+        return {
+            "form": f"|x|^{power:.2f} hardening" if ratio > 0 else f"|x|^{power:.2f} softening",
+            "power": power,
+            "ratio": ratio,
+            "x_ref": scale["x_max"],
+        }
+    if effect == "quadratic_damping":
+        power = float(rng.uniform(1.7, 2.3))
+        ratio = _log_between(0.15, 3.0, level)
+        return {"form": f"|v|^{power:.2f}", "power": power, "ratio": ratio, "v_ref": scale["v_max"]}
+    if effect == "sensor_quantization":
+        return {"form": "round after noise", "q": _log_between(3.0, 10.0, level) * scale["sigma"]}
+    if effect == "sensor_scale_error":
+        sign = 1 if rng.uniform() < 0.5 else -1
+        return {"form": "gain", "gain": 1 + sign * _log_between(0.06, 0.35, level)}
+    if effect == "sensor_bias_drift":
+        form = str(rng.choice(["power", "exponential", "linear_plus_wander"]))
+        total = _log_between(2.5, 15.0, level) * scale["sigma"] * (1 if rng.uniform() < 0.5 else -1)
+        return {
+            "form": form,
+            "total": total,
+            "power": rng.uniform(0.6, 1.6),
+            "tau_frac": rng.uniform(0.4, 1.5),
+        }
+    if effect == "sensor_interference":
+        return {
+            "form": "sinusoid",
+            "amplitude": _log_between(1.5, 6.0, level) * scale["sigma"],
+            "freq_hz": rng.uniform(0.8, 8.0),
+            "phase": rng.uniform(0, 2 * np.pi),
+        }
+    if effect == "stiffness_change":
+        factor = (
+            _log_between(1.25, 2.5, level)
+            if rng.uniform() < 0.7
+            else 1 / _log_between(1.25, 2.0, level)
+        )
+        return {"form": "step in k", "factor": factor, "at_frac": rng.uniform(0.35, 0.65)}
+    if effect == PARAMETER_MISMATCH:
+        section, names = _MISMATCH_PARAMS[module]
+        name = names if isinstance(names, str) else str(rng.choice(names))
+        sign = 1 if rng.uniform() < 0.5 else -1
+        if name == "bias":
+            return {
+                "form": "offset",
+                "section": section,
+                "param": name,
+                "delta": sign * _log_between(1.5, 10.0, level) * scale["sigma"],
+            }
+        if name == "alpha":
+            return {
+                "form": "offset",
+                "section": section,
+                "param": name,
+                "delta": sign * _log_between(0.06, 0.35, level),
+            }
+        low, high = (0.4, 2.0) if name == "tau" and module in ("M2a", "M2b") else (0.15, 0.6)
+        factor = (1 + _log_between(low, high, level)) ** sign
+        return {"form": "factor", "section": section, "param": name, "factor": factor}
+    raise DtwinValueError(f"unknown case effect {effect!r}")
+
+
+def _actuator(u_cmd, tau, dt, noise, spec):
+    u = u_cmd
+    if spec.get("effect") == "actuator_saturation":
+        if spec["form"] == "tanh":
+            u = spec["U"] * np.tanh(u / spec["U"])
+        else:
+            u = np.clip(u, -spec["U_low"], spec["U_high"])
+    elif spec.get("effect") == "actuator_deadzone":
+        high, low = spec["D_high"], spec["D_low"]
+        if spec["form"] == "smooth":
+            u = u - high * np.tanh(u / high)
+        else:
+            u = np.where(u > high, u - high, np.where(u < -low, u + low, 0.0))
+    elif spec.get("effect") == "actuator_delay":
+        u = fractional_delay(u, spec["delay_samples"])
+    a = math.exp(-dt / tau)
+    out = np.zeros(len(u))
+    for k in range(1, len(u)):
+        out[k] = a * out[k - 1] + (1 - a) * u[k - 1] + noise[k]
+    return out
+
+
+def _plant(u, m, c, k, dt, noise, spec, n):
+    effect = spec.get("effect")
+    x = np.zeros(n)
+    v = np.zeros(n)
+    change_at = int(spec["at_frac"] * n) if effect == "stiffness_change" else n + 1
+    for j in range(1, n):
+        xp, vp = x[j - 1], v[j - 1]
+        stiff = k * spec["factor"] if effect == "stiffness_change" and j >= change_at else k
+        force = 0.0
+        if effect == "coulomb_friction":
+            level = spec["Fc"] + (spec["Fs"] - spec["Fc"]) * math.exp(-((vp / spec["vs"]) ** 2))
+            force = level * math.tanh(vp / (1e-3 * spec["vs"])) + spec["extra_c"] * vp
+        elif effect == "cubic_stiffness":
+            ref = spec["x_ref"]
+            force = (
+                spec["ratio"] * k * ref * math.copysign(abs(xp / ref) ** (spec["power"] + 1), xp)
+            )
+        elif effect == "quadratic_damping":
+            ref = spec["v_ref"]
+            force = spec["ratio"] * c * ref * math.copysign(abs(vp / ref) ** spec["power"], vp)
+        accel = (u[j - 1] - c * vp - stiff * xp - force) / m + noise[j]
+        v[j] = vp + dt * accel
+        x[j] = xp + dt * vp
+    return x, v
+
+
+def _sensor(x, tau, bias, dt, noise, spec, t):
+    effect = spec.get("effect")
+    if effect == "sensor_delay":
+        x = fractional_delay(x, spec["delay_samples"])
+    a = math.exp(-dt / tau)
+    lag = np.zeros(len(x))
+    for k in range(1, len(x)):
+        lag[k] = a * lag[k - 1] + (1 - a) * x[k - 1]
+    if effect == "sensor_scale_error":
+        lag = spec["gain"] * lag
+    y = lag + bias + noise
+    duration = t[-1]
+    if effect == "sensor_bias_drift":
+        s = t / duration
+        if spec["form"] == "power":
+            shape = s ** spec["power"]
+        elif spec["form"] == "exponential":
+            shape = (1 - np.exp(-s / spec["tau_frac"])) / (1 - math.exp(-1 / spec["tau_frac"]))
+        else:
+            shape = 0.8 * s + 0.2 * np.sin(2 * np.pi * 0.7 * s) ** 2
+        y = y + spec["total"] * shape
+    elif effect == "sensor_interference":
+        y = y + spec["amplitude"] * np.sin(2 * np.pi * spec["freq_hz"] * t + spec["phase"])
+    elif effect == "sensor_quantization":
+        y = spec["q"] * np.round(y / spec["q"])
+    return y
+
+
+def _run_asset(asset, u_cmd, noises, specs, t):
+    dt = asset["dt"]
+    n = len(u_cmd)
+    u_act = _actuator(u_cmd, asset["actuator"]["tau"], dt, noises["actuator"], specs["M0"])
+    p = asset["plant"]
+    x, v = _plant(u_act, p["m"], p["c"], p["k"], dt, noises["plant"], specs["M1"], n)
+    y = {}
+    for which, module in (("A", "M2a"), ("B", "M2b")):
+        s = asset[f"sensor_{which}"]
+        y[which] = _sensor(x, s["tau"], s["bias"], dt, noises[which], specs[module], t)
+    alpha = asset["fusion"]["alpha"]
+    kpi = asset["kpi"]
+    return {
+        "u_cmd": u_cmd,
+        "u_act": u_act,
+        "x": x,
+        "v": v,
+        "y_A": y["A"],
+        "y_B": y["B"],
+        "y_fused": alpha * y["A"] + (1 - alpha) * y["B"],
+        "z": kpi["w1"] * x + kpi["w2"] * v,
+    }
+
+
+_MODULE_OUTPUT = {"M0": "u_act", "M1": "x", "M2a": "y_A", "M2b": "y_B", "M3": "y_fused", "M4": "z"}
+
+
+def generate_case(
+    effect: str,
+    seed: int,
+    *,
+    magnitude: float | None = None,
+    module: str | None = None,
+    n_samples: int | None = None,
+    miscalibration: float = 0.03,
+    noise_error: float = 0.10,
+    nominal: Mapping[str, Any] | None = None,
+) -> GeneratedCase:
+    """Generate one recording of the asset with a withheld effect.
+
+    Parameters
+    ----------
+    effect : str
+        One of :data:`ALL_CASE_EFFECTS`.
+    seed : int
+        Seed of every random draw of the case.
+    magnitude : float in [0, 1], optional
+        Effect strength, from barely above the noise (0) to strong (1); default random.
+    module : str, optional
+        Module for effects that may sit in several (sensors, ``parameter_mismatch``).
+    n_samples : int, optional
+        Length; default random in 1000–5000.
+    miscalibration : float, default 0.03
+        Largest relative error of the twin's ``m, c, k`` and time constants.
+    noise_error : float, default 0.10
+        Largest relative error of the noise levels written into the twin file.
+    nominal : mapping, optional
+        The nominal twin (default :data:`NOMINAL_TWIN`; all sections and ``noise`` needed).
+
+    Returns
+    -------
+    GeneratedCase
+
+    Examples
+    --------
+    >>> case = generate_case("coulomb_friction", 3, magnitude=0.8, n_samples=1000)
+    >>> case.recording.shape, case.key["module"], case.key["expected_effect"]
+    ((1000, 9), 'M1', 'coulomb_friction')
+    """
+    if effect not in ALL_CASE_EFFECTS:
+        raise DtwinValueError(
+            f"effect must be one of {', '.join(ALL_CASE_EFFECTS)} (got {effect!r})"
+        )
+    rng = np.random.default_rng(seed)
+    nominal = {
+        k: (dict(v) if isinstance(v, Mapping) else v) for k, v in (nominal or NOMINAL_TWIN).items()
+    }
+    level = (
+        float(rng.uniform())
+        if magnitude is None
+        else require_in_range("magnitude", magnitude, 0, 1)
+    )
+    n = int(rng.integers(1000, 5001)) if n_samples is None else int(n_samples)
+    choices = {**IN_LIST_EFFECTS, **OUT_OF_LIST_EFFECTS}.get(effect, (None,))
+    module = module or (str(rng.choice(choices)) if choices[0] is not None else None)
+    dt = float(nominal["dt"])
+    t = time_axis(n, dt)
+
+    from dtwin.params import CommandParams  # local: the generator's excitation only
+
+    command = CommandParams(
+        amp=float(rng.uniform(0.6, 1.6)),
+        sine_amp=0.6,
+        sine_freq_hz=float(rng.uniform(0.15, 0.35)),
+        square_amp=0.4,
+        square_freq_hz=float(rng.uniform(0.03, 0.08)),
+        step_every_s=2.5,
+        step_std=float(rng.uniform(0.1, 0.3)),
+    )
+    u_cmd = make_command(n, dt, command, rng)
+
+    asset = {k: (dict(v) if isinstance(v, dict) else v) for k, v in nominal.items()}
+    for section, name in (
+        ("actuator", "tau"),
+        ("plant", "m"),
+        ("plant", "c"),
+        ("plant", "k"),
+        ("sensor_A", "tau"),
+        ("sensor_B", "tau"),
+    ):
+        asset[section][name] *= 1 + rng.uniform(-miscalibration, miscalibration)
+    noise_true = dict(nominal["noise"])
+    phis = {"A": float(rng.uniform(0.0, 0.6)), "B": float(rng.uniform(0.0, 0.6))}
+    noises = {
+        "actuator": np.r_[0.0, noise_true["actuator"] * rng.standard_normal(n - 1)],
+        "plant": np.r_[0.0, noise_true["plant"] * rng.standard_normal(n - 1)],
+        "A": _ar1(rng, n, noise_true["sensor_A"], phis["A"]),
+        "B": _ar1(rng, n, noise_true["sensor_B"], phis["B"]),
+    }
+    clean_specs = {m: {} for m in _MODULE_OUTPUT}
+    baseline = _run_asset(asset, u_cmd, noises, clean_specs, t)
+    sigma = noise_true["sensor_A"] if module == "M2a" else noise_true["sensor_B"]
+    scale = {
+        # sizes from the first half, so that the effect shows in a default training part
+        "u_max": float(np.max(np.abs((u_cmd if module == "M0" else baseline["u_act"])[: n // 2]))),
+        "u_std": float(np.std(u_cmd)),
+        "x_max": float(np.max(np.abs(baseline["x"]))),
+        "v_max": float(np.max(np.abs(baseline["v"]))),
+        "v_std": float(np.std(baseline["v"])),
+        "sigma": sigma,
+    }
+    specs = {m: {} for m in _MODULE_OUTPUT}
+    true_effect = {}
+    if effect != NONE:
+        true_effect = _draw_effect(effect, module, level, rng, scale)
+        if effect == PARAMETER_MISMATCH:
+            section, name = true_effect["section"], true_effect["param"]
+            before = asset[section][name]
+            if "factor" in true_effect:
+                asset[section][name] = before * true_effect["factor"]
+            else:
+                asset[section][name] = before + true_effect["delta"]
+                if name == "alpha":
+                    asset[section][name] = min(max(asset[section][name], 0.0), 1.0)
+            true_effect["value"] = asset[section][name]
+            true_effect["nominal"] = nominal[section][name]
+        else:
+            specs[module] = {"effect": effect, **true_effect}
+    signals = _run_asset(asset, u_cmd, noises, specs, t)
+    snr = None
+    if effect != NONE:
+        out = _MODULE_OUTPUT[module]
+        contribution = _effect_contribution(
+            asset, nominal, u_cmd, noises, specs, signals, module, t
+        )
+        floor = {
+            "M0": noise_true["actuator"]
+            / math.sqrt(1 - math.exp(-2 * dt / asset["actuator"]["tau"])),
+            "M1": noise_true["plant"] * plant_noise_gain(**asset["plant"], dt=dt)[0],
+            "M2a": noise_true["sensor_A"],
+            "M2b": noise_true["sensor_B"],
+        }.get(module)
+        if floor is None:
+            floor = float(np.std(signals[out])) * 0.01
+        snr = float(np.sqrt(np.mean(contribution**2)) / floor)
+
+    twin_noise = {
+        k: float(v * (1 + rng.uniform(-noise_error, noise_error))) for k, v in noise_true.items()
+    }
+    twin_file = {
+        "twin": {**{k: v for k, v in nominal.items() if k != "noise"}, "noise": twin_noise}
+    }
+    expected_effect = (
+        effect if effect in IN_LIST_EFFECTS else (NONE if effect == NONE else UNEXPLAINED)
+    )
+    key = {
+        "effect": effect,
+        "module": module,
+        "expected_effect": expected_effect,
+        "expected_module": module,
+        "in_list": effect in IN_LIST_EFFECTS,
+        "magnitude": level,
+        "snr": snr,
+        "seed": int(seed),
+        "n_samples": n,
+        "params": true_effect,
+        "asset": asset,
+        "noise_true": noise_true,
+        "noise_ar1_phi": phis,
+        "command": command.__dict__,
+    }
+    frame = pd.DataFrame({"t": t, **signals})
+    return GeneratedCase(recording=frame, twin=twin_file, key=key)
+
+
+def _effect_contribution(asset, nominal, u_cmd, noises, specs, signals, module, t):
+    """RMS contribution of the effect to its module's output, the module driven identically."""
+    out = _MODULE_OUTPUT[module]
+    clean = {m: {} for m in _MODULE_OUTPUT}
+    dt = asset["dt"]
+    if module == "M0":
+        other = _actuator(u_cmd, asset["actuator"]["tau"], dt, noises["actuator"], clean["M0"])
+        return signals[out] - other
+    if module == "M1":
+        p = asset["plant"]
+        other, _ = _plant(signals["u_act"], p["m"], p["c"], p["k"], dt, noises["plant"], {}, len(t))
+        if not specs["M1"]:  # parameter mismatch: compare with the nominal plant
+            q = nominal["plant"]
+            other, _ = _plant(
+                signals["u_act"], q["m"], q["c"], q["k"], dt, noises["plant"], {}, len(t)
+            )
+        return signals[out] - other
+    if module in ("M2a", "M2b"):
+        which = "A" if module == "M2a" else "B"
+        s = asset[f"sensor_{which}"]
+        if not specs[module]:
+            s = nominal[f"sensor_{which}"]
+        other = _sensor(signals["x"], s["tau"], s["bias"], dt, noises[which], {}, t)
+        return signals[out] - other
+    if module == "M3":
+        a = nominal["fusion"]["alpha"]
+        return signals[out] - (a * signals["y_A"] + (1 - a) * signals["y_B"])
+    k = nominal["kpi"]
+    return signals[out] - (k["w1"] * signals["x"] + k["w2"] * signals["v"])
+
+
+def case_plan(
+    cases_per_effect: int, effects: tuple[str, ...] = ALL_CASE_EFFECTS, first_seed: int = 1000
+) -> list[dict[str, Any]]:
+    """Return the benchmark's cases: ``[{"case": "coulomb_friction_03", "effect", "seed"}]``.
+
+    Seeds are ``first_seed + 1000·(effect index) + case index``, so adding cases keeps the
+    earlier ones.
+    """
+    plan = []
+    for index, effect in enumerate(effects):
+        for number in range(cases_per_effect):
+            plan.append(
+                {
+                    "case": f"{effect}_{number:02d}",
+                    "effect": effect,
+                    "seed": first_seed + 1000 * index + number,
+                }
+            )
+    return plan
+
+
+def case_spec(case: str, effects: Sequence[str], first_seed: int = 1000) -> dict[str, Any]:
+    """Return ``{"case", "effect", "seed"}`` of a case name ``<effect>_<NN>`` (see case_plan).
+
+    Raises
+    ------
+    DtwinValueError
+        If the name does not end in ``_<number>`` or its effect is not in ``effects``.
+    """
+    effect, _, number = case.rpartition("_")
+    if not number.isdigit() or effect not in effects:
+        raise DtwinValueError(
+            f"case must be <effect>_<number> with effect in {', '.join(effects)} (got {case!r})"
+        )
+    index = list(effects).index(effect)
+    return {"case": case, "effect": effect, "seed": int(first_seed) + 1000 * index + int(number)}

@@ -1,0 +1,242 @@
+"""The module twins of the gap diagnoser, each with an optional candidate effect (paper §3.1).
+
+One function, :func:`simulate_module`, drives one module's twin with given input signals and
+returns its output, shape ``(n_samples,)``. The linear part of each module is the paper's
+(REFERENCE.md §1), with one-sample input delays:
+
+- M0 ``u_act[k] = a·u_act[k−1] + (1−a)·u_cmd[k−1]``, ``a = exp(−dt/tau)``;
+- M1 explicit Euler ``a = (u[k−1] − u_offset − c·v[k−1] − k·x[k−1] − F(x, v))/m``,
+  ``v[k] = v[k−1] + dt·a``, ``x[k] = x[k−1] + dt·v[k−1]``, with an optional extra input delay
+  (``delay_samples``) and ``u_offset`` when the plant is calibrated from data;
+- M2a/M2b ``lag[k] = a_s·lag[k−1] + (1−a_s)·x[k−1]``, ``y = lag + bias``;
+- M3 ``y_fused = alpha·y_A + (1−alpha)·y_B``; M4 ``z = w1·x + w2·v``.
+
+Unlike :mod:`dtwin.physics`, every recursion starts from the *recorded* initial state (a rig
+is not at rest when the recording starts) and no noise is drawn: these are predictions.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.signal import lfilter, savgol_filter
+
+from dtwin.gap.effects import (
+    Effect,
+    Scales,
+    deadzone,
+    fractional_delay,
+    smooth_quantize,
+    soft_saturation,
+)
+
+__all__ = [
+    "LINEAR_PARAMS",
+    "ModuleData",
+    "velocity_from_position",
+    "simulate_module",
+    "first_order_lag",
+]
+
+#: The linear twin parameters of each module (their section in :class:`dtwin.params.TwinParams`).
+LINEAR_PARAMS: dict[str, tuple[str, ...]] = {
+    "M0": ("tau",),
+    "M1": ("m", "c", "k"),
+    "M2a": ("tau", "bias"),
+    "M2b": ("tau", "bias"),
+    "M3": ("alpha",),
+    "M4": ("w1", "w2"),
+}
+
+#: Friction smoothing velocity as a fraction of std(v) (the tanh in ``coulomb_friction``).
+FRICTION_SMOOTHING = 0.01
+
+
+@dataclass(frozen=True)
+class ModuleData:
+    """The recorded signals one module is driven with and compared against.
+
+    Attributes
+    ----------
+    name : str
+        ``"M0"`` … ``"M4"``.
+    inputs : dict of str to numpy.ndarray
+        The module's input signals, each shape ``(n_samples,)``.
+    output : numpy.ndarray, shape (n_samples,)
+        The recorded output.
+    dt : float
+        Sample period, s.
+    t : numpy.ndarray, shape (n_samples,)
+        Time from the first sample, s.
+    velocity : numpy.ndarray, shape (n_samples,)
+        M1: the velocity estimated from the recorded position; M4: the velocity input.
+    scales : Scales
+        Data scales for effect bounds.
+    """
+
+    name: str
+    inputs: dict[str, np.ndarray] = field(repr=False)
+    output: np.ndarray = field(repr=False)
+    dt: float
+    t: np.ndarray = field(repr=False)
+    velocity: np.ndarray | None = field(default=None, repr=False)
+    scales: Scales | None = None
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples."""
+        return len(self.output)
+
+
+def velocity_from_position(x: np.ndarray, dt: float) -> np.ndarray:
+    """Return the plant velocity implied by a position record, shape ``(n_samples,)``, units/s.
+
+    The Euler plant defines ``x[k+1] = x[k] + dt·v[k]``, so ``v[k] = (x[k+1] − x[k])/dt``; the
+    position is first smoothed by a cubic Savitzky-Golay filter over 7 samples (exact for
+    smooth signals, it tames measurement noise). The last sample repeats the one before.
+    """
+    smooth = savgol_filter(x, 7, 3) if len(x) >= 7 else np.asarray(x, dtype=float)
+    velocity = np.empty_like(smooth)
+    velocity[:-1] = np.diff(smooth) / dt
+    velocity[-1] = velocity[-2]
+    return velocity
+
+
+def first_order_lag(u: np.ndarray, tau: float, dt: float, initial: float) -> np.ndarray:
+    """Return ``y[k] = a·y[k−1] + (1−a)·u[k−1]``, ``y[0] = initial``, ``a = exp(−dt/tau)``."""
+    a = math.exp(-dt / tau) if tau > 0 else 0.0
+    response = lfilter([0.0, 1.0 - a], [1.0, -a], u)
+    return response + initial * np.power(a, np.arange(len(u)))
+
+
+def _effect_input(u: np.ndarray, effect: Effect | None, theta: Sequence[float], dt: float):
+    if effect is None:
+        return u
+    if effect.name == "actuator_saturation":
+        return soft_saturation(u, theta[0], theta[1])
+    if effect.name == "actuator_deadzone":
+        return deadzone(u, theta[0])
+    if effect.stage == "delay":
+        return fractional_delay(u, theta[0] / dt)
+    return u
+
+
+def _simulate_actuator(data, lin, effect, theta, stop):
+    u = _effect_input(data.inputs["u_cmd"][:stop], effect, theta, data.dt)
+    return first_order_lag(u, lin["tau"], data.dt, data.output[0])
+
+
+def _simulate_sensor(data, lin, effect, theta, stop):
+    x = _effect_input(data.inputs["x"][:stop], effect, theta, data.dt)
+    lag = first_order_lag(x, lin["tau"], data.dt, x[0])
+    bias = lin["bias"]
+    if effect is None or effect.stage != "output":
+        return lag + bias
+    if effect.name == "sensor_scale_error":
+        return theta[0] * lag + bias
+    if effect.name == "sensor_bias_drift":
+        return lag + bias + theta[0] * data.t[:stop]
+    if effect.name == "sensor_quantization":
+        step, offset, before = theta
+        return offset + smooth_quantize(lag + bias - offset, step, before)
+    raise ValueError(f"effect {effect.name} cannot act on a sensor")
+
+
+def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float):
+    if effect is None or effect.stage != "force":
+        return None
+    if effect.name == "coulomb_friction":
+        fc = float(theta[0])
+        vs = max(FRICTION_SMOOTHING * velocity_std, 1e-300)
+        tanh = math.tanh
+        return lambda x, v: fc * tanh(v / vs)
+    if effect.name == "cubic_stiffness":
+        k3 = float(theta[0])
+        return lambda x, v: k3 * x * x * x
+    if effect.name == "quadratic_damping":
+        c2 = float(theta[0])
+        return lambda x, v: c2 * v * abs(v)
+    raise ValueError(f"effect {effect.name} cannot act on the plant")
+
+
+def _plant_segment(u, m, c, k, dt, x, v, start, stop, force, out, limit):
+    """Explicit-Euler plant from state (x, v) at ``start``; writes ``out[start:stop]``."""
+    for j in range(start, stop):
+        out[j] = x
+        f = force(x, v) if force is not None else 0.0
+        a = (u[j] - c * v - k * x - f) / m
+        x, v = x + dt * v, v + dt * a
+        if not -limit < x < limit:
+            for rest in range(j + 1, stop):
+                out[rest] = limit
+            return
+
+
+def _simulate_plant(data, lin, effect, theta, stop, segments):
+    u = data.inputs["u_act"][:stop]
+    delay = int(lin.get("delay_samples", 0))
+    if delay:
+        u = fractional_delay(u, delay)
+    u = (u - lin.get("u_offset", 0.0)).tolist()
+    x_rec, v_rec = data.output, data.velocity
+    force = _force(effect, theta, data.scales.velocity_std if data.scales else 1.0)
+    out = [0.0] * len(u)
+    limit = 1e6 * (np.abs(x_rec).max() + 1e-12)
+    m, c, k = float(lin["m"]), float(lin["c"]), float(lin["k"])
+    for start, end in segments or [(0, len(u))]:
+        _plant_segment(
+            u, m, c, k, data.dt, x_rec[start], v_rec[start], start, end, force, out, limit
+        )
+    return np.asarray(out)
+
+
+def simulate_module(
+    data: ModuleData,
+    lin: Mapping[str, float],
+    effect: Effect | None = None,
+    theta: Sequence[float] = (),
+    *,
+    stop: int | None = None,
+    segments: Sequence[tuple[int, int]] | None = None,
+) -> np.ndarray:
+    """Return the twin's prediction of one module's output, shape ``(stop,)``.
+
+    Parameters
+    ----------
+    data : ModuleData
+        Recorded inputs (and the recorded output, whose first sample sets the initial state).
+    lin : mapping
+        The module's linear parameters (:data:`LINEAR_PARAMS`; M1 may add ``u_offset`` and
+        ``delay_samples``).
+    effect : Effect, optional
+        A candidate effect; ``None`` or ``parameter_mismatch`` for the linear twin alone.
+    theta : sequence of float
+        The effect's parameters, in the order of ``effect.params``.
+    stop : int, optional
+        Simulate samples ``0 … stop−1`` only (all models are causal). Default: all.
+    segments : sequence of (start, stop), optional
+        M1 only: simulate each segment from the *recorded* state at its start (multiple
+        shooting), which bounds the drift that process noise causes; samples outside the
+        segments are 0.
+
+    Returns
+    -------
+    numpy.ndarray, shape (stop,)
+    """
+    stop = data.n_samples if stop is None else stop
+    name = data.name
+    if name == "M0":
+        return _simulate_actuator(data, lin, effect, theta, stop)
+    if name == "M1":
+        return _simulate_plant(data, lin, effect, theta, stop, segments)
+    if name in ("M2a", "M2b"):
+        return _simulate_sensor(data, lin, effect, theta, stop)
+    if name == "M3":
+        alpha = lin["alpha"]
+        return alpha * data.inputs["y_A"][:stop] + (1.0 - alpha) * data.inputs["y_B"][:stop]
+    if name == "M4":
+        return lin["w1"] * data.inputs["x"][:stop] + lin["w2"] * data.velocity[:stop]
+    raise ValueError(f"unknown module {name!r}")

@@ -1,0 +1,257 @@
+"""What a module's noise explains: noise floors of the local gap (issue #5, "Where").
+
+The *noise floor* of a module is the RMS simulation error its twin would show if the twin were
+exact and only the noise of that module acted (output units):
+
+- M0: actuator process noise ``w`` through the lag: ``σ_w/√(1 − a²)``;
+- M1: acceleration noise ``ξ`` through the Euler plant: ``σ_ξ·√P_xx`` with ``P`` the
+  stationary state covariance per unit noise (a discrete Lyapunov equation);
+- M2a/M2b: the measurement noise ``σ_s`` itself;
+- M3, M4: no noise in the twin, floor 0.
+
+From the twin (:func:`twin_noise_floor`) when its file gives noise levels; from the data
+otherwise (:func:`data_noise_floor`). The data estimate reads the noise from the
+*high-frequency* part of a residual, where the structured effects (smooth functions of the
+input, or rare jumps) are absent: first differences of the one-step prediction error (M0, M1) or
+of the simulation error (sensors, M3, M4), with a robust scale (MAD), so the few jumps an effect
+causes at a command step do not count. For M1 it separates process noise (white in the one-step
+error) from measurement noise on the position (coloured by the plant polynomial) by their
+autocovariances, lags 0–3 (method of moments).
+
+The data estimate is reported beside the twin's but used only when the twin gives no noise: it
+cannot tell noise from high-frequency *effects* (a quantizer, an interference) and it is biased
+low for coloured noise, whereas the twin's level is trusted to the ``noise_tolerance`` that the
+threshold includes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import solve_discrete_lyapunov
+from scipy.optimize import nnls
+from scipy.stats import chi2
+
+from dtwin.params import NoiseParams
+
+__all__ = [
+    "NoiseFloor",
+    "robust_std",
+    "plant_noise_gain",
+    "twin_noise_floor",
+    "data_noise_floor",
+    "effective_samples",
+    "gap_threshold",
+]
+
+_MAD_TO_STD = 1.482602218505602
+
+
+@dataclass(frozen=True)
+class NoiseFloor:
+    """A module's noise floor.
+
+    Attributes
+    ----------
+    rms : float
+        RMS simulation error explained by noise, output units.
+    source : str
+        ``"twin"`` or ``"data"``.
+    acf : numpy.ndarray, shape (n_lags,)
+        Autocorrelation of that noise in the simulation error, lags 0, 1, … (for the effective
+        sample size of the gap).
+    """
+
+    rms: float
+    source: str
+    acf: np.ndarray
+
+
+def robust_std(values: np.ndarray) -> float:
+    """Return ``1.4826·median(|v − median(v)|)``, a standard deviation robust to outliers."""
+    values = np.asarray(values, dtype=float)
+    return float(_MAD_TO_STD * np.median(np.abs(values - np.median(values))))
+
+
+def _plant_matrices(m: float, c: float, k: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    a = np.array([[1.0, dt], [-dt * k / m, 1.0 - dt * c / m]])
+    b = np.array([[0.0], [dt]])
+    return a, b
+
+
+def plant_noise_gain(m: float, c: float, k: float, dt: float, n_lags: int = 400) -> tuple:
+    """Return ``(√P_xx, acf)``: position std per unit acceleration noise and its autocorrelation.
+
+    ``P = A·P·Aᵀ + b·bᵀ`` for the Euler plant's state ``(x, v)``; ``acf[l] = (A^l P)_xx / P_xx``.
+    An unstable or undamped plant has no stationary variance; then the variance after
+    ``n_lags`` steps is used.
+    """
+    a, b = _plant_matrices(m, c, k, dt)
+    if np.max(np.abs(np.linalg.eigvals(a))) < 1.0 - 1e-9:
+        cov = solve_discrete_lyapunov(a, b @ b.T)
+    else:
+        cov = np.zeros((2, 2))
+        for _ in range(n_lags):
+            cov = a @ cov @ a.T + b @ b.T
+    acf = np.empty(n_lags)
+    row = cov.copy()
+    for lag in range(n_lags):
+        acf[lag] = row[0, 0]
+        row = a @ row
+    variance = max(cov[0, 0], 1e-300)
+    return math.sqrt(variance), acf / variance
+
+
+def _white_acf() -> np.ndarray:
+    return np.array([1.0])
+
+
+def twin_noise_floor(module: str, noise: NoiseParams, lin: dict, dt: float) -> NoiseFloor:
+    """Return the floor implied by the twin's noise levels (see the module docstring)."""
+    if module == "M0":
+        a = math.exp(-dt / lin["tau"])
+        n_lags = max(2, min(400, int(10 / max(1e-9, 1 - a))))
+        return NoiseFloor(noise.actuator / math.sqrt(1 - a * a), "twin", a ** np.arange(n_lags))
+    if module == "M1":
+        gain, acf = plant_noise_gain(lin["m"], lin["c"], lin["k"], dt)
+        return NoiseFloor(noise.plant * gain, "twin", acf)
+    if module in ("M2a", "M2b"):
+        sigma = noise.sensor_A if module == "M2a" else noise.sensor_B
+        return NoiseFloor(sigma, "twin", _white_acf())
+    return NoiseFloor(0.0, "twin", _white_acf())
+
+
+def _winsorize(values: np.ndarray, width: float = 5.0) -> np.ndarray:
+    scale = robust_std(values)
+    centre = np.median(values)
+    return np.clip(values, centre - width * scale, centre + width * scale)
+
+
+def _autocov(values: np.ndarray, n_lags: int) -> np.ndarray:
+    values = values - values.mean()
+    n = len(values)
+    return np.array([values[: n - lag] @ values[lag:] / n for lag in range(n_lags)])
+
+
+def _filter_autocov(coeffs: np.ndarray, n_lags: int) -> np.ndarray:
+    full = np.correlate(coeffs, coeffs, mode="full")[len(coeffs) - 1 :]
+    out = np.zeros(n_lags)
+    out[: min(n_lags, len(full))] = full[:n_lags]
+    return out
+
+
+def data_noise_floor(
+    module: str,
+    inputs: dict[str, np.ndarray],
+    output: np.ndarray,
+    simulated: np.ndarray,
+    lin: dict,
+    dt: float,
+) -> NoiseFloor:
+    """Return the floor estimated from the high-frequency part of the residuals.
+
+    Parameters
+    ----------
+    module : str
+        ``"M0"`` … ``"M4"``.
+    inputs : dict of str to array
+        The module's recorded inputs, each shape ``(n,)`` (M1 reads ``u_act``).
+    output : array, shape (n,)
+        The recorded output.
+    simulated : array, shape (n,)
+        The twin's simulation of the output (sensors, M3, M4 use ``output − simulated``).
+    lin : dict
+        The module's linear parameters (M0, M1 form their one-step predictor from them).
+    dt : float
+        Sample period, s.
+    """
+    if module == "M0":
+        a = math.exp(-dt / lin["tau"])
+        u = inputs["u_cmd"]
+        step_error = output[1:] - a * output[:-1] - (1 - a) * u[:-1]
+        sigma = robust_std(np.diff(step_error)) / math.sqrt(2.0)
+        n_lags = max(2, min(400, int(10 / max(1e-9, 1 - a))))
+        return NoiseFloor(sigma / math.sqrt(1 - a * a), "data", a ** np.arange(n_lags))
+    if module == "M1":
+        return _plant_data_floor(inputs["u_act"], output, lin, dt)
+    residual = output - simulated
+    sigma = robust_std(np.diff(residual)) / math.sqrt(2.0)
+    return NoiseFloor(sigma, "data", _white_acf())
+
+
+def _plant_noise_moments(u, x, lin, dt):
+    """Return ``(var_process, var_meas, process_share)`` of the one-step error's differences."""
+    m, c, k = lin["m"], lin["c"], lin["k"]
+    delay = int(lin.get("delay_samples", 0))
+    a1, a2 = -(2 - c * dt / m), 1 - c * dt / m + k * dt * dt / m
+    lag = 2 + delay
+    rows = len(x) - lag
+    step_error = x[lag:] + a1 * x[lag - 1 : -1] + a2 * x[lag - 2 : -2] - dt * dt / m * u[:rows]
+    diffs = _winsorize(np.diff(step_error))
+    n_lags = 4
+    observed = _autocov(diffs, n_lags)
+    process = _filter_autocov(np.array([1.0, -1.0]), n_lags)
+    measurement = _filter_autocov(np.convolve([1.0, -1.0], [1.0, a1, a2]), n_lags)
+    (var_process, var_meas), _ = nnls(np.column_stack([process, measurement]), observed)
+    total = var_process * process[0] + var_meas * measurement[0]
+    return var_process, var_meas, (var_process * process[0] / total if total > 0 else 1.0)
+
+
+def _plant_data_floor(u: np.ndarray, x: np.ndarray, lin: dict, dt: float) -> NoiseFloor:
+    """Process and measurement noise of the plant from the one-step error (method of moments).
+
+    When measurement noise dominates the one-step error (fast sampling), the process noise is
+    read on block averages of 2, 4, 8, … samples: over a step h its share grows like h⁴. The
+    per-sample acceleration noise at dt is ``σ_h·√(h/dt)`` (white noise of fixed intensity).
+    """
+    u = u - lin.get("u_offset", 0.0)
+    _, var_meas, _ = _plant_noise_moments(u, x, lin, dt)
+    factor, sigma_accel = 1, 0.0
+    while len(x) // factor >= 200:
+        n_blocks = len(x) // factor
+        xs = x[: n_blocks * factor].reshape(n_blocks, factor).mean(axis=1)
+        us = u[: n_blocks * factor].reshape(n_blocks, factor).mean(axis=1)
+        lin_h = dict(lin, delay_samples=int(lin.get("delay_samples", 0)) // factor)
+        step = dt * factor
+        var_process, _, share = _plant_noise_moments(us, xs, lin_h, step)
+        sigma_accel = math.sqrt(var_process) / (step * step) * math.sqrt(step / dt)
+        if share >= 0.5:
+            break
+        factor *= 2
+    gain, acf = plant_noise_gain(lin["m"], lin["c"], lin["k"], dt)
+    total = (sigma_accel * gain) ** 2 + var_meas
+    weight = (sigma_accel * gain) ** 2 / total if total > 0 else 1.0
+    mixed = weight * acf + (1 - weight) * np.r_[1.0, np.zeros(len(acf) - 1)]
+    return NoiseFloor(math.sqrt(total), "data", mixed)
+
+
+def effective_samples(acf: np.ndarray, n: int) -> float:
+    """Return the effective sample size of a mean square over ``n`` samples of coloured noise.
+
+    ``n_eff = n / (1 + 2·Σ_{l≥1} (1 − l/n)·ρ_l²)`` (the variance of a sample variance of a
+    Gaussian process).
+    """
+    lags = np.arange(1, min(len(acf), n))
+    inflation = 1.0 + 2.0 * float(np.sum((1 - lags / n) * acf[lags] ** 2))
+    return max(1.0, n / inflation)
+
+
+def gap_threshold(
+    floor_rms: float,
+    n_eff: float,
+    *,
+    noise_tolerance: float,
+    significance: float,
+    min_gap: float,
+) -> float:
+    """Return the largest gap noise alone explains, normalised like the gap.
+
+    ``floor·(1 + noise_tolerance)·√(χ²_{n_eff}(1 − significance)/n_eff)``, at least
+    ``min_gap``: the floor with its level uncertain by ``noise_tolerance``, and the upper
+    quantile of a mean square of Gaussian noise over ``n_eff`` effective samples.
+    """
+    n_eff = max(n_eff, 1.0)
+    sampling = math.sqrt(chi2.ppf(1.0 - significance, n_eff) / n_eff)
+    return max(min_gap, floor_rms * (1.0 + noise_tolerance) * sampling)

@@ -1,0 +1,239 @@
+"""Reports of a diagnosis: ``diagnosis.json``, ``report.md`` and a figure (issue #5).
+
+:func:`diagnosis_to_dict` gives the JSON payload (schema: ``workflow/schemas/
+diagnosis.schema.json``); :func:`write_report` writes all three files into a folder, each
+atomically. The figure answers in one look: where the gap lies (local vs chain gap per module
+against its noise threshold), the ranked candidates, and the source module before/after on the
+held-out part.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dtwin.artifacts import atomic_write, to_jsonable, write_json
+from dtwin.gap.diagnose import Diagnosis
+
+__all__ = ["SCHEMA_VERSION", "DEFINITIONS", "diagnosis_to_dict", "render_markdown", "write_report"]
+
+SCHEMA_VERSION = "dtwin.gap/1"
+
+#: How every number of the report is defined (copied into ``diagnosis.json``).
+DEFINITIONS: dict[str, str] = {
+    "gap": "normalised RMS error over the held-out samples (those after the training fraction): "
+    "RMS(recorded − twin) / std(recorded signal over the whole recording)",
+    "local gap": "the module's twin driven with the module's recorded input",
+    "chain gap": "the whole twin run from the most upstream recorded signal, each module fed by "
+    "its simulated predecessor",
+    "noise_floor": "the gap the module's own noise explains (twin noise levels; from the data "
+    "when the twin gives none)",
+    "threshold": "noise floor × (1 + noise_tolerance) × the upper (1 − significance) quantile of "
+    "a noise RMS over the held-out part's effective sample size, at least min_gap",
+    "gap_calibrated": "local gap after re-fitting the module's linear parameters within "
+    "calibration_tolerance of nominal on the training part (calibration slack removed)",
+    "excess gap": "sqrt(gap² − noise_floor²): the part of the gap above what noise explains",
+    "shrink_pct": "100·(1 − excess gap after / excess gap before) of the source module, held-out "
+    "part, the effect's parameters fitted on the training part",
+    "raw_shrink_pct": "100·(1 − gap after / gap before) of the source module, held-out part",
+    "kpi_shrink_pct": "100·(1 − chain gap after / chain gap before) of the end-to-end signal "
+    "(kpi_signal: z when recorded), held-out part; null when the source is not upstream of it",
+    "score": "n_eff·ln(held-out MSE) + n_params·ln(n_eff), relative to the best candidate",
+    "confidence": "BIC weight of the chosen candidate among the module's candidates",
+}
+
+
+def diagnosis_to_dict(diagnosis: Diagnosis) -> dict[str, Any]:
+    """Return the JSON payload of a diagnosis (plain types, non-finite numbers as null)."""
+    modules = {}
+    for name, report in diagnosis.modules.items():
+        entry = asdict(report)
+        entry.pop("name")
+        entry["nominal"] = entry.pop("lin_nominal")
+        entry["used"] = entry.pop("lin_used")
+        modules[name] = entry
+    candidates = []
+    for candidate in diagnosis.candidates:
+        entry = asdict(candidate)
+        entry["linear_params"] = entry.pop("lin")
+        candidates.append(entry)
+    payload = {
+        "schema": SCHEMA_VERSION,
+        "module": diagnosis.module,
+        "effect": diagnosis.effect,
+        "params": diagnosis.params,
+        "confidence": diagnosis.confidence,
+        "shrink_pct": diagnosis.shrink_pct,
+        "raw_shrink_pct": diagnosis.raw_shrink_pct,
+        "kpi_shrink_pct": diagnosis.kpi_shrink_pct,
+        "kpi_signal": diagnosis.kpi_signal,
+        "modules": modules,
+        "candidates": candidates,
+        "recording": {
+            "n_samples": diagnosis.n_samples,
+            "n_train": diagnosis.n_train,
+            "dt": diagnosis.dt,
+            "train_frac": diagnosis.train_frac,
+        },
+        "calibrated": list(diagnosis.calibrated),
+        "notes": list(diagnosis.notes),
+        "settings": asdict(diagnosis.settings),
+        "definitions": DEFINITIONS,
+    }
+    return to_jsonable(payload)
+
+
+def _fmt(value: Any, digits: int = 3) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, float):
+        return f"{value:.{digits}g}"
+    return str(value)
+
+
+def _headline(d: Diagnosis) -> str:
+    if d.effect == "none":
+        return "**No gap beyond the noise**: every diagnosed module is within its noise threshold."
+    if d.effect == "unexplained":
+        return (
+            f"**Gap in {d.module}, unexplained**: no candidate effect removes at least "
+            f"{d.settings.min_share:.0%} of its held-out excess gap."
+        )
+    params = ", ".join(f"{k} = {v:.4g}" for k, v in d.params.items())
+    kpi = (
+        f", end-to-end {d.kpi_signal} gap −{d.kpi_shrink_pct:.0f} %"
+        if d.kpi_shrink_pct is not None
+        else ""
+    )
+    return (
+        f"**Gap in {d.module}: {d.effect}** ({params}; confidence {d.confidence:.2f}). "
+        f"Added to the twin, it removes {d.shrink_pct:.0f} % of the held-out excess gap "
+        f"({d.raw_shrink_pct:.0f} % of the whole gap{kpi})."
+    )
+
+
+def render_markdown(diagnosis: Diagnosis, figure_name: str = "gap.png") -> str:
+    """Return ``report.md``: the answer first, then per-module gaps, candidates, definitions."""
+    d = diagnosis
+    lines = [
+        "# Sim-to-real gap diagnosis",
+        "",
+        _headline(d),
+        "",
+        f"![gap diagnosis]({figure_name})",
+        "",
+        f"Recording: {d.n_samples} samples, dt = {d.dt:.6g} s; parameters fitted on the first "
+        f"{d.n_train} samples ({d.train_frac:.0%}), every gap measured on the remaining "
+        f"{d.n_samples - d.n_train} (held out).",
+        "",
+        "## Where: per module",
+        "",
+        "| module | status | local gap | after calibration slack | threshold | chain gap "
+        "| gap after | why |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name, m in d.modules.items():
+        lines.append(
+            f"| {name} | {m.status} | {_fmt(m.gap_before)} | {_fmt(m.gap_calibrated)} "
+            f"| {_fmt(m.threshold)} | {_fmt(m.chain_gap)} | {_fmt(m.gap_after)} | {m.reason} |"
+        )
+    lines += ["", "## Which: candidates (held-out part, best first)", ""]
+    if d.candidates:
+        lines += [
+            "| module | effect | parameters | gap after | excess shrink % | raw shrink % "
+            "| score | weight |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for c in d.candidates:
+            params = ", ".join(f"{k}={v:.4g}" for k, v in c.params.items())
+            lines.append(
+                f"| {c.module} | {c.effect} | {params} | {_fmt(c.gap_after)} "
+                f"| {_fmt(c.heldout_shrink_pct)} | {_fmt(c.raw_shrink_pct)} | {c.score:.1f} "
+                f"| {c.weight:.2f} |"
+            )
+    else:
+        lines.append("No module has a gap beyond its noise, so no candidate was fitted.")
+    if d.notes:
+        lines += ["", "## Notes", ""] + [f"- {note}" for note in d.notes]
+    lines += ["", "## Definitions", ""] + [f"- **{k}**: {v}" for k, v in DEFINITIONS.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), gridspec_kw={"width_ratios": [1.2, 1, 1.6]})
+    names = [n for n, m in d.modules.items() if m.status != "skipped"]
+    x = np.arange(len(names))
+    local = [d.modules[n].gap_before for n in names]
+    chain = [d.modules[n].chain_gap or 0.0 for n in names]
+    thresholds = [d.modules[n].threshold for n in names]
+    ax = axes[0]
+    colors = ["tab:red" if d.modules[n].status in ("source", "gap") else "tab:blue" for n in names]
+    ax.bar(x - 0.2, local, 0.4, color=colors, label="local gap")
+    ax.bar(x + 0.2, chain, 0.4, color="lightgray", label="chain gap")
+    ax.scatter(x - 0.2, thresholds, marker="_", s=400, color="k", label="noise threshold")
+    ax.set_xticks(x, names)
+    ax.set_ylabel("normalised RMS gap (held-out)")
+    ax.set_title("Where: local gap vs chain gap")
+    ax.legend(fontsize=8)
+    ax = axes[1]
+    if d.candidates:
+        labels = [f"{c.module} {c.effect}" for c in d.candidates][::-1]
+        values = [c.heldout_shrink_pct for c in d.candidates][::-1]
+        values = [v if np.isfinite(v) else -100.0 for v in values]
+        bar_colors = ["tab:green" if c.effect == d.effect else "gray" for c in d.candidates][::-1]
+        ax.barh(labels, np.clip(values, -100, 100), color=bar_colors)
+        ax.axvline(100 * d.settings.min_share, color="k", ls="--", lw=1)
+        ax.set_xlabel("held-out excess gap removed, %")
+        ax.tick_params(axis="y", labelsize=8)
+    else:
+        ax.text(0.5, 0.5, "no gap beyond noise:\nno candidates", ha="center", va="center")
+        ax.set_axis_off()
+    ax.set_title("Which: candidates")
+    ax = axes[2]
+    if d.series:
+        t, recorded = d.series["t"], d.series["recorded"]
+        after_label = "twin + effect" if d.effect != "unexplained" else "twin + best candidate"
+        ax.plot(t, recorded - d.series["before"], color="tab:red", lw=0.8, label="recorded − twin")
+        ax.plot(
+            t,
+            recorded - d.series["after"],
+            color="tab:green",
+            lw=0.8,
+            label=f"recorded − ({after_label})",
+        )
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_xlabel("t (s), held-out part")
+        ax.set_ylabel(f"{d.module} output error (recording units)")
+        ax.legend(fontsize=8)
+    else:
+        ax.set_axis_off()
+    ax.set_title("How far: before / after")
+    title = {"none": "No gap beyond noise", "unexplained": f"{d.module}: unexplained gap"}.get(
+        d.effect, f"{d.module}: {d.effect}, excess gap −{(d.shrink_pct or 0):.0f} % held-out"
+    )
+    fig.suptitle(title, fontsize=13, fontweight="bold")
+    fig.tight_layout()
+    for path in paths:
+        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110))
+    plt.close(fig)
+
+
+def write_report(diagnosis: Diagnosis, out_dir: str | os.PathLike) -> list[Path]:
+    """Write ``diagnosis.json``, ``report.md`` and ``gap.png`` into ``out_dir``; return paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    json_path, md_path, png_path = out / "diagnosis.json", out / "report.md", out / "gap.png"
+    write_json(diagnosis_to_dict(diagnosis), json_path)
+    text = render_markdown(diagnosis, png_path.name)
+    atomic_write(md_path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+    _draw_figure(diagnosis, [png_path])
+    return [json_path, md_path, png_path]

@@ -1,0 +1,30 @@
+"""gap_diagnose: diagnose one recording's sim-to-real gap (issue #5), as `dtwin diagnose` does.
+
+Inputs: ``recording`` (CSV: t in s and module signals), ``twin`` (YAML twin file).
+Outputs: ``diagnosis.json`` (schema workflow/schemas/diagnosis.schema.json), ``report.md``,
+``gap.png`` — all in one folder, each written atomically.
+Config: ``gap.diagnose`` (``train_frac``, ``calibrate`` and the decision constants of
+:class:`dtwin.gap.diagnose.GapSettings`).
+"""
+
+import sys
+from pathlib import Path
+
+import yaml
+
+from dtwin.gap import GapSettings, diagnose, read_recording, twin_from_mapping, write_report
+
+sys.stderr = open(snakemake.log[0], "w")  # noqa: SIM115
+settings = dict(snakemake.params.diagnose)
+train_frac = settings.pop("train_frac")
+calibrate = bool(settings.pop("calibrate"))
+recording = read_recording(snakemake.input.recording)
+twin = twin_from_mapping(yaml.safe_load(Path(snakemake.input.twin).read_text()), dt=recording.dt)
+result = diagnose(
+    recording,
+    twin,
+    calibrate=calibrate,
+    train_frac=train_frac,
+    settings=GapSettings.from_mapping(settings),
+)
+write_report(result, Path(snakemake.output.diagnosis).parent)

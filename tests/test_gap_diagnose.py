@@ -1,0 +1,160 @@
+"""The gap diagnoser on generated recordings whose effect is withheld, and on a rig-like one."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from dtwin.cli import main
+from dtwin.gap import (
+    diagnose,
+    diagnosis_to_dict,
+    generate_case,
+    recording_from_frame,
+    twin_from_mapping,
+)
+from dtwin.gap.effects import EFFECT_NAMES
+
+ROOT = Path(__file__).resolve().parents[1]
+SCHEMA = json.loads((ROOT / "workflow/schemas/diagnosis.schema.json").read_text())
+
+# (case effect, module, seed): moderately strong effects, fixed seeds, 1500 samples
+CASES = [
+    ("actuator_saturation", "M0", 1),
+    ("actuator_deadzone", "M0", 1),
+    ("actuator_delay", "M0", 1),
+    ("coulomb_friction", "M1", 1),
+    ("cubic_stiffness", "M1", 1),
+    ("quadratic_damping", "M1", 1),
+    ("sensor_quantization", "M2b", 1),
+    ("sensor_scale_error", "M2a", 1),
+    ("sensor_bias_drift", "M2b", 1),
+    ("sensor_delay", "M2a", 1),
+    ("parameter_mismatch", "M1", 1),
+    ("parameter_mismatch", "M3", 1),
+    ("stiffness_change", "M1", 2),
+    ("sensor_interference", "M2a", 1),
+]
+
+
+def _diagnose_case(effect, module, seed, **kwargs):
+    case = generate_case(effect, seed, magnitude=0.8, module=module, n_samples=1500)
+    result = diagnose(recording_from_frame(case.recording), twin_from_mapping(case.twin), **kwargs)
+    return case, result
+
+
+@pytest.mark.parametrize(("effect", "module", "seed"), CASES)
+def test_each_effect_is_diagnosed(effect, module, seed):
+    case, result = _diagnose_case(effect, module, seed)
+    assert (result.module, result.effect) == (module, case.key["expected_effect"])
+    assert result.modules[module].status == "source"
+    payload = diagnosis_to_dict(result)
+    jsonschema.validate(payload, SCHEMA)
+    if result.effect != "unexplained":
+        assert result.shrink_pct >= 50 and 0 <= result.confidence <= 1
+        assert result.candidates[0].effect == effect
+
+
+def test_none_on_a_clean_case():
+    _case, result = _diagnose_case("none", None, 1)
+    assert (result.module, result.effect, result.params) == (None, "none", {})
+    assert result.shrink_pct is None and not result.candidates
+    assert all(m.status in ("clean", "inherited") for m in result.modules.values())
+    jsonschema.validate(diagnosis_to_dict(result), SCHEMA)
+
+
+def test_partial_recording_diagnoses_m1_alone():
+    case = generate_case("coulomb_friction", 1, magnitude=0.8, n_samples=1500)
+    frame = case.recording[["t", "u_act", "x"]]
+    result = diagnose(recording_from_frame(frame), twin_from_mapping(case.twin))
+    assert (result.module, result.effect) == ("M1", "coulomb_friction")
+    statuses = {name: m.status for name, m in result.modules.items()}
+    assert statuses.pop("M1") == "source"
+    assert set(statuses.values()) == {"skipped"}
+    assert "not in the recording" in result.modules["M2a"].reason
+    assert result.kpi_signal == "x"
+
+
+def test_calibrate_fits_the_linear_twin_first():
+    case = generate_case("cubic_stiffness", 1, magnitude=0.8, n_samples=1500)
+    frame = case.recording[["t", "u_act", "x"]]
+    twin = twin_from_mapping({"dt": 0.02})  # no nominal parameters: calibrated from data
+    result = diagnose(recording_from_frame(frame), twin)
+    assert result.calibrated == ("M1",) and any("M1: linear twin fitted" in n for n in result.notes)
+    assert (result.module, result.effect) == ("M1", "cubic_stiffness")
+    assert all(c.effect != "parameter_mismatch" for c in result.candidates)
+
+
+def _rig(friction: float, n: int = 12000, dt: float = 0.002, seed: int = 0) -> pd.DataFrame:
+    """A plant in volts at 500 Hz: gain, offsets, an input delay, process and sensor noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt
+    u = 1.5 * np.sin(2 * np.pi * 0.7 * t) + 0.8 * np.sign(np.sin(2 * np.pi * 0.13 * t))
+    m, c, k, delay = 0.05, 0.3, 6.0, 3
+    x = np.zeros(n)
+    v = np.zeros(n)
+    for j in range(1, n):
+        force = u[max(j - 1 - delay, 0)] + 0.1 - c * v[j - 1] - k * x[j - 1]
+        force -= friction * math.tanh(v[j - 1] / 0.005)
+        v[j] = v[j - 1] + dt * (force / m + 2.0 * rng.standard_normal())
+        x[j] = x[j - 1] + dt * v[j - 1]
+    volts = 2.5 + 1.8 * x + 0.002 * rng.standard_normal(n)
+    return pd.DataFrame({"t": np.round(t, 4), "u_act": u, "x": volts})
+
+
+@pytest.mark.parametrize(("friction", "expected"), [(0.0, "none"), (0.3, "coulomb_friction")])
+def test_rig_in_volts_without_nominal_parameters(friction, expected):
+    result = diagnose(recording_from_frame(_rig(friction)), twin_from_mapping({"dt": 0.002}))
+    assert result.effect == expected
+    if friction:
+        assert result.params["Fc"] == pytest.approx(friction, rel=0.2)
+
+
+def test_cli_writes_a_valid_report(tmp_path, capsys):
+    case = generate_case("actuator_deadzone", 1, magnitude=0.8, n_samples=1500)
+    case.recording.to_csv(tmp_path / "rec.csv", index=False, float_format="%.12g")
+    (tmp_path / "twin.yaml").write_text(yaml.safe_dump(case.twin))
+    out = tmp_path / "out"
+    argv = ["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "twin.yaml")]
+    assert main([*argv, "--out", str(out), "--train-frac", "0.6"]) == 0
+    assert "M0: actuator_deadzone" in capsys.readouterr().out
+    assert sorted(p.name for p in out.iterdir()) == ["diagnosis.json", "gap.png", "report.md"]
+    payload = json.loads((out / "diagnosis.json").read_text())
+    jsonschema.validate(payload, SCHEMA)
+    assert payload["recording"]["train_frac"] == 0.6
+    assert "actuator_deadzone" in (out / "report.md").read_text()
+    assert main([*argv, "--out", str(out)]) == 0  # re-running replaces its own folder
+
+
+def test_python_m_dtwin_runs(tmp_path):
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "dtwin",
+            "diagnose",
+            str(tmp_path / "no.csv"),
+            "--twin",
+            "x.yaml",
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        check=False,
+    )
+    assert done.returncode == 2 and "error:" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_schema_lists_every_effect_name():
+    assert set(SCHEMA["$defs"]["effect_name"]["enum"]) == set(EFFECT_NAMES)
