@@ -53,6 +53,26 @@ _EXPORTS: dict[str, str] = {
     # structured residuals (paper §4.1)
     "acf_table": "dtwin.residual_stats",
     "ljung_box_table": "dtwin.residual_stats",
+    # regimes: Gaussian HMM (paper §2.1, §4.2)
+    "zscore": "dtwin.hmm",
+    "fit_hmm": "dtwin.hmm",
+    "HmmFit": "dtwin.hmm",
+    "filtered_posteriors": "dtwin.hmm",
+    "bic_sweep": "dtwin.hmm",
+    # bias correction (paper §4.3, Eq. (25))
+    "correct_bias": "dtwin.correction",
+    # fault injection and regime scoring (paper §4.4)
+    "inject_faults": "dtwin.faults",
+    "regime_features": "dtwin.faults",
+    "hungarian_map": "dtwin.faults",
+    "classification_scores": "dtwin.faults",
+    # decisions (paper §5, Table 1)
+    "topsis": "dtwin.mcda",
+    "run_mcda": "dtwin.mcda",
+    # sim-to-real gap diagnosis
+    "diagnose": "dtwin.gap",
+    "read_recording": "dtwin.gap",
+    "generate_case": "dtwin.gap",
 }
 
 __all__ = sorted(_EXPORTS)

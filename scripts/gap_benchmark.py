@@ -7,14 +7,17 @@ targets are claims), ``results/gap/benchmark.csv`` (one row per case, columns in
 :mod:`dtwin.gap.benchmark`). Config: none beyond the case list.
 """
 
+from dtwin._script import start_rule
+
+start_rule(snakemake)
+
+
 import json
-import sys
 from pathlib import Path
 
 from dtwin.artifacts import write_artifact, write_csv
 from dtwin.gap.benchmark import benchmark_checks, benchmark_metrics, draw_benchmark, score_cases
 
-sys.stderr = open(snakemake.log[0], "w")  # noqa: SIM115
 triples = [
     (Path(key).parent.name, json.loads(Path(key).read_text()), json.loads(Path(diag).read_text()))
     for key, diag in zip(snakemake.input.truths, snakemake.input.diagnoses, strict=True)

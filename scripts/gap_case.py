@@ -6,7 +6,11 @@ noise levels right to ±10 %), ``key.json`` (the truth; the diagnoser never read
 Config: ``gap.benchmark`` (``effects``, ``first_seed``, ``miscalibration``, ``noise_error``).
 """
 
-import sys
+from dtwin._script import start_rule
+
+start_rule(snakemake)
+
+
 from pathlib import Path
 
 import yaml
@@ -14,7 +18,6 @@ import yaml
 from dtwin.artifacts import atomic_write, write_csv, write_json
 from dtwin.gap.generator import case_spec, generate_case
 
-sys.stderr = open(snakemake.log[0], "w")  # noqa: SIM115
 settings = snakemake.params.benchmark
 spec = case_spec(snakemake.wildcards.case, settings["effects"], settings["first_seed"])
 case = generate_case(

@@ -7,14 +7,17 @@ Config: ``gap.diagnose`` (``train_frac``, ``calibrate`` and the decision constan
 :class:`dtwin.gap.diagnose.GapSettings`).
 """
 
-import sys
+from dtwin._script import start_rule
+
+start_rule(snakemake)
+
+
 from pathlib import Path
 
 import yaml
 
 from dtwin.gap import GapSettings, diagnose, read_recording, twin_from_mapping, write_report
 
-sys.stderr = open(snakemake.log[0], "w")  # noqa: SIM115
 settings = dict(snakemake.params.diagnose)
 train_frac = settings.pop("train_frac")
 calibrate = bool(settings.pop("calibrate"))

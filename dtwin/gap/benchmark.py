@@ -138,12 +138,9 @@ def draw_benchmark(
     table: pd.DataFrame, metrics: Mapping[str, Any], paths: Iterable[str | os.PathLike]
 ) -> None:
     """Draw the benchmark figure (confusion matrix, accuracy vs magnitude, shrinks) to ``paths``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from dtwin.artifacts import atomic_write
+    from dtwin.figures._style import save_figure
 
     fig, axes = plt.subplots(1, 3, figsize=(18, 6), gridspec_kw={"width_ratios": [1.4, 1, 1.2]})
     truths = sorted(table.expected_effect.unique())
@@ -196,6 +193,4 @@ def draw_benchmark(
         fontsize=11,
     )
     fig.tight_layout()
-    for path in paths:
-        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110))
-    plt.close(fig)
+    save_figure(fig, paths)

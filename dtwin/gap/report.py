@@ -164,10 +164,9 @@ def render_markdown(diagnosis: Diagnosis, figure_name: str = "gap.png") -> str:
 
 
 def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from dtwin.figures._style import save_figure
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), gridspec_kw={"width_ratios": [1.2, 1, 1.6]})
     names = [n for n, m in d.modules.items() if m.status != "skipped"]
@@ -222,9 +221,7 @@ def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
     )
     fig.suptitle(title, fontsize=13, fontweight="bold")
     fig.tight_layout()
-    for path in paths:
-        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110))
-    plt.close(fig)
+    save_figure(fig, paths)
 
 
 def write_report(diagnosis: Diagnosis, out_dir: str | os.PathLike) -> list[Path]:

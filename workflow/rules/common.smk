@@ -73,7 +73,14 @@ def figure_outputs(artifact):
 
 PAPER_ARTIFACTS = ["fig01_pipeline", "fig02_arx_vs_physics", "fig03_residual_acf"]
 
+GAP_CASES = [
+    f"{effect}_{number:02d}"
+    for effect in config["gap"]["benchmark"]["effects"]
+    for number in range(config["gap"]["benchmark"]["cases_per_effect"])
+]
+
 ALL_TARGETS = [path for artifact in PAPER_ARTIFACTS for path in figure_outputs(artifact)] + [
+    *figure_outputs("gap_benchmark"),
     "paper_figures/CLAIMS.md",
     "paper_figures/claims.json",
 ]

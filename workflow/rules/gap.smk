@@ -1,20 +1,10 @@
 # Issue #5: sim-to-real gap diagnosis, checked on generated recordings with a withheld effect.
 # gap_case (one job per case) -> gap_diagnose (one job per case) -> gap_benchmark (aggregate).
-# Config: config["gap"] (config/gap.yaml). Helpers below belong in common.smk when merged.
-
-from pathlib import Path
-
-GAP_LIBRARY = sorted(str(p) for p in Path(workflow.basedir).glob("dtwin/gap/*.py"))
-GAP_CASES = [
-    f"{effect}_{number:02d}"
-    for effect in config["gap"]["benchmark"]["effects"]
-    for number in range(config["gap"]["benchmark"]["cases_per_effect"])
-]
-
+# Config: config["gap"]; the case list GAP_CASES is built in common.smk.
 
 rule gap_case:
     input:
-        library=GAP_LIBRARY,
+        lib=dtwin_sources("scripts/gap_case.py"),
     output:
         recording="results/gap/cases/{case}/recording.csv",
         twin="results/gap/cases/{case}/twin.yaml",
@@ -41,7 +31,7 @@ rule gap_diagnose:
     input:
         recording=rules.gap_case.output.recording,
         twin=rules.gap_case.output.twin,
-        library=GAP_LIBRARY,
+        lib=dtwin_sources("scripts/gap_diagnose.py"),
     output:
         diagnosis="results/gap/diagnoses/{case}/diagnosis.json",
         report="results/gap/diagnoses/{case}/report.md",
@@ -66,6 +56,7 @@ rule gap_diagnose:
 
 rule gap_benchmark:
     input:
+        lib=dtwin_sources("scripts/gap_benchmark.py"),
         diagnoses=expand(rules.gap_diagnose.output.diagnosis, case=GAP_CASES),
         truths=expand(rules.gap_case.output.key, case=GAP_CASES),
     output:
