@@ -636,7 +636,70 @@ def _forward_filter(
     means: np.ndarray,
     variances: np.ndarray,
 ) -> tuple[np.ndarray, float]:
-    """Normalised forward recursion (Eq. (4)) in log space; returns (filtered, log p(X))."""
+    """Normalised forward recursion (Eq. (4)); returns (filtered (T, K), log p(X)).
+
+    Vectorised: with ``β_t = exp(log b_t − max_k log b_t)`` and ``M_t = diag(β_t) Aᵀ`` the
+    filtered vector is ``α_t ∝ M_t ⋯ M_1 α_0``. The series is cut into ~√T blocks; prefix
+    products inside every block are built for all blocks at once (one batched 4×4 matrix
+    product per position), the block entry vectors are chained sequentially (√T small
+    steps), and every α_t is then one batched matrix-vector product. Products are rescaled
+    at every step, so nothing overflows; if a row underflows to zero (a state sequence the
+    transition matrix forbids) the exact log-space loop takes over.
+    """
+    log_b = _log_emission(X, means, variances)
+    peak = log_b.max(axis=1)
+    emission = np.exp(log_b - peak[:, None])
+    first = startprob * emission[0]
+    n_steps, n_states = emission.shape
+    filtered = np.empty((n_steps, n_states))
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        filtered[0] = first / first.sum()
+        if n_steps > 1:
+            filtered[1:] = _blocked_forward(filtered[0], emission[1:], transmat)
+        predicted = filtered[:-1] @ transmat
+        norms = np.einsum("tk,tk->t", predicted, emission[1:])
+        log_likelihood = float(np.log(first.sum()) + peak[0] + np.sum(np.log(norms) + peak[1:]))
+    if not (np.all(np.isfinite(filtered)) and np.isfinite(log_likelihood)):
+        return _forward_filter_loop(X, startprob, transmat, means, variances)
+    return filtered, log_likelihood
+
+
+def _blocked_forward(start: np.ndarray, emission: np.ndarray, transmat: np.ndarray) -> np.ndarray:
+    """Filtered vectors for steps 1 … n given the filtered vector of step 0 (see above)."""
+    n_steps, n_states = emission.shape
+    block = max(1, math.isqrt(n_steps))
+    n_blocks = -(-n_steps // block)
+    beta = np.ones((n_blocks * block, n_states))
+    beta[:n_steps] = emission
+    beta = beta.reshape(n_blocks, block, n_states)
+    transposed = transmat.T
+    prefix = np.empty((n_blocks, block, n_states, n_states))
+    for position in range(block):
+        step = beta[:, position, :, None] * transposed
+        prefix[:, position] = step if position == 0 else step @ prefix[:, position - 1]
+        prefix[:, position] /= prefix[:, position].max(axis=(1, 2), keepdims=True)
+    entries = np.empty((n_blocks, n_states))
+    alpha = start
+    for index in range(n_blocks):
+        entries[index] = alpha
+        alpha = prefix[index, -1] @ alpha
+        alpha = alpha / alpha.sum()
+    alphas = np.einsum("bjik,bk->bji", prefix, entries).reshape(-1, n_states)[:n_steps]
+    return alphas / alphas.sum(axis=1, keepdims=True)
+
+
+def _forward_filter_loop(
+    X: np.ndarray,
+    startprob: np.ndarray,
+    transmat: np.ndarray,
+    means: np.ndarray,
+    variances: np.ndarray,
+) -> tuple[np.ndarray, float]:
+    """Normalised forward recursion (Eq. (4)), one step at a time in log space.
+
+    Exact for any transition matrix (zeros included); slow for long series (a Python loop
+    over T). The reference for :func:`_forward_filter` and its fallback.
+    """
     log_b = _log_emission(X, means, variances)
     with np.errstate(divide="ignore"):
         log_a = np.log(transmat)

@@ -256,3 +256,27 @@ def test_scaling_underflow_falls_back_to_log_implementation():
     assert set(fit.restarts["status"]) == {"ok"}
     np.testing.assert_allclose(fit.smoothed.sum(axis=1), 1.0)
     np.testing.assert_allclose(fit.filtered.sum(axis=1), 1.0)
+
+
+@pytest.mark.parametrize(
+    ("n_steps", "left_to_right"), [(1, False), (2, False), (997, False), (3000, True)]
+)
+def test_vectorised_forward_filter_equals_the_exact_loop(n_steps, left_to_right):
+    from dtwin.hmm import _forward_filter, _forward_filter_loop
+
+    rng = np.random.default_rng(n_steps)
+    transmat = rng.dirichlet(np.ones(4), size=4)
+    if left_to_right:  # zeros in the transition matrix
+        transmat = np.triu(transmat)
+        transmat /= transmat.sum(axis=1, keepdims=True)
+    args = (
+        rng.normal(size=(n_steps, 3)) * 2.0,
+        rng.dirichlet(np.ones(4)),
+        transmat,
+        rng.normal(size=(4, 3)),
+        rng.uniform(0.3, 2.0, size=(4, 3)),
+    )
+    fast, fast_ll = _forward_filter(*args)
+    exact, exact_ll = _forward_filter_loop(*args)
+    np.testing.assert_allclose(fast, exact, atol=1e-10)
+    assert fast_ll == pytest.approx(exact_ll, rel=1e-12)
