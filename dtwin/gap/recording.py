@@ -126,8 +126,8 @@ def _check_time(t: np.ndarray, resolution: float) -> float:
     if back.any():
         row = int(np.flatnonzero(back)[0]) + 2
         raise DtwinValueError(
-            f"recording column 't' must increase (got {t[row - 2]!r} then {t[row - 1]!r} "
-            f"at row {row})"
+            f"recording column 't' must increase (got {float(t[row - 2])!r} then "
+            f"{float(t[row - 1])!r} at row {row})"
         )
     dt = float((t[-1] - t[0]) / (len(t) - 1))
     eps = 1e-12 * abs(t).max()
