@@ -124,7 +124,7 @@ def test_a_million_sample_recording_is_read_without_running_out_of_memory(tmp_pa
     u = np.sign(np.sin(2 * np.pi * 0.3 * t)) + 0.1 * rng.standard_normal(n)
     x = np.convolve(u, np.exp(-np.arange(400) / 80.0) / 80.0)[:n] + 0.01 * rng.standard_normal(n)
     pd.DataFrame({"t": t, "u_act": u, "x": x}).to_csv(
-        tmp_path / "rec.csv", index=False, float_format="%.6g"
+        tmp_path / "rec.csv", index=False, float_format="%.9g"
     )
     (tmp_path / "twin.yaml").write_text("dt: 0.002\n")
     script = (
