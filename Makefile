@@ -28,6 +28,9 @@ test: $(STAMP)
 report: figures
 	$(BIN)/snakemake --report paper_figures/report.html
 
+bench: $(STAMP)
+	$(BIN)/python benchmarks/run.py
+
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/snakemake --lint
