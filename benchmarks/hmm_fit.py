@@ -2,6 +2,8 @@
 
 Usage: python benchmarks/hmm_fit.py {dtwin,hmmlearn} T [n_restarts] [max_iter]
 Prints one JSON line. Data: T×10 features from a 4-state switching Gaussian, seed 0.
+Seconds per EM iteration = (time of the fit with max_iter − time with 1 iteration) / (extra
+iterations), so start-up, random starts and the final posteriors are not counted.
 """
 
 from __future__ import annotations

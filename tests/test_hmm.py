@@ -280,3 +280,23 @@ def test_vectorised_forward_filter_equals_the_exact_loop(n_steps, left_to_right)
     exact, exact_ll = _forward_filter_loop(*args)
     np.testing.assert_allclose(fast, exact, atol=1e-10)
     assert fast_ll == pytest.approx(exact_ll, rel=1e-12)
+
+
+def test_matmul_emission_hook_equals_hmmlearns_density():
+    """The one override below hmmlearn's public API gives hmmlearn's own numbers."""
+    from hmmlearn.stats import log_multivariate_normal_density
+
+    from dtwin.hmm import _new_model
+
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(500, 6)) * 3
+    model = _new_model(3, "scaling")
+    model.n_features = 6
+    model.startprob_ = np.full(3, 1 / 3)
+    model.transmat_ = np.full((3, 3), 1 / 3)
+    model.means_ = rng.normal(size=(3, 6))
+    model.covars_ = rng.uniform(0.05, 4.0, size=(3, 6))
+    ours = model._compute_log_likelihood(X)
+    variances = np.diagonal(model.covars_, axis1=1, axis2=2)
+    reference = log_multivariate_normal_density(X, model.means_, variances, "diag")
+    np.testing.assert_allclose(ours, reference, rtol=1e-10)
