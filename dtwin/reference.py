@@ -19,6 +19,7 @@ from dtwin.artifacts import Check
 from dtwin.arx import ArxFit, ArxOrders
 from dtwin.params import TwinParams
 from dtwin.surrogate import fit_surrogates, run_surrogate_chain
+from dtwin.wiring import RESIDUALS
 
 __all__ = [
     "R_PHYSICS_COLUMNS",
@@ -27,6 +28,7 @@ __all__ = [
     "load_r_physics",
     "load_r_theta",
     "crosscheck_arx",
+    "load_r_fault_scenario",
 ]
 
 #: Our signal name → column of R's physics signals in the seed-11 pipeline CSV.
@@ -141,3 +143,25 @@ def crosscheck_arx(
         ),
     ]
     return checks, {"theta_max_rel_dev": theta_dev, "rollout_max_abs_dev": rollout_dev}
+
+
+def load_r_fault_scenario(path: str | os.PathLike) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Return R's faulted residuals and its Hungarian-mapped regime posteriors.
+
+    Returns
+    -------
+    (residuals, posteriors) : tuple of DataFrame
+        ``residuals``: ``t, regime, e0 … e4`` (R's fault scenario, seed 11);
+        ``posteriors``: ``p_<regime>`` per step, R's smoothed state posteriors ``gamma_S1…S4``
+        summed per regime through the Hungarian map of R's Viterbi path (rows sum to 1).
+    """
+    from dtwin.faults import REGIMES, hungarian_map, mapped_posteriors
+
+    gamma_columns = [f"gamma_S{k}" for k in range(1, 5)]
+    raw = _read_csv(path, ["t", "regime", "viterbi_state", *RESIDUALS, *gamma_columns])
+    mapping = hungarian_map(
+        raw["viterbi_state"].to_numpy(), raw["regime"].to_numpy(), all_states=[1, 2, 3, 4]
+    )
+    probs = mapped_posteriors(raw[gamma_columns].to_numpy(), mapping)
+    posteriors = pd.DataFrame({f"p_{regime}": probs[regime] for regime in REGIMES})
+    return raw[["t", "regime", *RESIDUALS]].copy(), posteriors

@@ -10,6 +10,7 @@ from pymcdm.methods import TOPSIS
 
 from dtwin._validation import DtwinValueError
 from dtwin.mcda import ACTIONS, NO_ACTION, McdaSettings, run_mcda, select_actions, topsis
+from dtwin.reference import load_r_fault_scenario
 from tests.conftest import REFERENCE
 
 WEIGHTS = {
@@ -80,12 +81,7 @@ def test_dwell_and_margin_are_obeyed():
 
 
 def _r_inputs():
-    r = pd.read_csv(REFERENCE / "faulted_pipeline_seed11_rerun.csv")
-    mapping = r.groupby("viterbi_state")["viterbi_regime"].first().to_dict()
-    probs = pd.DataFrame({f"p_{g}": 0.0 for g in REGIMES}, index=r.index)
-    for state, regime in mapping.items():
-        probs[f"p_{regime}"] += r[f"gamma_S{state}"]
-    return r, probs.div(probs.sum(axis=1), axis=0)
+    return load_r_fault_scenario(REFERENCE / "faulted_pipeline_seed11_rerun.csv")
 
 
 def test_legacy_mode_reproduces_r_031_timeline_exactly():

@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.figures._style import PHYSICS_COLOR, apply_style
 from dtwin.mcda import ACTIONS, NO_ACTION, run_mcda
+from dtwin.reference import load_r_fault_scenario
 from dtwin.stages.decisions import mcda_settings_from_mapping
 
 __all__ = ["fig10_mcda_actions", "plot_mcda_actions", "REGIME_COLORS"]
@@ -176,13 +177,10 @@ def _gate_violations(timeline: pd.DataFrame, dwell: int) -> int:
 
 def _legacy_crosscheck(mcda, dt, r_pipeline_path, r_timeline_path) -> Check:
     """Our selection in legacy mode on R's residuals and posteriors vs R's RMCDA 0.3.1 timeline."""
-    r = pd.read_csv(r_pipeline_path)
-    mapping = r.groupby("viterbi_state")["viterbi_regime"].first().to_dict()
-    probs = pd.DataFrame(0.0, index=r.index, columns=[f"p_{g}" for g in REGIME_COLORS])
-    for state, regime in mapping.items():
-        probs[f"p_{regime}"] += r[f"gamma_S{state}"]
-    probs = probs.div(probs.sum(axis=1), axis=0)
-    legacy = run_mcda(r, probs, dt, mcda_settings_from_mapping(mcda, legacy_r=True)).timeline
+    residuals, probs = load_r_fault_scenario(r_pipeline_path)
+    legacy = run_mcda(
+        residuals, probs, dt, mcda_settings_from_mapping(mcda, legacy_r=True)
+    ).timeline
     r_timeline = pd.read_csv(r_timeline_path)
     raw = float(
         np.mean(legacy["best"].to_numpy() == r_timeline["action_raw_rmcda0.3.1"].to_numpy())
