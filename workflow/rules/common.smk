@@ -71,6 +71,16 @@ def figure_outputs(artifact):
     return [f"paper_figures/{artifact}.{ext}" for ext in (*FIGURE_FORMATS, "json")]
 
 
-PAPER_ARTIFACTS = ["fig01_pipeline", "fig02_arx_vs_physics", "fig03_residual_acf"]
+PAPER_ARTIFACTS = [
+    "fig01_pipeline",
+    "fig02_arx_vs_physics",
+    "fig03_residual_acf",
+    "fig04_hmm_posteriors",
+    "fig05_correction_timeseries",
+    "fig06_correction_distributions",
+    "fig07_fault_posteriors",
+    "fig08_feature_separability",
+    "fig09_bic",
+]
 
 ALL_TARGETS = [path for artifact in PAPER_ARTIFACTS for path in figure_outputs(artifact)]
