@@ -25,7 +25,7 @@ import pandas as pd
 from dtwin.artifacts import Check
 from dtwin.correction import BiasCorrection, correct_bias
 from dtwin.reference import load_r_physics
-from dtwin.stages.regimes import posterior_matrix
+from dtwin.stages._states import posterior_matrix
 from dtwin.wiring import RESIDUALS
 
 __all__ = [

@@ -23,6 +23,7 @@ from dtwin._validation import DtwinValueError
 from dtwin.artifacts import Check
 from dtwin.faults import regime_features
 from dtwin.hmm import HmmFit, ZScored, bic_sweep, fit_hmm, zscore
+from dtwin.stages._states import posterior_matrix, state_labels
 from dtwin.wiring import RESIDUALS
 
 __all__ = [
@@ -71,11 +72,6 @@ def hmm_seed(hmm: Mapping[str, Any], use: str) -> list[int]:
 def hmm_fit_options(hmm: Mapping[str, Any]) -> dict[str, Any]:
     """Return the EM options of :func:`dtwin.hmm.fit_hmm` from the ``hmm`` section."""
     return {key: hmm[key] for key in ("max_iter", "tol", "var_floor")}
-
-
-def state_labels(n_states: int) -> list[str]:
-    """Return the state labels ``S1 … SK`` (1-based, as R's ``viterbi_state`` and the paper)."""
-    return [f"S{k}" for k in range(1, n_states + 1)]
 
 
 def fit_regimes(features: pd.DataFrame, hmm: Mapping[str, Any], use: str) -> tuple[ZScored, HmmFit]:
@@ -136,13 +132,6 @@ def states_table(t: Any, fit: HmmFit, regime: Any = None) -> pd.DataFrame:
     for j, label in enumerate(labels):
         table[f"filtered_{label}"] = fit.filtered[:, j]
     return table
-
-
-def posterior_matrix(states: pd.DataFrame, prefix: str) -> np.ndarray:
-    """Return the ``(T, K)`` posteriors ``<prefix>_S1 … <prefix>_SK`` of a states table."""
-    columns = [c for c in states.columns if c.startswith(f"{prefix}_S")]
-    columns.sort(key=lambda c: int(c.rsplit("_S", 1)[1]))
-    return states[columns].to_numpy()
 
 
 def hmm_summary(fit: HmmFit, scaled: ZScored) -> dict[str, Any]:
