@@ -12,6 +12,10 @@ configfile: "config/config.yaml"
 
 include: "workflow/rules/common.smk"
 include: "workflow/rules/twin.smk"
+include: "workflow/rules/faults.smk"  # before regimes.smk: bic_sweep reads the fault residuals
+include: "workflow/rules/regimes.smk"
+include: "workflow/rules/correction.smk"
+include: "workflow/rules/decisions.smk"
 include: "workflow/rules/gap.smk"
 include: "workflow/rules/report.smk"
 

@@ -21,4 +21,6 @@ def start_rule(snakemake: Any) -> None:
         level=logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
+    # matplotlib's PDF backend subsets fonts with fontTools, which logs every table at INFO
+    logging.getLogger("fontTools").setLevel(logging.WARNING)
     logging.getLogger(__name__).info("rule %s started", getattr(snakemake, "rule", "?"))

@@ -36,6 +36,7 @@ __all__ = [
     "FigureArtifact",
     "ArtifactValidityError",
     "validity_finite",
+    "validity_probabilities",
     "validity_files_nonempty",
     "atomic_write",
     "write_csv",
@@ -96,6 +97,23 @@ def validity_finite(check_id: str, what: str, values: Any) -> Check:
         expected="0 non-finite values",
         observed=f"{n_bad} non-finite of {array.size}",
         passed=n_bad == 0 and array.size > 0,
+    )
+
+
+def validity_probabilities(check_id: str, what: str, posteriors: Any) -> Check:
+    """Return a validity check that every row of ``posteriors`` (T, K) is a probability
+    distribution: entries in [0, 1], rows summing to 1 within 1e-9."""
+    posteriors = np.asarray(posteriors, dtype=float)
+    sums = posteriors.sum(axis=1)
+    worst = float(np.max(np.abs(sums - 1.0))) if len(sums) else float("nan")
+    low, high = float(posteriors.min()), float(posteriors.max())
+    return Check(
+        id=check_id,
+        kind="validity",
+        statement=f"{what} are probabilities: within [0, 1], every row sums to 1",
+        expected="range within [0, 1]; max |row sum - 1| <= 1e-9",
+        observed={"min": low, "max": high, "max_abs_row_sum_error": worst},
+        passed=bool(low >= -1e-12 and high <= 1 + 1e-12 and worst <= 1e-9),
     )
 
 

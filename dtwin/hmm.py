@@ -228,6 +228,10 @@ class HmmFit:
         Filtered (causal) posteriors P(S_t = k | e_1:t), the normalised α_t of Eq. (4).
     viterbi : ndarray of int, shape (T,)
         Viterbi path, states numbered 0 … K−1 (Eq. (10)).
+    restart_viterbi : ndarray of int, shape (n_restarts, T)
+        Viterbi path of every start's fitted model (row ``restart − 1``), ``−1`` throughout
+        for starts that failed or degenerated; how much the starts disagree (paper §4.4;
+        REFERENCE.md §5: depmixS4's restarts agree on 69–100 % of the samples).
     """
 
     startprob: np.ndarray
@@ -244,6 +248,7 @@ class HmmFit:
     smoothed: np.ndarray
     filtered: np.ndarray
     viterbi: np.ndarray
+    restart_viterbi: np.ndarray
 
     @property
     def n_states(self) -> int:
@@ -581,8 +586,9 @@ def fit_hmm(
         for restart, start_seed in enumerate(_restart_seeds(seed, n_restarts), start=1):
             row, model = _fit_one_start(X, n_states, start_seed, max_iter, tol, var_floor)
             rows.append({"restart": restart, **row})
-            logger.debug(
-                "restart %d/%d: status=%s logL=%.4f n_iter=%d",
+            logger.info(
+                "fit_hmm K=%d restart %d/%d: status=%s logL=%.4f n_iter=%d",
+                n_states,
                 restart,
                 n_restarts,
                 row["status"],
@@ -597,6 +603,9 @@ def fit_hmm(
                 f"fit_hmm: all {n_restarts} starts failed or degenerated (K={n_states}); "
                 f"statuses: {', '.join(restarts['status'])}"
             )
+        restart_viterbi = np.full((n_restarts, len(X)), -1, dtype=int)
+        for restart, fitted in models.items():
+            restart_viterbi[restart - 1] = fitted.decode(X, algorithm="viterbi")[1]
         usable = restarts[restarts["restart"].isin(models)]
         best = int(usable.loc[usable["log_likelihood"].idxmax(), "restart"])
         model = models[best]
@@ -630,6 +639,7 @@ def fit_hmm(
         smoothed=_freeze(smoothed),
         filtered=_freeze(filtered),
         viterbi=_freeze(viterbi.astype(int)),
+        restart_viterbi=_freeze(restart_viterbi),
     )
 
 
@@ -786,7 +796,7 @@ def bic_sweep(
     ks: Sequence[int],
     *,
     n_restarts: int = 5,
-    seed: int = 0,
+    seed: int | Sequence[int] = 0,
     **fit_options: Any,
 ) -> pd.DataFrame:
     """Fit one HMM per number of states and tabulate the BIC (paper §5, Eq. (26)).
@@ -799,8 +809,8 @@ def bic_sweep(
         Numbers of states to try (paper: 2 … 9).
     n_restarts : int, default 5
         Random starts per K (CovarianceAnalysis.Rmd: 5).
-    seed : int, default 0
-        K's starts derive from ``SeedSequence([seed, K])``, so a K's result does not depend
+    seed : int or sequence of int, default 0
+        K's starts derive from ``SeedSequence([*seed, K])``, so a K's result does not depend
         on which other K are swept.
     **fit_options
         Passed to :func:`fit_hmm` (``max_iter``, ``tol``, ``var_floor``).
@@ -814,11 +824,12 @@ def bic_sweep(
     """
     X = require_finite_array("X", X, ndim=2)
     ks = [_require_count("ks[]", k, 1) for k in ks]
+    entropy = [int(seed)] if isinstance(seed, (int, np.integer)) else [int(s) for s in seed]
     if not ks:
         raise DtwinValueError("ks must list at least one number of states (got none)")
     rows = []
     for k in ks:
-        fit = fit_hmm(X, k, n_restarts=n_restarts, seed=[int(seed), k], **fit_options)
+        fit = fit_hmm(X, k, n_restarts=n_restarts, seed=[*entropy, k], **fit_options)
         usable = int((~fit.restarts["status"].isin(["failed", "degenerate"])).sum())
         rows.append(
             {

@@ -182,6 +182,29 @@ def test_restart_table_and_honest_convergence():
     assert (capped.restarts["n_iter"] == 2).all()
 
 
+def test_every_start_keeps_its_viterbi_path():
+    X = three_state_data(seed=6)
+    fit = fit_hmm(X, 3, n_restarts=4, seed=0)
+    assert fit.restart_viterbi.shape == (4, len(X))
+    np.testing.assert_array_equal(fit.restart_viterbi[fit.best_restart - 1], fit.viterbi)
+    usable = ~fit.restarts["status"].isin(["failed", "degenerate"]).to_numpy()
+    assert (fit.restart_viterbi[usable] >= 0).all()
+    assert (fit.restart_viterbi[~usable] == -1).all()
+    # a start that degenerated keeps a row of -1
+    rng = np.random.default_rng(0)
+    tiny = fit_hmm(rng.normal(size=(12, 1)), 4, n_restarts=6, seed=1)
+    failed = tiny.restarts["status"].isin(["failed", "degenerate"]).to_numpy()
+    assert failed.any()
+    assert (tiny.restart_viterbi[failed] == -1).all()
+
+
+def test_bic_sweep_accepts_a_seed_sequence():
+    X = three_state_data(seed=7)
+    table = bic_sweep(X, [2, 3], n_restarts=2, seed=[5, 1])
+    again = bic_sweep(X, [3], n_restarts=2, seed=[5, 1])
+    assert table.loc[table["K"] == 3, "bic"].item() == again["bic"].item()
+
+
 def test_variance_floor_holds_for_a_one_sample_state():
     rng = np.random.default_rng(0)
     X = np.concatenate([rng.normal(size=(40, 1)), [[50.0]], rng.normal(size=(40, 1))])

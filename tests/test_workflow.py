@@ -35,7 +35,52 @@ IGNORED = shutil.ignore_patterns(
     ".hypothesis",
     "*.egg-info",
 )
-ARTIFACTS = ("fig01_pipeline", "fig02_arx_vs_physics", "fig03_residual_acf", "gap_benchmark")
+ARTIFACTS = (
+    "fig01_pipeline",
+    "fig02_arx_vs_physics",
+    "fig03_residual_acf",
+    "fig04_hmm_posteriors",
+    "fig05_correction_timeseries",
+    "fig06_correction_distributions",
+    "fig07_fault_posteriors",
+    "fig08_feature_separability",
+    "fig09_bic",
+    "fig10_mcda_actions",
+    "gap_benchmark",
+)
+#: Every rule downstream of `residuals` (its surrogate and residual tables).
+AFTER_RESIDUALS = {
+    "residuals",
+    "fig02_arx_vs_physics",
+    "fig03_residual_acf",
+    "nominal_regimes",
+    "fig04_hmm_posteriors",
+    "fault_regimes",
+    "fig07_fault_posteriors",
+    "fig08_feature_separability",
+    "targeted_intervention",
+    "fig05_correction_timeseries",
+    "fig06_correction_distributions",
+    "bic_sweep",
+    "fig09_bic",
+    "mcda_actions",
+    "fig10_mcda_actions",
+    "claims",
+}
+#: Every rule downstream of `fault_regimes`.
+AFTER_FAULTS = {
+    "fault_regimes",
+    "fig07_fault_posteriors",
+    "fig08_feature_separability",
+    "targeted_intervention",
+    "fig05_correction_timeseries",
+    "fig06_correction_distributions",
+    "bic_sweep",
+    "fig09_bic",
+    "mcda_actions",
+    "fig10_mcda_actions",
+    "claims",
+}
 
 
 def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
@@ -100,14 +145,38 @@ def test_every_artifact_is_produced_with_passing_validity_checks(workflow_copy):
         assert {c["kind"] for c in payload["checks"]} >= {"validity"}
         failed = [c["id"] for c in payload["checks"] if c["kind"] == "validity" and not c["passed"]]
         assert not failed
-    fig02 = json.loads((workflow_copy / "paper_figures" / "fig02_arx_vs_physics.json").read_text())
-    crosschecks = {c["id"]: c["passed"] for c in fig02["checks"] if c["kind"] == "crosscheck"}
-    assert crosschecks == {"arx_theta_matches_r": True, "arx_rollout_matches_r": True}
+    crosschecks = {}
+    for artifact in ARTIFACTS:
+        payload = json.loads((workflow_copy / "paper_figures" / f"{artifact}.json").read_text())
+        crosschecks |= {
+            c["id"]: c["passed"] for c in payload["checks"] if c["kind"] == "crosscheck"
+        }
+    assert crosschecks == {
+        "arx_theta_matches_r": True,
+        "arx_rollout_matches_r": True,
+        "loglik_on_r_features_reaches_depmix": True,
+        "correction_on_r_signals_gives_r_table": True,
+        "hungarian_on_r_viterbi_gives_r_confusion": True,
+        "scores_on_r_viterbi_equal_r": True,
+        "bic_formula_matches_r": True,
+        "legacy_matches_r_031": True,
+    }
     claims = (workflow_copy / "paper_figures" / "CLAIMS.md").read_text()
-    assert "## Claims of the paper" in claims and "fig03_residual_acf" in claims
+    assert "## Claims of the paper" in claims and "fig09_bic" in claims
     residuals = (workflow_copy / "results" / "residuals.csv").read_text().splitlines()
     assert residuals[0] == "t,e0,e1,e2a,e2b,e3,e4"
     assert len(residuals) == 1 + 400
+
+
+def test_fault_tables_keep_the_contract_columns(workflow_copy):
+    faults = workflow_copy / "results" / "faults"
+    residuals = (faults / "residuals.csv").read_text().splitlines()
+    assert residuals[0] == "t,regime,e0,e1,e2a,e2b,e3,e4"
+    posteriors = (faults / "posteriors.csv").read_text().splitlines()
+    assert posteriors[0] == (
+        "t,regime,state,mapped_regime,p_Nominal,p_SensorNoisy,p_DynamicsOff,p_Drift"
+    )
+    assert len(residuals) == len(posteriors) == 1 + 400
 
 
 def test_nothing_to_do_after_a_complete_run(workflow_copy):
@@ -119,47 +188,70 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     assert planned_rules(workflow_copy) == {"fig03_residual_acf", "claims"}
     edit_config(workflow_copy, lambda c: c["acf"].update(nlags=30))
     edit_config(workflow_copy, lambda c: c["arx"].update(rollout_init="zeros"))
-    assert planned_rules(workflow_copy) == {
-        "residuals",
-        "fig02_arx_vs_physics",
-        "fig03_residual_acf",
-        "claims",
-    }
+    assert planned_rules(workflow_copy) == AFTER_RESIDUALS
     edit_config(workflow_copy, lambda c: c["arx"].update(rollout_init="physics"))
     edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.5))
+    assert planned_rules(workflow_copy) == {"simulate", "fit_surrogates", *AFTER_RESIDUALS}
+    edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.0))
+    edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.5))
     assert planned_rules(workflow_copy) == {
-        "simulate",
-        "fit_surrogates",
-        "residuals",
-        "fig02_arx_vs_physics",
-        "fig03_residual_acf",
+        "targeted_intervention",
+        "fig05_correction_timeseries",
+        "fig06_correction_distributions",
         "claims",
     }
-    edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.0))
+    edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.8))
+    edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=3))
+    assert planned_rules(workflow_copy) == {"bic_sweep", "fig09_bic", "claims"}
+    edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=5))
+    edit_config(workflow_copy, lambda c: c["faults"].update(drift_origin="regime_start"))
+    assert planned_rules(workflow_copy) == AFTER_FAULTS
+    edit_config(workflow_copy, lambda c: c["faults"].update(drift_origin="global"))
     assert planned_rules(workflow_copy) == set()
 
 
 def test_a_library_edit_reruns_the_rules_that_import_it(workflow_copy):
-    module = workflow_copy / "dtwin" / "residual_stats.py"
-    original = module.read_text()
+    edited = {
+        path: path.read_text()
+        for path in (
+            workflow_copy / "dtwin" / "residual_stats.py",
+            workflow_copy / "dtwin" / "figures" / "pipeline.py",
+            workflow_copy / "dtwin" / "correction.py",
+        )
+    }
+    residual_stats, pipeline, correction = edited
     try:
-        module.write_text(original + "\n# edited\n")
+        residual_stats.write_text(edited[residual_stats] + "\n# edited\n")
         assert planned_rules(workflow_copy) == {"fig03_residual_acf", "claims"}
-        style = workflow_copy / "dtwin" / "figures" / "pipeline.py"
-        style_text = style.read_text()
-        style.write_text(style_text + "\n# edited\n")
+        pipeline.write_text(edited[pipeline] + "\n# edited\n")
         assert planned_rules(workflow_copy) == {"fig01_pipeline", "fig03_residual_acf", "claims"}
+        correction.write_text(edited[correction] + "\n# edited\n")
+        assert planned_rules(workflow_copy) == {
+            "fig01_pipeline",
+            "fig03_residual_acf",
+            "targeted_intervention",
+            "fig05_correction_timeseries",
+            "fig06_correction_distributions",
+            "claims",
+        }
     finally:
-        snakemake(workflow_copy, "--cores", "2")
+        # the edits were comments: restore the sources and mark the outputs current
+        for path, text in edited.items():
+            path.write_text(text)
+        snakemake(workflow_copy, "--touch", "--cores", "1")
+        assert planned_rules(workflow_copy) == set()
 
 
 def test_rerun_gives_byte_identical_tables_and_figures(workflow_copy):
-    outputs = sorted((workflow_copy / "results").glob("*.csv")) + sorted(
+    outputs = sorted((workflow_copy / "results").rglob("*.*")) + sorted(
         (workflow_copy / "paper_figures").glob("*.*")
     )
-    before = {path.name: path.read_bytes() for path in outputs}
+    assert len(
+        [p for p in outputs if p.suffix == ".json" and p.parent.name == "paper_figures"]
+    ) == (len(ARTIFACTS) + 1)
+    before = {str(path): path.read_bytes() for path in outputs}
     snakemake(workflow_copy, "--cores", "2", "--forceall")
-    after = {path.name: path.read_bytes() for path in outputs}
+    after = {str(path): path.read_bytes() for path in outputs}
     changed = [name for name in before if before[name] != after[name]]
     assert not changed
 
@@ -176,6 +268,8 @@ def test_lint_is_clean(workflow_copy):
         (lambda c: c["twin"]["plant"].pop("k"), "twin.plant"),
         (lambda c: c["simulation"].update(seed="eleven"), "simulation.seed"),
         (lambda c: c["twin"]["actuator"].update(tau=-0.15), "twin.actuator.tau"),
+        (lambda c: c["faults"].update(drift_origin="sideways"), "faults.drift_origin"),
+        (lambda c: c["faults"]["schedule"][1].pop("end"), "faults.schedule.1"),
     ],
 )
 def test_malformed_config_stops_before_any_job_and_names_the_key(tmp_path, edit, key):

@@ -12,38 +12,14 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
-from dtwin.figures._style import PHYSICS_COLOR, apply_style
+from dtwin.figures._style import PHYSICS_COLOR, apply_style, regime_spans, shade_regimes
 from dtwin.mcda import ACTIONS, NO_ACTION, run_mcda
 from dtwin.reference import load_r_fault_scenario
 from dtwin.stages.decisions import mcda_settings_from_mapping
 
-__all__ = ["fig10_mcda_actions", "plot_mcda_actions", "REGIME_COLORS"]
+__all__ = ["fig10_mcda_actions", "plot_mcda_actions"]
 
-REGIME_COLORS = {
-    "Nominal": "#e8f1e4",
-    "SensorNoisy": "#fdf0d5",
-    "DynamicsOff": "#f9dcdc",
-    "Drift": "#dde6f5",
-}
 ACTION_ORDER = [NO_ACTION, *(a.name for a in ACTIONS)]
-
-
-def _shade_regimes(ax: plt.Axes, t: np.ndarray, regimes: np.ndarray) -> None:
-    starts = np.flatnonzero(np.r_[True, regimes[1:] != regimes[:-1]])
-    ends = np.r_[starts[1:], len(t)]
-    dt = t[1] - t[0] if len(t) > 1 else 1.0
-    for start, end in zip(starts, ends, strict=True):
-        regime = regimes[start]
-        ax.axvspan(t[start], t[end - 1] + dt, color=REGIME_COLORS.get(regime, "#eeeeee"), lw=0)
-        ax.text(
-            (t[start] + t[end - 1]) / 2,
-            1.01,
-            regime,
-            transform=ax.get_xaxis_transform(),
-            ha="center",
-            va="bottom",
-            fontsize=8,
-        )
 
 
 def plot_mcda_actions(timeline: pd.DataFrame) -> Figure:
@@ -57,8 +33,19 @@ def plot_mcda_actions(timeline: pd.DataFrame) -> Figure:
     )
     t = timeline["t"].to_numpy()
     regimes = timeline["regime"].to_numpy()
+    spans = regime_spans(t, regimes)
     for ax in (ax_action, ax_conf):
-        _shade_regimes(ax, t, regimes)
+        shade_regimes(ax, spans, alpha=0.15)
+    for regime, start, end in spans:
+        ax_action.text(
+            (start + end) / 2,
+            1.01,
+            regime,
+            transform=ax_action.get_xaxis_transform(),
+            ha="center",
+            va="bottom",
+            fontsize=8,
+        )
     levels = {name: index for index, name in enumerate(ACTION_ORDER)}
     y = timeline["action"].map(levels).to_numpy()
     ax_action.scatter(

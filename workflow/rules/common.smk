@@ -71,7 +71,18 @@ def figure_outputs(artifact):
     return [f"paper_figures/{artifact}.{ext}" for ext in (*FIGURE_FORMATS, "json")]
 
 
-PAPER_ARTIFACTS = ["fig01_pipeline", "fig02_arx_vs_physics", "fig03_residual_acf"]
+PAPER_ARTIFACTS = [
+    "fig01_pipeline",
+    "fig02_arx_vs_physics",
+    "fig03_residual_acf",
+    "fig04_hmm_posteriors",
+    "fig05_correction_timeseries",
+    "fig06_correction_distributions",
+    "fig07_fault_posteriors",
+    "fig08_feature_separability",
+    "fig09_bic",
+    "fig10_mcda_actions",
+]
 
 GAP_CASES = [
     f"{effect}_{number:02d}"

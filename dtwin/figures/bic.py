@@ -1,0 +1,232 @@
+"""Paper Fig. 9: BIC against the number of HMM states K, nominal residuals and fault features."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
+
+from dtwin.artifacts import Check, FigureArtifact, validity_finite
+from dtwin.figures._style import PHYSICS_COLOR, R_COLOR, apply_style
+from dtwin.hmm import n_hmm_params
+
+__all__ = ["fig09_bic", "plot_bic", "r_bic_tables"]
+
+#: K at which the paper (and both R experiments) find the BIC minimum (§5, Fig. 9).
+PAPER_K_MIN = 8
+
+#: Titles of the two data sets (REFERENCE.md §6 (a) and (b)).
+TITLES = {
+    "nominal_residuals": "A  Nominal run: six z-scored residuals",
+    "fault_features": "B  Fault scenario: ten z-scored features",
+}
+
+
+def r_bic_tables(r_nominal: pd.DataFrame, r_features: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """R's BIC by K per data set: columns ``K``, ``bic`` (and ``log_likelihood`` if known)."""
+    return {
+        "nominal_residuals": pd.DataFrame({"K": r_nominal["K"], "bic": r_nominal["BIC"]}),
+        "fault_features": pd.DataFrame(
+            {
+                "K": r_features["K"],
+                "bic": r_features["BIC_diag_published"],
+                "log_likelihood": r_features["best_logLik_diag_published"],
+            }
+        ),
+    }
+
+
+#: Curves whose small-K values dwarf the rest (range > this × the range for K >= 4) are drawn
+#: on a log axis when all values are positive.
+LOG_SCALE_RATIO = 2.5
+
+
+def _needs_log_scale(curves) -> bool:
+    values = pd.concat([c["bic"] for _, c, _, _ in curves])
+    tail = pd.concat([c.loc[c["K"] >= 4, "bic"] for _, c, _, _ in curves])
+    if tail.empty or values.size == tail.size or values.min() <= 0:
+        return False
+    return bool((values.max() - values.min()) > LOG_SCALE_RATIO * (tail.max() - tail.min()))
+
+
+def _draw(ax, curves) -> None:
+    """Plot each curve (``(who, table with K and bic, colour, label)``), star its minimum."""
+    for who, curve, color, label in curves:
+        style = "o-" if who == "ours" else "s--"
+        ax.plot(
+            curve["K"],
+            curve["bic"],
+            style,
+            color=color,
+            lw=2 if who == "ours" else 1.3,
+            ms=6 if who == "ours" else 5,
+            label=label,
+        )
+        best = curve.loc[curve["bic"].idxmin()]
+        ax.plot(best["K"], best["bic"], "*", color=color, ms=15)
+        ax.annotate(
+            f"{'min' if who == 'ours' else 'R min'} K={int(best['K'])}",
+            (best["K"], best["bic"]),
+            textcoords="offset points",
+            xytext=(-12, 0) if who == "ours" else (0, 11),
+            ha="right" if who == "ours" else "center",
+            va="center" if who == "ours" else "bottom",
+            color=color,
+            fontsize=8,
+        )
+    ks = sorted(set().union(*(set(c["K"]) for _, c, _, _ in curves)))
+    ax.set_xticks(ks)
+
+
+def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restarts: int) -> Figure:
+    """Draw BIC against K for each data set: ours (best of ``n_restarts`` starts) and R's.
+
+    Parameters
+    ----------
+    table : DataFrame
+        Our sweep: ``dataset``, ``K``, ``bic``.
+    r_tables : mapping
+        :func:`r_bic_tables`.
+    n_restarts : int
+        Starts per K of our sweep (for the legend).
+    """
+    apply_style()
+    datasets = list(dict.fromkeys(table["dataset"]))
+    figure, axes = plt.subplots(1, len(datasets), figsize=(6 * len(datasets), 4.6), squeeze=False)
+    r_label = {
+        "nominal_residuals": "R, BIC_vs_K.R (1 start per K)",
+        "fault_features": "R, CovarianceAnalysis (best of 5)",
+    }
+    for ax, name in zip(axes[0], datasets, strict=True):
+        ours = table[table["dataset"] == name]
+        r = r_tables.get(name)
+        curves = [("ours", ours, PHYSICS_COLOR, f"ours (best of {n_restarts} starts)")]
+        if r is not None:
+            curves.append(("R", r, R_COLOR, r_label.get(name, "R")))
+        _draw(ax, curves)
+        if _needs_log_scale(curves):
+            ax.set_yscale("log")
+            ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+            ax.yaxis.set_major_formatter(ScalarFormatter())
+            ax.yaxis.set_minor_formatter(NullFormatter())
+            ax.set_ylabel("BIC (log scale)")
+        ax.set_title(TITLES.get(name, name), loc="left")
+        ax.set_xlabel("number of states K")
+        if ax.get_yscale() != "log":
+            ax.set_ylabel("BIC = −2 log L + p log n")
+        ax.legend(loc="upper right", fontsize=8)
+    figure.suptitle("Model selection: BIC against the number of HMM states (paper Fig. 9)")
+    figure.tight_layout()
+    return figure
+
+
+def fig09_bic(
+    table: pd.DataFrame,
+    r_nominal: pd.DataFrame,
+    r_features: pd.DataFrame,
+    r_numbers: Mapping[str, Any],
+    bic: Mapping[str, Any],
+) -> FigureArtifact:
+    """Paper Fig. 9 with the BIC minima beside the paper's K = 8 and a formula crosscheck."""
+    r_tables = r_bic_tables(r_nominal, r_features)
+    figure = plot_bic(table, r_tables, bic["n_restarts"])
+    minima = {
+        name: int(group.loc[group["bic"].idxmin(), "K"])
+        for name, group in table.groupby("dataset", sort=False)
+    }
+    r_minima = {name: int(r.loc[r["bic"].idxmin(), "K"]) for name, r in r_tables.items()}
+    r_min_values = {name: float(r["bic"].min()) for name, r in r_tables.items()}
+
+    # Crosscheck: our parameter count and formula turn R's log-likelihoods into R's BIC.
+    n_samples = 1000
+    formula_dev = {}
+    r_nominal_ll = {int(k): v for k, v in r_numbers["bic_nominal_log_likelihood"].items()}
+    for name, r, n_features, loglik in (
+        ("nominal_residuals", r_tables["nominal_residuals"], 6, r_nominal_ll),
+        (
+            "fault_features",
+            r_tables["fault_features"],
+            10,
+            dict(
+                zip(
+                    r_tables["fault_features"]["K"],
+                    r_tables["fault_features"]["log_likelihood"],
+                    strict=True,
+                )
+            ),
+        ),
+    ):
+        ours = {
+            int(k): -2 * loglik[int(k)] + n_hmm_params(int(k), n_features) * math.log(n_samples)
+            for k in r["K"]
+        }
+        formula_dev[name] = float(
+            max(abs(ours[int(k)] - b) for k, b in zip(r["K"], r["bic"], strict=True))
+        )
+    checks = [
+        validity_finite("bic_finite", "BIC values", table[["log_likelihood", "bic"]]),
+        Check(
+            id="every_k_fitted",
+            kind="validity",
+            statement="every K of the sweep has at least one usable EM start",
+            expected=">= 1 usable start per K",
+            observed=dict(
+                zip(
+                    table["dataset"] + " K=" + table["K"].astype(str),
+                    table["n_usable"],
+                    strict=True,
+                )
+            ),
+            passed=bool((table["n_usable"] >= 1).all()),
+        ),
+        Check(
+            id="bic_formula_matches_r",
+            kind="crosscheck",
+            statement=(
+                "our parameter count p = (K-1) + K(K-1) + 2DK and BIC = -2 log L + p log n, "
+                "applied to R's log-likelihoods (n = 1000), give R's printed BIC values"
+            ),
+            expected="max |deviation| <= 0.05 (R prints 0.1 / 3-decimal log-likelihoods)",
+            observed=formula_dev,
+            passed=all(dev <= 0.05 for dev in formula_dev.values()),
+        ),
+    ]
+    for name, k_min in minima.items():
+        checks.append(
+            Check(
+                id=f"bic_minimum_at_k8_{name}",
+                kind="claim",
+                statement=(
+                    f"paper §5 / Fig. 9: the BIC is smallest at K = {PAPER_K_MIN} "
+                    f"({name.replace('_', ' ')}; R: minimum "
+                    f"{r_min_values.get(name, float('nan')):.2f} at K = {r_minima.get(name)})"
+                ),
+                expected=PAPER_K_MIN,
+                observed=k_min,
+                passed=k_min == PAPER_K_MIN,
+            )
+        )
+    metrics = {
+        "ks": sorted(set(table["K"].tolist())),
+        "n_restarts": bic["n_restarts"],
+        "bic_minimum_k": minima,
+        "r_bic_minimum_k": r_minima,
+        "r_bic_minimum": r_min_values,
+        "bic_minimum": {
+            name: float(group["bic"].min()) for name, group in table.groupby("dataset", sort=False)
+        },
+        "sweep": table.to_dict(orient="records"),
+        "r_sweep": {name: r.to_dict(orient="records") for name, r in r_tables.items()},
+        "formula_max_abs_deviation": formula_dev,
+        "still_decreasing_at_max_k": {
+            name: bool(np.diff(group.sort_values("K")["bic"].to_numpy())[-1] < 0)
+            for name, group in table.groupby("dataset", sort=False)
+        },
+    }
+    return FigureArtifact("fig09_bic", figure, metrics, checks)

@@ -1,0 +1,288 @@
+"""Stage "regimes" (paper §4.2, §5; Figs. 4, 9): K-state HMM on the nominal residuals, BIC over K.
+
+Figures of this stage live in :mod:`dtwin.figures.hmm_posteriors` and :mod:`dtwin.figures.bic`.
+Config sections (``config/config.yaml``): ``hmm`` and ``bic``.
+
+Every EM random start derives from the one config seed ``hmm.seed``: each *use* of it (the
+nominal fit, the fault-feature fit, a BIC sweep, the crosscheck fit on R's features) gets its
+own entropy ``[hmm.seed, SEED_STREAMS[use]]`` of :class:`numpy.random.SeedSequence`, so no two
+uses share random draws and adding a use does not change the others.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dtwin._validation import DtwinValueError
+from dtwin.artifacts import Check
+from dtwin.faults import regime_features
+from dtwin.hmm import HmmFit, ZScored, bic_sweep, fit_hmm, zscore
+from dtwin.stages._states import posterior_matrix, state_labels
+from dtwin.wiring import RESIDUALS
+
+__all__ = [
+    "SEED_STREAMS",
+    "hmm_seed",
+    "hmm_fit_options",
+    "state_labels",
+    "fit_regimes",
+    "states_table",
+    "posterior_matrix",
+    "hmm_summary",
+    "fit_nominal_regimes",
+    "BIC_DATASETS",
+    "sweep_bic",
+    "crosscheck_r_loglik",
+]
+
+logger = logging.getLogger(__name__)
+
+#: Stream number of each random use of ``hmm.seed`` (entropy ``[hmm.seed, stream]``).
+SEED_STREAMS: dict[str, int] = {
+    "nominal_fit": 1,
+    "fault_fit": 2,
+    "r_crosscheck_fit": 3,
+    "bic_nominal_residuals": 4,
+    "bic_fault_features": 5,
+}
+
+#: Data sets of the BIC sweep (REFERENCE.md §6 (a) and (b)).
+BIC_DATASETS: tuple[str, ...] = ("nominal_residuals", "fault_features")
+
+
+def hmm_seed(hmm: Mapping[str, Any], use: str) -> list[int]:
+    """Return the seed entropy ``[hmm.seed, stream]`` of one random use (see :data:`SEED_STREAMS`).
+
+    Examples
+    --------
+    >>> hmm_seed({"seed": 123}, "fault_fit")
+    [123, 2]
+    """
+    if use not in SEED_STREAMS:
+        raise DtwinValueError(f"use must be one of {', '.join(SEED_STREAMS)} (got {use!r})")
+    return [int(hmm["seed"]), SEED_STREAMS[use]]
+
+
+def hmm_fit_options(hmm: Mapping[str, Any]) -> dict[str, Any]:
+    """Return the EM options of :func:`dtwin.hmm.fit_hmm` from the ``hmm`` section."""
+    return {key: hmm[key] for key in ("max_iter", "tol", "var_floor")}
+
+
+def fit_regimes(features: pd.DataFrame, hmm: Mapping[str, Any], use: str) -> tuple[ZScored, HmmFit]:
+    """z-score ``features`` (R's ``scale``) and fit the K-state HMM of the ``hmm`` section.
+
+    Parameters
+    ----------
+    features : DataFrame, shape (T, D)
+        Raw feature columns (residuals in physical units, or the ten fault features).
+    hmm : mapping
+        The ``hmm`` config section (``n_states``, ``n_restarts``, ``seed``, ``max_iter``,
+        ``tol``, ``var_floor``).
+    use : str
+        Key of :data:`SEED_STREAMS` naming this random use.
+
+    Returns
+    -------
+    (ZScored, HmmFit)
+    """
+    scaled = zscore(features)
+    start = time.perf_counter()
+    fit = fit_hmm(
+        scaled.values,
+        hmm["n_states"],
+        n_restarts=hmm["n_restarts"],
+        seed=hmm_seed(hmm, use),
+        **hmm_fit_options(hmm),
+    )
+    logger.info(
+        "%s: K=%d, D=%d, T=%d, %d starts in %.3f s; best logL %.4f (start %d, %d EM iterations)",
+        use,
+        fit.n_states,
+        fit.n_features,
+        len(scaled.values),
+        hmm["n_restarts"],
+        time.perf_counter() - start,
+        fit.log_likelihood,
+        fit.best_restart,
+        fit.n_iter,
+    )
+    return scaled, fit
+
+
+def states_table(t: Any, fit: HmmFit, regime: Any = None) -> pd.DataFrame:
+    """Return the decoded states as a table.
+
+    Columns: ``t`` (s), ``regime`` (only if given), ``state`` (Viterbi, 1 … K),
+    ``gamma_S1 … gamma_SK`` (smoothed posteriors P(S_t = k | e_1:T)) and
+    ``filtered_S1 … filtered_SK`` (filtered posteriors P(S_t = k | e_1:t)).
+    """
+    table = pd.DataFrame({"t": np.asarray(t, dtype=float)})
+    if regime is not None:
+        table["regime"] = np.asarray(regime, dtype=str)
+    table["state"] = fit.viterbi + 1
+    labels = state_labels(fit.n_states)
+    for j, label in enumerate(labels):
+        table[f"gamma_{label}"] = fit.smoothed[:, j]
+    for j, label in enumerate(labels):
+        table[f"filtered_{label}"] = fit.filtered[:, j]
+    return table
+
+
+def hmm_summary(fit: HmmFit, scaled: ZScored) -> dict[str, Any]:
+    """Return the fitted model as plain data (for JSON): parameters, likelihood, all starts.
+
+    Means and sds are in z-units of the training features; ``means_physical`` converts the
+    means back to the features' units (``mean + sd·μ``).
+    """
+    labels = state_labels(fit.n_states)
+    restarts = fit.restarts.copy()
+    return {
+        "n_states": fit.n_states,
+        "features": list(scaled.columns),
+        "n_samples": len(scaled.values),
+        "log_likelihood": fit.log_likelihood,
+        "n_params": fit.n_params,
+        "bic": fit.bic,
+        "n_iter": fit.n_iter,
+        "converged": fit.converged,
+        "best_restart": fit.best_restart,
+        "states": labels,
+        "startprob": fit.startprob,
+        "transmat": fit.transmat,
+        "means_z": fit.means,
+        "sds_z": fit.sds,
+        "means_physical": scaled.mean + scaled.sd * fit.means,
+        "feature_mean": scaled.mean,
+        "feature_sd": scaled.sd,
+        "occupancy": fit.smoothed.sum(axis=0),
+        "restarts": restarts.to_dict(orient="records"),
+    }
+
+
+def fit_nominal_regimes(
+    residuals: pd.DataFrame, hmm: Mapping[str, Any]
+) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """Fit the K-state HMM to the z-scored nominal residuals (paper §4.2, Fig. 4).
+
+    Parameters
+    ----------
+    residuals : DataFrame
+        Columns ``t`` (s) and ``e0 … e4`` (the nominal residuals of the twin stage).
+    hmm : mapping
+        The ``hmm`` config section.
+
+    Returns
+    -------
+    (states, summary)
+        :func:`states_table` and :func:`hmm_summary` of the best start.
+    """
+    scaled, fit = fit_regimes(residuals[list(RESIDUALS)], hmm, "nominal_fit")
+    return states_table(residuals["t"], fit), hmm_summary(fit, scaled)
+
+
+def sweep_bic(
+    datasets: Mapping[str, pd.DataFrame],
+    bic: Mapping[str, Any],
+    hmm: Mapping[str, Any],
+) -> pd.DataFrame:
+    """BIC for every K of ``bic.ks`` on each data set (paper §5, Eq. (26); Fig. 9).
+
+    Parameters
+    ----------
+    datasets : mapping of str to DataFrame
+        Raw features per data set, keys from :data:`BIC_DATASETS` (each is z-scored here).
+    bic : mapping
+        The ``bic`` section: ``ks`` and ``n_restarts`` (starts per K).
+    hmm : mapping
+        The ``hmm`` section (``seed`` and the EM options).
+
+    Returns
+    -------
+    DataFrame
+        Columns ``dataset``, ``n_features``, ``K``, ``log_likelihood``, ``n_params``,
+        ``bic``, ``converged``, ``n_usable``; one row per data set and K.
+    """
+    tables = []
+    for name, features in datasets.items():
+        if name not in BIC_DATASETS:
+            raise DtwinValueError(f"datasets keys must be in {BIC_DATASETS} (got {name!r})")
+        start = time.perf_counter()
+        table = bic_sweep(
+            zscore(features).values,
+            list(bic["ks"]),
+            n_restarts=bic["n_restarts"],
+            seed=hmm_seed(hmm, f"bic_{name}"),
+            **hmm_fit_options(hmm),
+        )
+        logger.info(
+            "BIC sweep on %s (D=%d): K=%s, %d starts each, %.2f s",
+            name,
+            features.shape[1],
+            table["K"].tolist(),
+            bic["n_restarts"],
+            time.perf_counter() - start,
+        )
+        table.insert(0, "n_features", features.shape[1])
+        table.insert(0, "dataset", name)
+        tables.append(table)
+    return pd.concat(tables, ignore_index=True)
+
+
+def crosscheck_r_loglik(
+    r_pipeline: pd.DataFrame,
+    hmm: Mapping[str, Any],
+    r_log_likelihood: float,
+    n_states: int = 4,
+    atol: float = 1e-2,
+) -> tuple[Check, dict[str, Any]]:
+    """Fit our HMM to R's ten fault features and compare with depmixS4's best log-likelihood.
+
+    Parameters
+    ----------
+    r_pipeline : DataFrame
+        ``faulted_pipeline_seed11_rerun.csv`` (R's faulted residuals ``e0 … e4``).
+    hmm : mapping
+        The ``hmm`` section (starts and EM options; seed stream ``r_crosscheck_fit``).
+    r_log_likelihood : float
+        depmixS4's best log-likelihood on the same features (REFERENCE.md §11: −2115.852).
+    n_states : int, default 4
+        K of R's fit (whatever ``hmm.n_states`` says).
+    atol : float, default 1e-2
+        Allowed shortfall.
+
+    Returns
+    -------
+    (Check, metrics)
+        A ``crosscheck`` that our best start reaches ``r_log_likelihood − atol`` or better,
+        and the numbers behind it (our best, every start's log-likelihood).
+    """
+    options = {**hmm, "n_states": n_states}
+    _, fit = fit_regimes(regime_features(r_pipeline), options, "r_crosscheck_fit")
+    check = Check(
+        id="loglik_on_r_features_reaches_depmix",
+        kind="crosscheck",
+        statement=(
+            f"our best of {hmm['n_restarts']} EM starts (K={n_states}) on R's ten "
+            "z-scored fault features reaches depmixS4's best log-likelihood "
+            "(REFERENCE.md §11) or better"
+        ),
+        expected=f">= {r_log_likelihood} - {atol:g}",
+        observed=fit.log_likelihood,
+        passed=bool(fit.log_likelihood >= r_log_likelihood - atol),
+    )
+    metrics = {
+        "log_likelihood": fit.log_likelihood,
+        "r_log_likelihood": r_log_likelihood,
+        "bic": fit.bic,
+        "n_starts_reaching_r": int(
+            (fit.restarts["log_likelihood"] >= r_log_likelihood - atol).sum()
+        ),
+        "start_log_likelihoods": fit.restarts["log_likelihood"].tolist(),
+    }
+    return check, metrics

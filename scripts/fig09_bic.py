@@ -1,0 +1,27 @@
+"""Rule fig09_bic: paper Fig. 9, BIC against K for both data sets, beside R's.
+
+Input   results/bic_sweep.csv, config/reference/{bic_vs_K_6ch_nofault_singlefit_rerun,
+        bic_vs_K_10feat_faulted_multistart5}.csv, r_numbers.yaml
+Output  paper_figures/fig09_bic.{png,pdf,json}
+Params  bic (ks, n_restarts)
+"""
+
+from dtwin._script import start_rule
+
+start_rule(snakemake)
+
+import pandas as pd
+
+from dtwin.artifacts import load_yaml
+from dtwin.figures._style import publish_artifact
+from dtwin.figures.bic import fig09_bic
+
+inputs = snakemake.input
+artifact = fig09_bic(
+    pd.read_csv(inputs.table),
+    pd.read_csv(inputs.r_nominal),
+    pd.read_csv(inputs.r_features),
+    load_yaml(inputs.r_numbers),
+    snakemake.params.bic,
+)
+publish_artifact(artifact, [snakemake.output.png, snakemake.output.pdf], snakemake.output.json)

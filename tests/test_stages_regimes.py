@@ -1,0 +1,278 @@
+"""Tests of the regime, fault and correction stages (dtwin.stages.{regimes,faults,correction})."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from dtwin._validation import DtwinValueError
+from dtwin.artifacts import to_jsonable
+from dtwin.faults import FEATURES, REGIMES, regime_features
+from dtwin.hmm import zscore
+from dtwin.stages.correction import crosscheck_correction, targeted_intervention
+from dtwin.stages.faults import (
+    POSTERIOR_COLUMNS,
+    crosscheck_hungarian,
+    inject_scenario,
+    run_fault_scenario,
+)
+from dtwin.stages.regimes import (
+    SEED_STREAMS,
+    crosscheck_r_loglik,
+    fit_nominal_regimes,
+    hmm_seed,
+    posterior_matrix,
+    sweep_bic,
+)
+from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
+from dtwin.wiring import RESIDUALS
+from tests.conftest import REFERENCE
+
+TWIN_KEYS = ("dt", "fusion", "kpi")
+
+
+@pytest.fixture(scope="module")
+def twin_run(config):
+    """The default 20 s twin: physics, surrogate and nominal residual tables."""
+    physics = simulate_asset(config["simulation"], config["command"], config["twin"])
+    theta = fit_twin_surrogates(physics, config["arx"])
+    surrogate, residuals = roll_out_twin(
+        physics, theta, config["twin"], config["arx"]["rollout_init"]
+    )
+    return physics, surrogate, residuals
+
+
+@pytest.fixture(scope="module")
+def hmm(config):
+    return {**config["hmm"], "n_restarts": 4}
+
+
+@pytest.fixture(scope="module")
+def twin(config):
+    return {k: config["twin"][k] for k in TWIN_KEYS}
+
+
+@pytest.fixture(scope="module")
+def scenario(twin_run, config, hmm, twin):
+    physics, surrogate, _ = twin_run
+    return run_fault_scenario(physics, surrogate, config["faults"], hmm, twin)
+
+
+@pytest.fixture(scope="module")
+def r_pipeline() -> pd.DataFrame:
+    return pd.read_csv(REFERENCE / "faulted_pipeline_seed11_rerun.csv")
+
+
+# --- seeds ----------------------------------------------------------------------------------
+
+
+def test_every_random_use_has_its_own_seed_stream():
+    seeds = [hmm_seed({"seed": 7}, use) for use in SEED_STREAMS]
+    assert len({tuple(s) for s in seeds}) == len(SEED_STREAMS)
+    assert all(s[0] == 7 for s in seeds)
+    with pytest.raises(DtwinValueError, match="use must be one of"):
+        hmm_seed({"seed": 7}, "elsewhere")
+
+
+# --- nominal regimes ------------------------------------------------------------------------
+
+
+def test_nominal_states_are_probabilities_and_the_summary_is_json(twin_run, hmm):
+    _, _, residuals = twin_run
+    states, summary = fit_nominal_regimes(residuals, hmm)
+    k = hmm["n_states"]
+    assert list(states.columns) == [
+        "t",
+        "state",
+        *(f"gamma_S{i}" for i in range(1, k + 1)),
+        *(f"filtered_S{i}" for i in range(1, k + 1)),
+    ]
+    for prefix in ("gamma", "filtered"):
+        gamma = posterior_matrix(states, prefix)
+        assert gamma.shape == (len(residuals), k)
+        np.testing.assert_allclose(gamma.sum(axis=1), 1.0, atol=1e-9)
+        assert gamma.min() >= 0 and gamma.max() <= 1
+    assert set(states["state"]) <= set(range(1, k + 1))
+    assert len(summary["restarts"]) == hmm["n_restarts"]
+    assert summary["features"] == list(RESIDUALS)
+    json.dumps(to_jsonable(summary), allow_nan=False)
+
+
+def test_posterior_matrix_orders_states_numerically():
+    table = pd.DataFrame({"gamma_S10": [0.1], "gamma_S2": [0.2], "gamma_S1": [0.7]})
+    np.testing.assert_array_equal(posterior_matrix(table, "gamma"), [[0.7, 0.2, 0.1]])
+
+
+# --- fault scenario -------------------------------------------------------------------------
+
+
+def test_fault_tables_keep_the_contract_columns(scenario):
+    assert list(scenario.residuals.columns) == ["t", "regime", *RESIDUALS]
+    assert list(scenario.posteriors.columns) == list(POSTERIOR_COLUMNS)
+    assert list(POSTERIOR_COLUMNS) == [
+        "t",
+        "regime",
+        "state",
+        "mapped_regime",
+        "p_Nominal",
+        "p_SensorNoisy",
+        "p_DynamicsOff",
+        "p_Drift",
+    ]
+    assert scenario.posteriors["state"].dtype.kind == "i"
+    assert list(scenario.surrogate.columns[:2]) == ["t", "regime"]
+
+
+def test_mapped_posteriors_rows_sum_to_one(scenario):
+    p = scenario.posteriors[[f"p_{r}" for r in REGIMES]].to_numpy()
+    np.testing.assert_allclose(p.sum(axis=1), 1.0, atol=1e-9)
+    assert p.min() >= 0 and p.max() <= 1
+    assert set(scenario.posteriors["mapped_regime"]) <= set(REGIMES)
+    # with K = 4 = regimes every state is matched: the mapped posteriors permute the states'
+    states = posterior_matrix(scenario.states, "gamma")
+    np.testing.assert_allclose(np.sort(p, axis=1), np.sort(states, axis=1), atol=1e-12)
+
+
+def test_fault_features_are_ten_z_scored_columns(scenario):
+    features = zscore(regime_features(scenario.residuals)).to_frame()
+    assert features.shape == (len(scenario.residuals), 10)
+    assert list(features.columns) == list(FEATURES)
+    np.testing.assert_allclose(features.mean(), 0.0, atol=1e-12)
+    np.testing.assert_allclose(features.std(ddof=1), 1.0)
+
+
+def test_both_drift_origins_are_scored(scenario, config):
+    summary = scenario.summary
+    assert summary["drift_origin"] == config["faults"]["drift_origin"] == "global"
+    assert set(summary["origins"]) == {"global", "regime_start"}
+    for entry in summary["origins"].values():
+        assert 0 <= entry["accuracy"] <= 1
+        confusion = pd.DataFrame(entry["confusion"]).T
+        assert confusion.to_numpy().sum() == len(scenario.residuals)
+        assert entry["restart_accuracy"]["min"] <= entry["accuracy"] + 1e-12
+    json.dumps(to_jsonable(summary), allow_nan=False)
+
+
+def test_drift_origins_differ_only_in_the_drift_window(twin_run, config, twin):
+    physics, surrogate, _ = twin_run
+    _, glob = inject_scenario(physics, surrogate, config["faults"], twin, "global")
+    _, ramp = inject_scenario(physics, surrogate, config["faults"], twin, "regime_start")
+    drift = glob["regime"].to_numpy() == "Drift"
+    first = int(np.flatnonzero(drift)[0])
+    pd.testing.assert_frame_equal(glob[~drift], ramp[~drift])
+    step = config["faults"]["magnitudes"]["drift_per_sample"] * first
+    np.testing.assert_allclose(glob.loc[drift, "e2a"] - ramp.loc[drift, "e2a"], step)
+    np.testing.assert_allclose(
+        glob.loc[drift, ["e0", "e1", "e2b", "e4"]], ramp.loc[drift, ["e0", "e1", "e2b", "e4"]]
+    )
+
+
+def test_every_start_is_scored_and_the_best_agrees_with_itself(scenario, hmm):
+    entry = scenario.summary["origins"]["global"]
+    restarts = entry["restarts"]
+    assert len(restarts) == hmm["n_restarts"]
+    best = entry["model"]["best_restart"]
+    row = next(r for r in restarts if r["restart"] == best)
+    assert row["agreement_with_best"] == 1.0
+    assert row["accuracy"] == pytest.approx(entry["accuracy"])
+
+
+def test_a_short_run_with_two_regimes_still_gives_four_regime_columns(twin_run, config, hmm, twin):
+    physics, surrogate, _ = twin_run
+    short = slice(0, 400)  # 8 s: Nominal and SensorNoisy only
+    result = run_fault_scenario(
+        physics.iloc[short].reset_index(drop=True),
+        surrogate.iloc[short].reset_index(drop=True),
+        config["faults"],
+        hmm,
+        twin,
+    )
+    assert list(result.posteriors.columns) == list(POSTERIOR_COLUMNS)
+    assert set(result.residuals["regime"]) == {"Nominal", "SensorNoisy"}
+    np.testing.assert_allclose(
+        result.posteriors[[f"p_{r}" for r in REGIMES]].sum(axis=1), 1.0, atol=1e-9
+    )
+
+
+def test_hungarian_crosscheck_reproduces_r(r_pipeline):
+    checks, metrics = crosscheck_hungarian(
+        r_pipeline,
+        pd.read_csv(REFERENCE / "hungarian_confusion_K4_diag.csv", index_col=0),
+        pd.read_csv(REFERENCE / "classification_summary_K4.csv"),
+    )
+    assert [c.passed for c in checks] == [True, True]
+    assert metrics["r_mapping"] == {
+        "S1": "Drift",
+        "S2": "Nominal",
+        "S3": "SensorNoisy",
+        "S4": "DynamicsOff",
+    }
+
+
+def test_loglik_crosscheck_on_r_features(r_pipeline, config):
+    check, metrics = crosscheck_r_loglik(r_pipeline, config["hmm"], -2115.852)
+    assert check.passed, check.observed
+    assert metrics["n_starts_reaching_r"] >= 1
+
+
+# --- correction -----------------------------------------------------------------------------
+
+
+def test_correction_before_equals_the_fault_residuals(twin_run, scenario, twin, config):
+    physics, _, _ = twin_run
+    residuals, metrics = targeted_intervention(
+        physics, scenario.surrogate, scenario.states, twin, config["correction"]
+    )
+    for e in RESIDUALS:
+        np.testing.assert_allclose(residuals[f"{e}_before"], scenario.residuals[e], atol=1e-12)
+    assert list(metrics["variant"].unique()) == ["smoothed", "filtered"]
+    assert len(metrics) == 2 * len(RESIDUALS)
+    assert np.isfinite(metrics.drop(columns=["variant", "channel"]).to_numpy()).all()
+
+
+def test_zero_gain_leaves_the_residuals_unchanged(twin_run, scenario, twin, config):
+    physics, _, _ = twin_run
+    residuals, metrics = targeted_intervention(
+        physics, scenario.surrogate, scenario.states, twin, {**config["correction"], "kappa": 0.0}
+    )
+    for e in RESIDUALS:
+        for variant in ("smoothed", "filtered"):
+            np.testing.assert_allclose(residuals[f"{e}_{variant}"], residuals[f"{e}_before"])
+    np.testing.assert_allclose(metrics["drmse_pct"], 0.0, atol=1e-9)
+
+
+def test_correction_crosscheck_reproduces_r_table(config, twin):
+    r_metrics = pd.read_csv(REFERENCE / "targeted_intervention_metrics_rerun.csv")
+    check, deviations = crosscheck_correction(
+        REFERENCE / "faulted_pipeline_seed11_rerun.csv", r_metrics, twin, config["correction"]
+    )
+    assert check.passed, deviations
+
+
+# --- BIC ------------------------------------------------------------------------------------
+
+
+def test_bic_sweep_per_dataset_does_not_depend_on_the_other(scenario, twin_run, config):
+    _, _, residuals = twin_run
+    nominal = residuals[list(RESIDUALS)].iloc[:300]
+    faults = regime_features(scenario.residuals).iloc[:300]
+    bic = {"ks": [2, 3], "n_restarts": 2}
+    both = sweep_bic({"nominal_residuals": nominal, "fault_features": faults}, bic, config["hmm"])
+    alone = sweep_bic({"nominal_residuals": nominal}, bic, config["hmm"])
+    assert list(both.columns) == [
+        "dataset",
+        "n_features",
+        "K",
+        "log_likelihood",
+        "n_params",
+        "bic",
+        "converged",
+        "n_usable",
+    ]
+    assert list(both["n_features"]) == [6, 6, 10, 10]
+    pd.testing.assert_frame_equal(both.iloc[:2], alone)
+    with pytest.raises(DtwinValueError, match="datasets keys"):
+        sweep_bic({"other": nominal}, bic, config["hmm"])
