@@ -12,6 +12,7 @@ configfile: "config/config.yaml"
 
 include: "workflow/rules/common.smk"
 include: "workflow/rules/twin.smk"
+include: "workflow/rules/sensitivity.smk"
 
 
 rule all:
