@@ -15,7 +15,8 @@ start_rule(snakemake)
 
 from dtwin.artifacts import write_json
 from dtwin.reference import load_r_physics
-from dtwin.sensitivity import SweepPoint, run_sweep_point, run_sweep_point_on_r_signals
+from dtwin.sensitivity import SweepPoint
+from dtwin.stages.sensitivity import run_sweep_point, run_sweep_point_on_r_signals
 
 p = snakemake.params
 point = SweepPoint(**p.point)

@@ -33,7 +33,15 @@ IGNORED = shutil.ignore_patterns(
     ".hypothesis",
     "*.egg-info",
 )
-ARTIFACTS = ("fig01_pipeline", "fig02_arx_vs_physics", "fig03_residual_acf")
+ARTIFACTS = ("fig01_pipeline", "fig02_arx_vs_physics", "fig03_residual_acf", "fig11_sensitivity")
+SWEEP = {"sensitivity_config", "fig11_sensitivity"}
+
+
+def small_sweep(config: dict) -> None:
+    """A 2 x 1 x 2 sweep grid (4 jobs) with 2 EM starts, for workflow tests."""
+    sweep = config["sensitivity"]
+    sweep.update(alphas=[0.2, 0.8], sensor_A_mults=[1.0], sensor_B_mults=[0.5, 1.5])
+    sweep["hmm"]["n_restarts"] = 2
 
 
 def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
@@ -60,14 +68,19 @@ def edit_config(workdir: Path, edit) -> None:
     path.write_text(yaml.safe_dump(config, sort_keys=False))
 
 
-def planned_rules(workdir: Path) -> set[str]:
-    """Rules a dry run would execute (from the job-stats table), without `all`."""
-    output = snakemake(workdir, "-n", "--cores", "1").stdout
+def planned_jobs(workdir: Path, *targets: str) -> dict[str, int]:
+    """Jobs per rule a dry run would execute (from the job-stats table), without `all`."""
+    output = snakemake(workdir, "-n", "--cores", "1", *targets).stdout
     if "Nothing to be done" in output:
-        return set()
+        return {}
     table = output.split("Job stats:")[1].split("total")[0]
-    names = set(re.findall(r"^(\w+)\s+\d+\s*$", table, flags=re.MULTILINE))
-    return names - {"job", "all"}
+    counts = dict(re.findall(r"^(\w+)\s+(\d+)\s*$", table, flags=re.MULTILINE))
+    return {name: int(n) for name, n in counts.items() if name not in ("job", "all")}
+
+
+def planned_rules(workdir: Path) -> set[str]:
+    """Rules a dry run would execute, without `all`."""
+    return set(planned_jobs(workdir))
 
 
 @pytest.fixture(scope="module")
@@ -76,6 +89,7 @@ def workflow_copy(tmp_path_factory) -> Path:
     workdir = tmp_path_factory.mktemp("wf") / "repo"
     shutil.copytree(REPO, workdir, ignore=IGNORED)
     edit_config(workdir, lambda c: c["simulation"].update(T=8.0))
+    edit_config(workdir, small_sweep)
     snakemake(workdir, "--cores", "2")
     return workdir
 
@@ -95,6 +109,14 @@ def test_every_artifact_is_produced_with_passing_validity_checks(workflow_copy):
     residuals = (workflow_copy / "results" / "residuals.csv").read_text().splitlines()
     assert residuals[0] == "t,e0,e1,e2a,e2b,e3,e4"
     assert len(residuals) == 1 + 400
+    fig11 = json.loads((workflow_copy / "paper_figures" / "fig11_sensitivity.json").read_text())
+    crosschecks = {c["id"]: c["passed"] for c in fig11["checks"] if c["kind"] == "crosscheck"}
+    assert crosschecks == {"r_inputs_rebuilt_exactly": True}
+    assert len(fig11["metrics"]["configurations"]) == 4
+    runs = sorted(p.name for p in (workflow_copy / "results" / "sensitivity").glob("*.json"))
+    assert runs == [
+        f"alpha{a}_mA1.0_mB{b}_rep0.json" for a in ("0.2", "0.8") for b in ("0.5", "1.5")
+    ]
 
 
 def test_nothing_to_do_after_a_complete_run(workflow_copy):
@@ -110,6 +132,7 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
         "residuals",
         "fig02_arx_vs_physics",
         "fig03_residual_acf",
+        *SWEEP,
     }
     edit_config(workflow_copy, lambda c: c["arx"].update(rollout_init="physics"))
     edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.5))
@@ -119,8 +142,19 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
         "residuals",
         "fig02_arx_vs_physics",
         "fig03_residual_acf",
+        *SWEEP,
     }
     edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.0))
+    assert planned_rules(workflow_copy) == set()
+
+
+def test_growing_the_sweep_grid_plans_only_the_new_configurations(workflow_copy):
+    edit_config(workflow_copy, lambda c: c["sensitivity"]["alphas"].append(0.5))
+    assert planned_jobs(workflow_copy) == {"sensitivity_config": 2, "fig11_sensitivity": 1}
+    edit_config(workflow_copy, lambda c: c["sensitivity"]["alphas"].remove(0.5))
+    edit_config(workflow_copy, lambda c: c["sensitivity"]["correction"].update(method="paper"))
+    assert planned_jobs(workflow_copy) == {"fig11_sensitivity": 1}
+    edit_config(workflow_copy, lambda c: c["sensitivity"]["correction"].update(method="code"))
     assert planned_rules(workflow_copy) == set()
 
 
@@ -139,8 +173,10 @@ def test_a_library_edit_reruns_the_rules_that_import_it(workflow_copy):
 
 
 def test_rerun_gives_byte_identical_tables_and_figures(workflow_copy):
-    outputs = sorted((workflow_copy / "results").glob("*.csv")) + sorted(
-        (workflow_copy / "paper_figures").glob("fig0*.*")
+    outputs = (
+        sorted((workflow_copy / "results").glob("**/*.csv"))
+        + sorted((workflow_copy / "results" / "sensitivity").glob("*.json"))
+        + sorted((workflow_copy / "paper_figures").glob("fig*.*"))
     )
     before = {path.name: path.read_bytes() for path in outputs}
     snakemake(workflow_copy, "--cores", "2", "--forceall")
@@ -154,6 +190,22 @@ def test_lint_is_clean(workflow_copy):
     assert "Congratulations" in result.stdout + result.stderr
 
 
+def test_sweep_dry_run_plans_one_job_per_configuration_and_replicate(tmp_path):
+    workdir = tmp_path / "repo"
+    shutil.copytree(REPO, workdir, ignore=IGNORED)
+
+    def grid(config):
+        config["sensitivity"].update(
+            alphas=[0.2, 0.8], sensor_A_mults=[1.5], sensor_B_mults=[0.5], n_replicates=2
+        )
+
+    edit_config(workdir, grid)
+    assert planned_jobs(workdir, "fig11_sensitivity") == {
+        "sensitivity_config": 4,
+        "fig11_sensitivity": 1,
+    }
+
+
 @pytest.mark.parametrize(
     ("edit", "key"),
     [
@@ -161,6 +213,8 @@ def test_lint_is_clean(workflow_copy):
         (lambda c: c["twin"]["plant"].pop("k"), "twin.plant"),
         (lambda c: c["simulation"].update(seed="eleven"), "simulation.seed"),
         (lambda c: c["twin"]["actuator"].update(tau=-0.15), "twin.actuator.tau"),
+        (lambda c: c["sensitivity"]["alphas"].append(1.2), "sensitivity.alphas.4"),
+        (lambda c: c["sensitivity"]["correction"].update(method="text"), "sensitivity.correction"),
     ],
 )
 def test_malformed_config_stops_before_any_job_and_names_the_key(tmp_path, edit, key):
