@@ -181,8 +181,9 @@ def sweep_claim_numbers(means: pd.DataFrame, slopes: pd.DataFrame | None = None)
     -------
     dict
         ``min, max, mean, median, bimodality_coefficient, n_low_mode`` (below
-        :data:`R_MODE_SPLIT_PCT`), ``slopes_B_noisiest`` / ``slopes_B_cleanest`` (mean slope per
-        m_A row, %/unit α, and the fraction of replicates with a positive slope),
+        :data:`R_MODE_SPLIT_PCT`), ``slopes_B_noisiest`` / ``slopes_B_cleanest`` (median and
+        mean over replicates of the slope per m_A row, %/unit α, and the fraction of
+        replicates with a positive slope),
         ``argmax`` (the best configuration) and ``balanced_median`` (median over m_A = m_B).
     """
     values = means["value"].to_numpy(dtype=float)
@@ -195,6 +196,7 @@ def sweep_claim_numbers(means: pd.DataFrame, slopes: pd.DataFrame | None = None)
         rows = slopes[slopes["m_B"] == m_b]
         return {
             f"m_A={m_a:g}": {
+                "median_slope": float(group["slope_pct_per_unit_alpha"].median()),
                 "mean_slope": float(group["slope_pct_per_unit_alpha"].mean()),
                 "frac_positive": float((group["slope_pct_per_unit_alpha"] > 0).mean()),
             }
@@ -232,11 +234,11 @@ def _claims(numbers: Mapping[str, dict], alphas: Sequence[float], grid: Mapping)
 
     def trend_ok(values: dict) -> bool:
         rows = values["slopes_B_noisiest"].values()
-        return two_b and bool(rows) and all(row["mean_slope"] > 0 for row in rows)
+        return two_b and bool(rows) and all(row["median_slope"] > 0 for row in rows)
 
     def weaker_ok(values: dict) -> bool:
-        noisy = [abs(r["mean_slope"]) for r in values["slopes_B_noisiest"].values()]
-        clean = [abs(r["mean_slope"]) for r in values["slopes_B_cleanest"].values()]
+        noisy = [abs(r["median_slope"]) for r in values["slopes_B_noisiest"].values()]
+        clean = [abs(r["median_slope"]) for r in values["slopes_B_cleanest"].values()]
         return two_b and bool(noisy) and float(np.mean(clean)) < float(np.mean(noisy))
 
     def argmax_ok(values: dict) -> bool:
@@ -299,9 +301,10 @@ def _claims(numbers: Mapping[str, dict], alphas: Sequence[float], grid: Mapping)
             id="alpha_trend_sensor_B_degraded",
             kind="claim",
             statement="paper §5: when Sensor B was degraded, improvements generally increased "
-            "with α (slope of ΔRMSE_e1 on α in the noisiest-B column, per Sensor A row; "
-            "with replicates the mean slope, and the share of replicates with a positive slope)",
-            expected="mean slope > 0 in every Sensor A row",
+            "with α (least-squares slope of ΔRMSE_e1 on α within each replicate, noisiest-B "
+            "column, per Sensor A row; the median over replicates, robust to a replicate whose "
+            "EM fit fell into a worse local optimum, and the share of positive slopes)",
+            expected="median slope > 0 in every Sensor A row",
             observed={**side("slopes_B_noisiest"), "passed_by_source": judged(trend_ok)},
             passed=trend_ok(ours),
         ),
@@ -309,7 +312,7 @@ def _claims(numbers: Mapping[str, dict], alphas: Sequence[float], grid: Mapping)
             id="alpha_dependence_weaker_sensor_B_clean",
             kind="claim",
             statement="paper §5: when Sensor B was cleaner, the dependence on α was weaker",
-            expected="mean |slope| in the cleanest-B column < in the noisiest-B column",
+            expected="mean over Sensor A rows of |median slope|: cleanest-B column < noisiest-B",
             observed={**side("slopes_B_cleanest"), "passed_by_source": judged(weaker_ok)},
             passed=weaker_ok(ours),
         ),
