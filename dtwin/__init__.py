@@ -53,6 +53,14 @@ _EXPORTS: dict[str, str] = {
     # structured residuals (paper §4.1)
     "acf_table": "dtwin.residual_stats",
     "ljung_box_table": "dtwin.residual_stats",
+    # sensitivity sweep (paper §5, Fig. 11)
+    "SweepPoint": "dtwin.sensitivity",
+    "SweepRun": "dtwin.sensitivity",
+    "sweep_grid": "dtwin.sensitivity",
+    "replicate_seed": "dtwin.sensitivity",
+    "sweep_table": "dtwin.sensitivity",
+    "summarize_sweep": "dtwin.sensitivity",
+    "run_sweep_point": "dtwin.stages.sensitivity",
 }
 
 __all__ = sorted(_EXPORTS)
