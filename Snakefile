@@ -16,6 +16,7 @@ include: "workflow/rules/faults.smk"  # before regimes.smk: bic_sweep reads the 
 include: "workflow/rules/regimes.smk"
 include: "workflow/rules/correction.smk"
 include: "workflow/rules/decisions.smk"
+include: "workflow/rules/sensitivity.smk"
 include: "workflow/rules/gap.smk"
 include: "workflow/rules/report.smk"
 

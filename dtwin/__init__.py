@@ -73,6 +73,14 @@ _EXPORTS: dict[str, str] = {
     "diagnose": "dtwin.gap",
     "read_recording": "dtwin.gap",
     "generate_case": "dtwin.gap",
+    # sensitivity sweep (paper §5, Fig. 11)
+    "SweepPoint": "dtwin.sensitivity",
+    "SweepRun": "dtwin.sensitivity",
+    "sweep_grid": "dtwin.sensitivity",
+    "replicate_seed": "dtwin.sensitivity",
+    "sweep_table": "dtwin.sensitivity",
+    "summarize_sweep": "dtwin.sensitivity",
+    "run_sweep_point": "dtwin.stages.sensitivity",
 }
 
 __all__ = sorted(_EXPORTS)

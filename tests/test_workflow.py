@@ -46,6 +46,7 @@ ARTIFACTS = (
     "fig08_feature_separability",
     "fig09_bic",
     "fig10_mcda_actions",
+    "fig11_sensitivity",
     "gap_benchmark",
 )
 #: Every rule downstream of `residuals` (its surrogate and residual tables).
@@ -81,6 +82,14 @@ AFTER_FAULTS = {
     "fig10_mcda_actions",
     "claims",
 }
+SWEEP = {"sensitivity_config", "fig11_sensitivity"}
+
+
+def small_sweep(config: dict) -> None:
+    """A 2 x 1 x 2 sweep grid (4 jobs) with 2 EM starts, for workflow tests."""
+    sweep = config["sensitivity"]
+    sweep.update(alphas=[0.2, 0.8], sensor_A_mults=[1.0], sensor_B_mults=[0.5, 1.5])
+    sweep["hmm"]["n_restarts"] = 2
 
 
 def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
@@ -115,14 +124,21 @@ def job_counts(output: str) -> dict[str, int]:
     return {name: int(n) for name, n in re.findall(r"^(\w+)\s+(\d+)\s*$", table, flags=re.M)}
 
 
+def planned_jobs(workdir: Path, *targets: str) -> dict[str, int]:
+    """Jobs per rule a dry run would execute, without `all`."""
+    counts = job_counts(snakemake(workdir, "-n", "--cores", "1", *targets).stdout)
+    return {name: n for name, n in counts.items() if name != "all"}
+
+
 def planned_rules(workdir: Path) -> set[str]:
     """Rules a dry run would execute, without `all`."""
     return set(job_counts(snakemake(workdir, "-n", "--cores", "1").stdout)) - {"all"}
 
 
 def shorten(config: dict) -> None:
-    """An 8 s run and a two-case gap benchmark, so the whole DAG runs in well under a minute."""
+    """An 8 s run, a 4-job sweep and a two-case gap benchmark: the whole DAG in about a minute."""
     config["simulation"]["T"] = 8.0
+    small_sweep(config)
     config["gap"]["benchmark"].update(effects=["none", "coulomb_friction"], cases_per_effect=1)
 
 
@@ -160,12 +176,21 @@ def test_every_artifact_is_produced_with_passing_validity_checks(workflow_copy):
         "scores_on_r_viterbi_equal_r": True,
         "bic_formula_matches_r": True,
         "legacy_matches_r_031": True,
+        "r_inputs_rebuilt_exactly": True,
     }
     claims = (workflow_copy / "paper_figures" / "CLAIMS.md").read_text()
     assert "## Claims of the paper" in claims and "fig09_bic" in claims
     residuals = (workflow_copy / "results" / "residuals.csv").read_text().splitlines()
     assert residuals[0] == "t,e0,e1,e2a,e2b,e3,e4"
     assert len(residuals) == 1 + 400
+    fig11 = json.loads((workflow_copy / "paper_figures" / "fig11_sensitivity.json").read_text())
+    crosschecks = {c["id"]: c["passed"] for c in fig11["checks"] if c["kind"] == "crosscheck"}
+    assert crosschecks == {"r_inputs_rebuilt_exactly": True}
+    assert len(fig11["metrics"]["configurations"]) == 4
+    runs = sorted(p.name for p in (workflow_copy / "results" / "sensitivity").glob("*.json"))
+    assert runs == [
+        f"alpha{a}_mA1.0_mB{b}_rep0.json" for a in ("0.2", "0.8") for b in ("0.5", "1.5")
+    ]
 
 
 def test_fault_tables_keep_the_contract_columns(workflow_copy):
@@ -188,10 +213,10 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     assert planned_rules(workflow_copy) == {"fig03_residual_acf", "claims"}
     edit_config(workflow_copy, lambda c: c["acf"].update(nlags=30))
     edit_config(workflow_copy, lambda c: c["arx"].update(rollout_init="zeros"))
-    assert planned_rules(workflow_copy) == AFTER_RESIDUALS
+    assert planned_rules(workflow_copy) == AFTER_RESIDUALS | SWEEP
     edit_config(workflow_copy, lambda c: c["arx"].update(rollout_init="physics"))
     edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.5))
-    assert planned_rules(workflow_copy) == {"simulate", "fit_surrogates", *AFTER_RESIDUALS}
+    assert planned_rules(workflow_copy) == {"simulate", "fit_surrogates", *AFTER_RESIDUALS, *SWEEP}
     edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.0))
     edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.5))
     assert planned_rules(workflow_copy) == {
@@ -207,6 +232,20 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     edit_config(workflow_copy, lambda c: c["faults"].update(drift_origin="regime_start"))
     assert planned_rules(workflow_copy) == AFTER_FAULTS
     edit_config(workflow_copy, lambda c: c["faults"].update(drift_origin="global"))
+    assert planned_rules(workflow_copy) == set()
+
+
+def test_growing_the_sweep_grid_plans_only_the_new_configurations(workflow_copy):
+    edit_config(workflow_copy, lambda c: c["sensitivity"]["alphas"].append(0.5))
+    assert planned_jobs(workflow_copy) == {
+        "sensitivity_config": 2,
+        "fig11_sensitivity": 1,
+        "claims": 1,
+    }
+    edit_config(workflow_copy, lambda c: c["sensitivity"]["alphas"].remove(0.5))
+    edit_config(workflow_copy, lambda c: c["sensitivity"]["correction"].update(method="paper"))
+    assert planned_jobs(workflow_copy) == {"fig11_sensitivity": 1, "claims": 1}
+    edit_config(workflow_copy, lambda c: c["sensitivity"]["correction"].update(method="code"))
     assert planned_rules(workflow_copy) == set()
 
 
@@ -233,6 +272,7 @@ def test_a_library_edit_reruns_the_rules_that_import_it(workflow_copy):
             "fig05_correction_timeseries",
             "fig06_correction_distributions",
             "claims",
+            *SWEEP,
         }
     finally:
         # the edits were comments: restore the sources and mark the outputs current
@@ -261,6 +301,22 @@ def test_lint_is_clean(workflow_copy):
     assert "Congratulations" in result.stdout + result.stderr
 
 
+def test_sweep_dry_run_plans_one_job_per_configuration_and_replicate(tmp_path):
+    workdir = tmp_path / "repo"
+    shutil.copytree(REPO, workdir, ignore=IGNORED)
+
+    def grid(config):
+        config["sensitivity"].update(
+            alphas=[0.2, 0.8], sensor_A_mults=[1.5], sensor_B_mults=[0.5], n_replicates=2
+        )
+
+    edit_config(workdir, grid)
+    assert planned_jobs(workdir, "fig11_sensitivity") == {
+        "sensitivity_config": 4,
+        "fig11_sensitivity": 1,
+    }
+
+
 @pytest.mark.parametrize(
     ("edit", "key"),
     [
@@ -270,6 +326,8 @@ def test_lint_is_clean(workflow_copy):
         (lambda c: c["twin"]["actuator"].update(tau=-0.15), "twin.actuator.tau"),
         (lambda c: c["faults"].update(drift_origin="sideways"), "faults.drift_origin"),
         (lambda c: c["faults"]["schedule"][1].pop("end"), "faults.schedule.1"),
+        (lambda c: c["sensitivity"]["alphas"].append(1.2), "sensitivity.alphas.4"),
+        (lambda c: c["sensitivity"]["correction"].update(method="text"), "sensitivity.correction"),
     ],
 )
 def test_malformed_config_stops_before_any_job_and_names_the_key(tmp_path, edit, key):

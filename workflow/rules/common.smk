@@ -82,6 +82,7 @@ PAPER_ARTIFACTS = [
     "fig08_feature_separability",
     "fig09_bic",
     "fig10_mcda_actions",
+    "fig11_sensitivity",
 ]
 
 GAP_CASES = [
@@ -95,3 +96,51 @@ ALL_TARGETS = [path for artifact in PAPER_ARTIFACTS for path in figure_outputs(a
     "paper_figures/CLAIMS.md",
     "paper_figures/claims.json",
 ]
+
+
+# --- the sensitivity sweep (paper §5, Fig. 11): one job per configuration and replicate ------
+
+SENSITIVITY_RUN = "alpha{alpha}_mA{ma}_mB{mb}_rep{rep}"
+
+
+wildcard_constraints:
+    alpha=r"[0-9.eE+-]+",
+    ma=r"[0-9.eE+-]+",
+    mb=r"[0-9.eE+-]+",
+    rep=r"[0-9]+",
+
+
+def sweep_value(value):
+    """A grid value as it appears in file names: repr of the float, which round-trips exactly."""
+    return repr(float(value))
+
+
+def sensitivity_run_files(sensitivity):
+    """The result file of every (alpha, m_A, m_B, replicate) of the configured grid."""
+    return expand(
+        f"results/sensitivity/{SENSITIVITY_RUN}.json",
+        alpha=[sweep_value(v) for v in sensitivity["alphas"]],
+        ma=[sweep_value(v) for v in sensitivity["sensor_A_mults"]],
+        mb=[sweep_value(v) for v in sensitivity["sensor_B_mults"]],
+        rep=range(sensitivity["n_replicates"]),
+    )
+
+
+def sensitivity_point(wildcards):
+    """The grid point of one sweep job, from its wildcards (params of sensitivity_config)."""
+    return {
+        "alpha": float(wildcards.alpha),
+        "m_A": float(wildcards.ma),
+        "m_B": float(wildcards.mb),
+        "replicate": int(wildcards.rep),
+    }
+
+
+# What one sweep job depends on: not the grid lists (adding an alpha must not rerun the others),
+# not correction.method or interval (they only choose what the figure shows).
+SENSITIVITY_JOB_PARAMS = {
+    "seed": config["sensitivity"]["seed"],
+    "hmm": config["sensitivity"]["hmm"],
+    "correction": {m: config["sensitivity"]["correction"][m] for m in ("code", "paper")},
+    "r_signals": config["sensitivity"]["r_signals"],
+}

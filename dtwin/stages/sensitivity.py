@@ -1,0 +1,234 @@
+"""Stage "sensitivity" (paper §5, Fig. 11): run one configuration and replicate of the sweep.
+
+The sweep itself — grid, seeds, result records and their aggregation — is
+:mod:`dtwin.sensitivity` (numpy and pandas only, so the aggregate rule does not import hmmlearn);
+this module runs one point: simulate (or rebuild R's signals), refit the ARX surrogates, the HMM
+and both plant corrections. Config sections: ``simulation``, ``command``, ``twin``, ``arx``,
+``sensitivity``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dtwin._validation import (
+    DtwinValueError,
+    require_in_range,
+    require_mapping,
+    require_nonnegative,
+)
+from dtwin.correction import correct_bias, correct_plant_bias_viterbi
+from dtwin.hmm import fit_hmm, zscore
+from dtwin.params import twin_params_from_mapping
+from dtwin.physics import fuse, sensor_first_order
+from dtwin.sensitivity import (
+    CORRECTION_METHODS,
+    CorrectionScore,
+    SweepPoint,
+    SweepRun,
+    replicate_seed,
+    scale_twin,
+)
+from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
+from dtwin.wiring import RESIDUALS
+
+__all__ = ["r_sweep_physics", "run_sweep_point", "run_sweep_point_on_r_signals"]
+
+
+def r_sweep_physics(
+    r_physics: pd.DataFrame, twin: Mapping[str, Any], alpha: float, m_A: float, m_B: float
+) -> pd.DataFrame:
+    """Return R's physics for one configuration of its sweep, rebuilt from R's seed-11 run.
+
+    Parameters
+    ----------
+    r_physics : DataFrame
+        R's nominal seed-11 physics (α 0.6, unit multipliers), columns ``t`` and
+        ``u_cmd, u_act, x, v, y_A, y_B, y_fused, z`` (:func:`dtwin.reference.load_r_physics`).
+    twin : mapping
+        The ``twin`` config section (sensor time constants and biases, ``dt``).
+    alpha, m_A, m_B : float
+        The configuration.
+
+    Returns
+    -------
+    DataFrame
+        Same columns; ``y_A``, ``y_B`` carry the measurement noise times ``m_A``, ``m_B`` and
+        ``y_fused`` is recomputed with α.
+
+    Notes
+    -----
+    R draws the same standard normals for every configuration (``set.seed(11)`` each time)
+    and scales them by the noise sd (REFERENCE.md §9), so a sensor reading is
+    ``ỹ + b + m·σ·ε`` with ``ỹ`` the noise-free first-order response to the physics position.
+    ``σ·ε = y − ỹ − b`` is recovered from the nominal run and rescaled. Actuator, plant and KPI
+    signals do not depend on the configuration.
+    """
+    params = twin_params_from_mapping(twin)
+    x = r_physics["x"].to_numpy(dtype=float)
+    out = r_physics.copy()
+    for which, mult in (("A", m_A), ("B", m_B)):
+        sensor = getattr(params, f"sensor_{which}")
+        clean = sensor_first_order(x, sensor.tau, params.dt, sensor.bias)
+        noise = r_physics[f"y_{which}"].to_numpy(dtype=float) - clean
+        out[f"y_{which}"] = clean + require_nonnegative(f"m_{which}", mult) * noise
+    out["y_fused"] = fuse(out["y_A"], out["y_B"], require_in_range("alpha", alpha, 0.0, 1.0))
+    return out
+
+
+def _score(method: str, residuals: np.ndarray, e1_after: np.ndarray) -> CorrectionScore:
+    e1 = residuals[:, RESIDUALS.index("e1")]
+    after = residuals.copy()
+    after[:, RESIDUALS.index("e1")] = e1_after
+    return CorrectionScore(
+        method=method,
+        rmse_e1_before=float(np.sqrt(np.mean(e1**2))),
+        rmse_e1_after=float(np.sqrt(np.mean(e1_after**2))),
+        mae_e1_before=float(np.mean(np.abs(e1))),
+        mae_e1_after=float(np.mean(np.abs(e1_after))),
+        l2_before=float(np.mean(np.linalg.norm(residuals, axis=1))),
+        l2_after=float(np.mean(np.linalg.norm(after, axis=1))),
+    )
+
+
+def _evaluate(
+    physics: pd.DataFrame,
+    point: SweepPoint,
+    source: str,
+    physics_seed: int | None,
+    hmm_seed: int,
+    twin: Mapping[str, Any],
+    arx: Mapping[str, Any],
+    hmm: Mapping[str, Any],
+    correction: Mapping[str, Any],
+) -> SweepRun:
+    """Refit the surrogates and the HMM on ``physics`` and score both corrections."""
+    surrogate, residual_table = roll_out_twin(
+        physics, fit_twin_surrogates(physics, arx), twin, arx["rollout_init"]
+    )
+    residuals = residual_table[list(RESIDUALS)].to_numpy()
+    fit = fit_hmm(
+        zscore(residuals).values,
+        hmm["n_states"],
+        n_restarts=hmm["n_restarts"],
+        seed=hmm_seed,
+        max_iter=hmm["max_iter"],
+        tol=hmm["tol"],
+    )
+    code = correction["code"]
+    plant = correct_plant_bias_viterbi(
+        surrogate["x"],
+        physics["x"],
+        fit.smoothed,
+        fit.viterbi,
+        kappa=code["kappa"],
+        ema_alpha=code["ema_alpha"],
+        rate_max=code["rate_max"],
+    )
+    paper = correction["paper"]
+    weighted = correct_bias(
+        surrogate,
+        physics,
+        fit.smoothed,
+        alpha=twin["fusion"]["alpha"],
+        w1=twin["kpi"]["w1"],
+        w2=twin["kpi"]["w2"],
+        dt=twin["dt"],
+        kappa=paper["kappa"],
+        ema_alpha=paper["ema_alpha"],
+        rate_max=paper["rate_max"],
+    )
+    usable = ~fit.restarts["status"].isin(["failed", "degenerate"])
+    return SweepRun(
+        point=point,
+        source=source,
+        physics_seed=physics_seed,
+        hmm_seed=hmm_seed,
+        n_steps=len(physics),
+        log_likelihood=fit.log_likelihood,
+        n_iter=fit.n_iter,
+        converged=fit.converged,
+        n_usable_starts=int(usable.sum()),
+        scores=(
+            _score("code", residuals, plant.e1_after),
+            _score("paper", residuals, weighted.residuals_after["e1"].to_numpy()),
+        ),
+    )
+
+
+def _require_sections(sensitivity: Mapping[str, Any]) -> tuple[Mapping, Mapping]:
+    sensitivity = require_mapping("sensitivity", sensitivity)
+    hmm = require_mapping("sensitivity.hmm", sensitivity["hmm"])
+    correction = require_mapping("sensitivity.correction", sensitivity["correction"])
+    missing = [m for m in CORRECTION_METHODS if m not in correction]
+    if missing:
+        raise DtwinValueError(f"sensitivity.correction is missing method(s) {', '.join(missing)}")
+    return hmm, correction
+
+
+def run_sweep_point(
+    point: SweepPoint,
+    *,
+    simulation: Mapping[str, Any],
+    command: Mapping[str, Any],
+    twin: Mapping[str, Any],
+    arx: Mapping[str, Any],
+    sensitivity: Mapping[str, Any],
+) -> SweepRun:
+    """Run one configuration and replicate of the sweep on our own simulation.
+
+    Parameters
+    ----------
+    point : SweepPoint
+    simulation, command, twin, arx : mapping
+        The config sections of the same names (the twin's fusion weight and sensor noise are
+        overridden by the point, :func:`scale_twin`).
+    sensitivity : mapping
+        ``seed`` (EM seed of replicate 0), ``hmm`` (``n_states``, ``n_restarts``,
+        ``max_iter``, ``tol``) and ``correction`` (``code`` and ``paper``, each ``kappa``,
+        ``ema_alpha``, ``rate_max``).
+
+    Returns
+    -------
+    SweepRun
+        ``source = "ours"``; physics seed ``replicate_seed(simulation.seed, r)`` and EM seed
+        ``replicate_seed(sensitivity.seed, r)``.
+
+    Notes
+    -----
+    Per point: simulate (:func:`dtwin.stages.twin.simulate_asset`), fit the ARX surrogates on
+    the training window, roll the chain out, z-score ``e0 … e4``, fit the HMM (best of
+    ``n_restarts`` EM starts) and score both corrections of ``e1`` (Eq. (27)).
+    """
+    hmm, correction = _require_sections(sensitivity)
+    physics_seed = replicate_seed(simulation["seed"], point.replicate)
+    hmm_seed = replicate_seed(sensitivity["seed"], point.replicate)
+    scaled = scale_twin(twin, point.alpha, point.m_A, point.m_B)
+    physics = simulate_asset({**simulation, "seed": physics_seed}, command, scaled)
+    return _evaluate(physics, point, "ours", physics_seed, hmm_seed, scaled, arx, hmm, correction)
+
+
+def run_sweep_point_on_r_signals(
+    point: SweepPoint,
+    r_physics: pd.DataFrame,
+    *,
+    twin: Mapping[str, Any],
+    arx: Mapping[str, Any],
+    sensitivity: Mapping[str, Any],
+) -> SweepRun:
+    """Run one configuration on R's own seed-11 signals (:func:`r_sweep_physics`).
+
+    The inputs to the HMM are then exactly R's (the pre-correction RMSE, MAE and L2 match R's
+    sweep table); only the EM starts differ. The EM seed is that of the replicate, so
+    replicates on R's signals differ in the EM starts alone. Returns ``source =
+    "r_signals"``, ``physics_seed = None``.
+    """
+    hmm, correction = _require_sections(sensitivity)
+    hmm_seed = replicate_seed(sensitivity["seed"], point.replicate)
+    scaled = scale_twin(twin, point.alpha, point.m_A, point.m_B)
+    physics = r_sweep_physics(r_physics, scaled, point.alpha, point.m_A, point.m_B)
+    return _evaluate(physics, point, "r_signals", None, hmm_seed, scaled, arx, hmm, correction)

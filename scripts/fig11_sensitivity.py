@@ -1,0 +1,34 @@
+"""Rule fig11_sensitivity: paper Fig. 11 from every sweep job, beside R's re-run.
+
+Input   results/sensitivity/alpha*_mA*_mB*_rep*.json (one per grid point and replicate),
+        config/reference/sensitivity_36_rerun.csv (R's 36 runs)
+Output  paper_figures/fig11_sensitivity.{png,pdf,json}
+        results/sensitivity/runs.csv      every run (dtwin.sensitivity.SWEEP_COLUMNS)
+        results/sensitivity/summary.csv   mean and interval over replicates per configuration (%)
+Params  sensitivity (grid, n_replicates, correction.method, interval, ...)
+"""
+
+from dtwin._script import start_rule
+
+start_rule(snakemake)
+
+from dtwin.artifacts import write_csv
+from dtwin.figures._style import publish_artifact
+from dtwin.figures.sensitivity import fig11_sensitivity
+from dtwin.sensitivity import (
+    load_r_sweep,
+    read_sweep_rows,
+    summarize_sweep,
+    sweep_grid,
+    sweep_table,
+)
+
+s = snakemake.params.sensitivity
+grid = sweep_grid(s["alphas"], s["sensor_A_mults"], s["sensor_B_mults"], s["n_replicates"])
+table = sweep_table(read_sweep_rows(snakemake.input.runs), grid)
+summary = summarize_sweep(table, s["interval"])
+write_csv(table, snakemake.output.runs)
+write_csv(summary, snakemake.output.summary)
+artifact = fig11_sensitivity(table, summary, load_r_sweep(snakemake.input.r_sweep), s)
+outputs = snakemake.output
+publish_artifact(artifact, [outputs.png, outputs.pdf], outputs.json)
