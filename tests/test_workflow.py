@@ -415,3 +415,37 @@ def test_a_run_interrupted_during_the_sweep_resumes_to_identical_outputs(workflo
     snakemake(workflow_copy, "--cores", "2")
     changed = [p.name for p, data in reference.items() if not p.exists() or p.read_bytes() != data]
     assert not changed
+
+
+SUBMIT_SCRIPT = """#!/usr/bin/env bash
+# A stand-in scheduler for Snakemake's cluster-generic executor: run the job script detached
+# and print a job id, as `sbatch --parsable` would.
+jobscript="${@: -1}"
+nohup bash "$jobscript" > "$jobscript.out" 2>&1 &
+echo "$!"
+"""
+
+
+def test_sweep_jobs_run_unchanged_under_a_cluster_executor(workflow_copy):
+    """The four sweep configurations through cluster-generic give the local run's bytes."""
+    sweep_dir = workflow_copy / "results" / "sensitivity"
+    local = {p: p.read_bytes() for p in sorted(sweep_dir.glob("alpha*.json"))}
+    assert len(local) == 4
+    for path in local:
+        path.unlink()
+    (workflow_copy / "submit.sh").write_text(SUBMIT_SCRIPT)
+    snakemake(
+        workflow_copy,
+        *[str(p.relative_to(workflow_copy)) for p in local],
+        "--executor",
+        "cluster-generic",
+        "--cluster-generic-submit-cmd",
+        "bash submit.sh",
+        "--jobs",
+        "4",
+        "--latency-wait",
+        "30",
+    )
+    changed = [p.name for p, data in local.items() if p.read_bytes() != data]
+    assert not changed
+    assert planned_rules(workflow_copy) == set()
