@@ -6,8 +6,8 @@ Benchmarks, not tests: one run each on whatever this machine is doing, medians w
 2. per-rule wall time and peak memory from the rules' `benchmark:` files of the cold run;
 3. one HMM fit (K 4, D 10, 10 restarts) at T = 1e3 … 1e6 through dtwin and through plain
    hmmlearn with its defaults, each in a fresh process: seconds per EM iteration, peak memory
-   (for T >= 1e5 the iterations are capped at 3 per restart and at T = 1e6 two restarts are
-   timed, so the run ends in minutes; seconds per iteration exclude start-up and posteriors);
+   (for T >= 1e5 the iterations are capped at 3 per restart so the run ends in minutes;
+   seconds per iteration exclude start-up, random starts and the final posteriors);
 4. `dtwin diagnose` on a 2,000-sample six-module recording and a 100,000-sample one.
 """
 
