@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pandas as pd
 import pytest
 import yaml
 
@@ -23,3 +24,9 @@ def config() -> dict:
 def twin(config):
     """The default twin parameters."""
     return twin_params_from_mapping(config["twin"])
+
+
+@pytest.fixture(scope="session")
+def r_pipeline() -> pd.DataFrame:
+    """The authors' seed-11 fault-scenario signals (config/reference, REFERENCE.md §13)."""
+    return pd.read_csv(REFERENCE / "faulted_pipeline_seed11_rerun.csv")

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 import pytest
@@ -19,14 +17,9 @@ from dtwin.correction import (
 )
 from dtwin.hmm import fit_hmm, zscore
 from dtwin.wiring import RESIDUALS
+from tests.conftest import REFERENCE
 
-REFERENCE = Path(__file__).resolve().parents[1] / "config" / "reference"
 TWIN = {"alpha": 0.6, "w1": 1.0, "w2": 0.2, "dt": 0.02}
-
-
-@pytest.fixture(scope="module")
-def r_pipeline() -> pd.DataFrame:
-    return pd.read_csv(REFERENCE / "faulted_pipeline_seed11_rerun.csv")
 
 
 @pytest.fixture(scope="module")

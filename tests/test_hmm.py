@@ -6,7 +6,6 @@ import dataclasses
 import itertools
 import logging
 import time
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -25,13 +24,7 @@ from dtwin.hmm import (
     zscore,
 )
 
-REFERENCE = Path(__file__).resolve().parents[1] / "config" / "reference"
 R_BEST_LOGLIK = -2115.852  # depmixS4, best of 10 starts (REFERENCE.md §5, §11)
-
-
-@pytest.fixture(scope="module")
-def r_pipeline() -> pd.DataFrame:
-    return pd.read_csv(REFERENCE / "faulted_pipeline_seed11_rerun.csv")
 
 
 @pytest.fixture(scope="module")

@@ -61,11 +61,6 @@ def scenario(twin_run, config, hmm, twin):
     return run_fault_scenario(physics, surrogate, config["faults"], hmm, twin)
 
 
-@pytest.fixture(scope="module")
-def r_pipeline() -> pd.DataFrame:
-    return pd.read_csv(REFERENCE / "faulted_pipeline_seed11_rerun.csv")
-
-
 # --- seeds ----------------------------------------------------------------------------------
 
 

@@ -51,25 +51,6 @@ ARTIFACTS = (
     "fig11_sensitivity",
     "gap_benchmark",
 )
-#: Every rule downstream of `residuals` (its surrogate and residual tables).
-AFTER_RESIDUALS = {
-    "residuals",
-    "fig02_arx_vs_physics",
-    "fig03_residual_acf",
-    "nominal_regimes",
-    "fig04_hmm_posteriors",
-    "fault_regimes",
-    "fig07_fault_posteriors",
-    "fig08_feature_separability",
-    "targeted_intervention",
-    "fig05_correction_timeseries",
-    "fig06_correction_distributions",
-    "bic_sweep",
-    "fig09_bic",
-    "mcda_actions",
-    "fig10_mcda_actions",
-    "claims",
-}
 #: Every rule downstream of `fault_regimes`.
 AFTER_FAULTS = {
     "fault_regimes",
@@ -83,6 +64,14 @@ AFTER_FAULTS = {
     "mcda_actions",
     "fig10_mcda_actions",
     "claims",
+}
+#: Every rule downstream of `residuals` (its surrogate and residual tables).
+AFTER_RESIDUALS = AFTER_FAULTS | {
+    "residuals",
+    "fig02_arx_vs_physics",
+    "fig03_residual_acf",
+    "nominal_regimes",
+    "fig04_hmm_posteriors",
 }
 SWEEP = {"sensitivity_config", "fig11_sensitivity"}
 
