@@ -344,18 +344,35 @@ CHROMIUM_FLAGS = [
     "--disable-component-update",
     "--disable-sync",
     "--window-size=1400,1000",
-    "--virtual-time-budget=5000",
+    "--virtual-time-budget=15000",
 ]
 
 
-def screenshot(url: str, path: Path, profile: Path) -> np.ndarray:
-    subprocess.run(
-        [CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", f"--screenshot={path}", url],
-        capture_output=True,
-        timeout=120,
-        check=True,
-    )
-    return plt.imread(path)
+def screenshot(url: str, path: Path, profile: Path, attempts: int = 3) -> np.ndarray:
+    """A headless-Chromium screenshot of ``url``; retried while the page is still blank.
+
+    A first Chromium start in a fresh profile can take the shot before the report's
+    JavaScript has drawn anything; a page that never draws stays blank on every attempt.
+    """
+    image = None
+    for attempt in range(attempts):
+        subprocess.run(
+            [
+                CHROMIUM,
+                *CHROMIUM_FLAGS,
+                "--run-all-compositor-stages-before-draw",
+                f"--user-data-dir={profile}-{attempt}",
+                f"--screenshot={path}",
+                url,
+            ],
+            capture_output=True,
+            timeout=120,
+            check=True,
+        )
+        image = plt.imread(path)
+        if non_white_fraction(image) > 0.05:
+            break
+    return image
 
 
 def non_white_fraction(image: np.ndarray) -> float:
