@@ -1,6 +1,7 @@
 """Helpers shared by the stage files (config validation, library inputs, target lists)."""
 
 import ast
+import functools
 import os
 
 import jsonschema
@@ -34,35 +35,44 @@ REFERENCE_DIR = "config/reference"
 FIGURE_FORMATS = ("png", "pdf")
 
 
+@functools.lru_cache(maxsize=None)
+def _direct_dtwin_imports(path):
+    """Files of the dtwin modules that ``path`` imports directly (package __init__s included)."""
+    with open(os.path.join(workflow.basedir, path)) as handle:
+        tree = ast.parse(handle.read(), filename=path)
+    found = []
+    for node in ast.walk(tree):
+        names = []
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        for name in names:
+            parts = name.split(".")
+            if parts[0] != "dtwin":
+                continue
+            for depth in range(1, len(parts) + 1):
+                stem = os.path.join(*parts[:depth])
+                for candidate in (f"{stem}.py", os.path.join(stem, "__init__.py")):
+                    if os.path.exists(os.path.join(workflow.basedir, candidate)):
+                        found.append(candidate)
+    return tuple(found)
+
+
 def dtwin_sources(script):
     """The dtwin library files a script imports, transitively, as rule inputs.
 
     Snakemake does not track imports, so without this an edit to dtwin/hmm.py would rerun
     nothing. Imports are read from the source (ast), including ones inside functions, and
-    every package __init__.py on the way is added because it runs on import.
+    every package __init__.py on the way is added because it runs on import. Each file is
+    parsed once per Snakemake run (cached).
     """
     seen, pending = set(), [script]
     while pending:
-        path = pending.pop()
-        with open(os.path.join(workflow.basedir, path)) as handle:
-            tree = ast.parse(handle.read(), filename=path)
-        for node in ast.walk(tree):
-            names = []
-            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
-            elif isinstance(node, ast.Import):
-                names = [a.name for a in node.names]
-            for name in names:
-                if name.split(".")[0] != "dtwin":
-                    continue
-                parts = name.split(".")
-                for depth in range(1, len(parts) + 1):
-                    stem = os.path.join(*parts[:depth])
-                    for candidate in (f"{stem}.py", os.path.join(stem, "__init__.py")):
-                        full = os.path.join(workflow.basedir, candidate)
-                        if os.path.exists(full) and candidate not in seen:
-                            seen.add(candidate)
-                            pending.append(candidate)
+        for candidate in _direct_dtwin_imports(pending.pop()):
+            if candidate not in seen:
+                seen.add(candidate)
+                pending.append(candidate)
     return sorted(seen)
 
 
