@@ -210,6 +210,7 @@ def fig09_bic(
                 expected=PAPER_K_MIN,
                 observed=k_min,
                 passed=k_min == PAPER_K_MIN,
+                reference=r_minima.get(name),
             )
         )
     metrics = {

@@ -152,6 +152,7 @@ def fig05_correction_timeseries(
             expected=f"dRMSE > {VISIBLE_PCT:g} % for {', '.join(PAPER_LOWERED)}",
             observed={e: drmse[e] for e in PAPER_LOWERED},
             passed=all(drmse[e] > VISIBLE_PCT for e in PAPER_LOWERED),
+            reference={e: r_drmse[e] for e in PAPER_LOWERED},
         ),
         crosscheck,
     ]

@@ -220,6 +220,7 @@ def fig07_fault_posteriors(
             ),
             expected={k: f"{v:.4f} ± {R_TOLERANCE:g}" for k, v in r_scores.items()},
             observed=ours,
+            reference=dict(r_scores),
             passed=all(abs(ours[k] - r_scores[k]) <= R_TOLERANCE for k in r_scores),
         ),
         Check(

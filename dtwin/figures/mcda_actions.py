@@ -119,6 +119,7 @@ def fig10_mcda_actions(
                 expected=f"{action} is the most frequent action in {regime}",
                 observed=round(share, 4),
                 passed=is_mode,
+                reference=round(r_share, 4),
             )
         )
     checks += [
