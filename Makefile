@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.dtwin-installed
 
-.PHONY: figures test lint report bench clean-results venv
+.PHONY: figures test fuzz lint report bench clean-results venv
 
 venv: $(STAMP)
 
@@ -37,3 +37,7 @@ lint: $(STAMP)
 
 clean-results:
 	rm -rf results logs benchmarks/rules paper_figures/*.png paper_figures/*.pdf paper_figures/*.json
+
+# Property tests with fresh randomness and FUZZ_FACTOR (tests/conftest.py) times the examples.
+fuzz: $(STAMP)
+	HYPOTHESIS_PROFILE=fuzz $(BIN)/python -m pytest -p no:cacheprovider tests/test_malformed_inputs.py
