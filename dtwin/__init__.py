@@ -60,12 +60,12 @@ _EXPORTS: dict[str, str] = {
     "filtered_posteriors": "dtwin.hmm",
     "bic_sweep": "dtwin.hmm",
     # bias correction (paper §4.3, Eq. (25))
-    "correct_bias": "dtwin.correction",
+    "correct_bias": "dtwin.bias_correction",
     # fault injection and regime scoring (paper §4.4)
-    "inject_faults": "dtwin.faults",
-    "regime_features": "dtwin.faults",
-    "hungarian_map": "dtwin.faults",
-    "classification_scores": "dtwin.faults",
+    "inject_faults": "dtwin.fault_injection",
+    "regime_features": "dtwin.fault_injection",
+    "hungarian_map": "dtwin.regime_matching",
+    "classification_scores": "dtwin.regime_matching",
     # decisions (paper §5, Table 1)
     "topsis": "dtwin.mcda",
     "run_mcda": "dtwin.mcda",
@@ -74,12 +74,12 @@ _EXPORTS: dict[str, str] = {
     "read_recording": "dtwin.gap",
     "generate_case": "dtwin.gap",
     # sensitivity sweep (paper §5, Fig. 11)
-    "SweepPoint": "dtwin.sensitivity",
-    "SweepRun": "dtwin.sensitivity",
-    "sweep_grid": "dtwin.sensitivity",
-    "replicate_seed": "dtwin.sensitivity",
-    "sweep_table": "dtwin.sensitivity",
-    "summarize_sweep": "dtwin.sensitivity",
+    "SweepPoint": "dtwin.sensitivity_sweep",
+    "SweepRun": "dtwin.sensitivity_sweep",
+    "sweep_grid": "dtwin.sensitivity_sweep",
+    "replicate_seed": "dtwin.sensitivity_sweep",
+    "sweep_table": "dtwin.sensitivity_sweep",
+    "summarize_sweep": "dtwin.sensitivity_sweep",
     "run_sweep_point": "dtwin.stages.sensitivity",
 }
 

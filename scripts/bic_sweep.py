@@ -13,7 +13,7 @@ start_rule(snakemake)
 import pandas as pd
 
 from dtwin.artifacts import write_csv
-from dtwin.faults import regime_features
+from dtwin.fault_injection import regime_features
 from dtwin.stages.regimes import sweep_bic
 from dtwin.wiring import RESIDUALS
 

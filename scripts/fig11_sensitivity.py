@@ -3,7 +3,7 @@
 Input   results/sensitivity/alpha*_mA*_mB*_rep*.json (one per grid point and replicate),
         config/reference/sensitivity_36_rerun.csv (R's 36 runs)
 Output  paper_figures/fig11_sensitivity.{png,pdf,json}
-        results/sensitivity/runs.csv      every run (dtwin.sensitivity.SWEEP_COLUMNS)
+        results/sensitivity/runs.csv      every run (dtwin.sensitivity_sweep.SWEEP_COLUMNS)
         results/sensitivity/summary.csv   mean and interval over replicates per configuration (%)
 Params  sensitivity (grid, n_replicates, correction.method, interval, ...)
 """
@@ -15,13 +15,8 @@ start_rule(snakemake)
 from dtwin.artifacts import write_csv
 from dtwin.figures._style import publish_artifact
 from dtwin.figures.sensitivity import fig11_sensitivity
-from dtwin.sensitivity import (
-    load_r_sweep,
-    read_sweep_rows,
-    summarize_sweep,
-    sweep_grid,
-    sweep_table,
-)
+from dtwin.reference.loaders import load_r_sweep
+from dtwin.sensitivity_sweep import read_sweep_rows, summarize_sweep, sweep_grid, sweep_table
 
 s = snakemake.params.sensitivity
 grid = sweep_grid(s["alphas"], s["sensor_A_mults"], s["sensor_B_mults"], s["n_replicates"])

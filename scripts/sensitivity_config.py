@@ -3,7 +3,7 @@
 Input   config/reference/faulted_pipeline_seed11_rerun.csv   R's seed-11 signals (if r_signals)
 Output  results/sensitivity/alpha{alpha}_mA{ma}_mB{mb}_rep{rep}.json
         {"point": {...}, "rows": [...]}: one row per source (ours, r_signals) and correction
-        method, columns dtwin.sensitivity.SWEEP_COLUMNS (RMSE/MAE in m, reductions in %)
+        method, columns dtwin.sensitivity_sweep.SWEEP_COLUMNS (RMSE/MAE in m, reductions in %)
 Params  point (alpha, m_A, m_B, replicate), simulation, command, twin, arx,
         sensitivity (seed, hmm, correction.code / .paper, r_signals)
 Imports no matplotlib or statsmodels: this runs once per grid point.
@@ -14,8 +14,8 @@ from dtwin._script import start_rule
 start_rule(snakemake)
 
 from dtwin.artifacts import write_json
-from dtwin.reference import load_r_physics
-from dtwin.sensitivity import SweepPoint
+from dtwin.reference.loaders import load_r_physics
+from dtwin.sensitivity_sweep import SweepPoint
 from dtwin.stages.sensitivity import run_sweep_point, run_sweep_point_on_r_signals
 
 p = snakemake.params

@@ -8,7 +8,7 @@ import pytest
 
 from dtwin._validation import DtwinValueError
 from dtwin.arx import ArxFit, ArxOrders, fit_arx, simulate_arx
-from dtwin.reference import crosscheck_arx
+from dtwin.reference.crosschecks import crosscheck_arx
 from tests.conftest import REFERENCE
 
 
@@ -80,7 +80,7 @@ def test_bad_inputs_give_clear_errors():
 
 def test_r_rollout_csv_agrees_with_zero_seeded_chain(config, twin):
     """ARX_vs_Phys.R seeds rollouts with zeros; our chain with rollout_init='zeros' matches."""
-    from dtwin.reference import load_r_physics
+    from dtwin.reference.loaders import load_r_physics
     from dtwin.surrogate import fit_surrogates, run_surrogate_chain
 
     physics, _ = load_r_physics(REFERENCE / "faulted_pipeline_seed11_rerun.csv")

@@ -1,4 +1,4 @@
-"""Tests of dtwin.correction: shaping bounds, the R crosschecks (§7A and §7C), causality."""
+"""Tests of dtwin.bias_correction: shaping bounds, the R crosschecks (§7A and §7C), causality."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from dtwin._validation import DtwinValueError
-from dtwin.correction import (
+from dtwin.bias_correction import (
     CORRECTED_SIGNALS,
     correct_bias,
     correct_plant_bias_viterbi,

@@ -1,4 +1,4 @@
-"""Tests of dtwin.faults: schedule, injection (vs the R run), features, Hungarian, scores."""
+"""Tests of dtwin.fault_injection and dtwin.regime_matching (schedule, injection, Hungarian)."""
 
 from __future__ import annotations
 
@@ -8,21 +8,18 @@ import pytest
 from sklearn.metrics import accuracy_score, cohen_kappa_score, f1_score
 
 from dtwin._validation import DtwinValueError
-from dtwin.faults import (
+from dtwin.fault_injection import (
     FAULT_SCHEDULE,
     FEATURES,
     REGIMES,
-    UNMATCHED,
     FaultMagnitudes,
     RegimeWindow,
-    classification_scores,
     fault_schedule,
-    hungarian_map,
     inject_faults,
-    mapped_posteriors,
     regime_features,
     regime_labels,
 )
+from dtwin.regime_matching import UNMATCHED, classification_scores, hungarian_map, mapped_posteriors
 from dtwin.wiring import RESIDUALS
 from tests.conftest import REFERENCE
 

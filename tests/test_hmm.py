@@ -13,7 +13,7 @@ import pytest
 from scipy.stats import norm
 
 from dtwin._validation import DtwinValueError
-from dtwin.faults import classification_scores, hungarian_map, regime_features
+from dtwin.fault_injection import regime_features
 from dtwin.hmm import (
     HmmFitError,
     bic_sweep,
@@ -23,6 +23,7 @@ from dtwin.hmm import (
     to_hmmlearn,
     zscore,
 )
+from dtwin.regime_matching import classification_scores, hungarian_map
 
 R_BEST_LOGLIK = -2115.852  # depmixS4, best of 10 starts (REFERENCE.md §5, §11)
 

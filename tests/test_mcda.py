@@ -10,7 +10,7 @@ from pymcdm.methods import TOPSIS
 
 from dtwin._validation import DtwinValueError
 from dtwin.mcda import ACTIONS, NO_ACTION, McdaSettings, run_mcda, select_actions, topsis
-from dtwin.reference import load_r_fault_scenario
+from dtwin.reference.loaders import load_r_fault_scenario
 from tests.conftest import REFERENCE
 
 WEIGHTS = {

@@ -1,4 +1,4 @@
-"""Tests of dtwin.sensitivity: grid, seeds, one configuration, R's inputs, aggregation."""
+"""Tests of dtwin.sensitivity_sweep: grid, seeds, one configuration, R's inputs, aggregation."""
 
 from __future__ import annotations
 
@@ -10,13 +10,12 @@ import pytest
 
 from dtwin._validation import DtwinTypeError, DtwinValueError
 from dtwin.figures.sensitivity import sweep_claim_numbers
-from dtwin.reference import load_r_physics
-from dtwin.sensitivity import (
+from dtwin.reference.loaders import load_r_physics, load_r_sweep
+from dtwin.sensitivity_sweep import (
     SWEEP_COLUMNS,
     SweepPoint,
     alpha_trends,
     bimodality_coefficient,
-    load_r_sweep,
     replicate_seed,
     scale_twin,
     summarize_sweep,

@@ -10,7 +10,7 @@ import pytest
 
 from dtwin._validation import DtwinValueError
 from dtwin.artifacts import to_jsonable
-from dtwin.faults import FEATURES, REGIMES, regime_features
+from dtwin.fault_injection import FEATURES, REGIMES, regime_features
 from dtwin.hmm import zscore
 from dtwin.stages.correction import crosscheck_correction, targeted_intervention
 from dtwin.stages.faults import (

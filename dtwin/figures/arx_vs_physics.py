@@ -15,7 +15,7 @@ from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.arx import arx_orders_from_mapping
 from dtwin.figures._style import PHYSICS_COLOR, SURROGATE_COLOR, apply_style
 from dtwin.params import twin_params_from_mapping
-from dtwin.reference import crosscheck_arx
+from dtwin.reference.crosschecks import crosscheck_arx
 from dtwin.surrogate import n_train_samples
 from dtwin.wiring import MODULES, RESIDUALS, Module
 

@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite, validity_probabilities
-from dtwin.faults import REGIMES
+from dtwin.fault_injection import REGIMES
 from dtwin.figures._style import R_COLOR, REGIME_COLORS, apply_style, regime_spans
 from dtwin.stages.faults import crosscheck_hungarian
 

@@ -10,7 +10,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
-from dtwin.faults import FEATURES, REGIMES, regime_features
+from dtwin.fault_injection import FEATURES, REGIMES, regime_features
 from dtwin.figures._style import REGIME_COLORS, apply_style
 from dtwin.hmm import zscore
 
@@ -152,7 +152,7 @@ def plot_feature_separability(features: pd.DataFrame, regimes: np.ndarray) -> Fi
     Parameters
     ----------
     features : DataFrame
-        The ten z-scored features (:data:`dtwin.faults.FEATURES`).
+        The ten z-scored features (:data:`dtwin.fault_injection.FEATURES`).
     regimes : array of str, shape (T,)
         Ground-truth regime of every sample.
     """

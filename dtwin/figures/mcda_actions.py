@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.figures._style import PHYSICS_COLOR, apply_style, regime_spans, shade_regimes
 from dtwin.mcda import ACTIONS, NO_ACTION, run_mcda
-from dtwin.reference import load_r_fault_scenario
+from dtwin.reference.loaders import load_r_fault_scenario
 from dtwin.stages.decisions import mcda_settings_from_mapping
 
 __all__ = ["fig10_mcda_actions", "plot_mcda_actions"]

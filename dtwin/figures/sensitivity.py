@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.figures._style import BAND_COLOR, PHYSICS_COLOR, SURROGATE_COLOR, apply_style
-from dtwin.sensitivity import alpha_trends, bimodality_coefficient
+from dtwin.sensitivity_sweep import alpha_trends, bimodality_coefficient
 
 __all__ = ["plot_sensitivity", "fig11_sensitivity", "sweep_claim_numbers"]
 
@@ -57,10 +57,10 @@ def plot_sensitivity(
     Parameters
     ----------
     summary : DataFrame
-        From :func:`dtwin.sensitivity.summarize_sweep` (sources ``ours`` and optionally
+        From :func:`dtwin.sensitivity_sweep.summarize_sweep` (sources ``ours`` and optionally
         ``r_signals``).
     r_sweep : DataFrame or None
-        R's re-run (:func:`dtwin.sensitivity.load_r_sweep`), drawn on the ``code`` panels.
+        R's re-run (:func:`dtwin.reference.loaders.load_r_sweep`), drawn on the ``code`` panels.
     methods : sequence of str
         Correction methods, one panel set each, left to right.
     interval : float
@@ -174,7 +174,7 @@ def sweep_claim_numbers(means: pd.DataFrame, slopes: pd.DataFrame | None = None)
     means : DataFrame
         Columns ``alpha, m_A, m_B, value`` (ΔRMSE_e1 % per configuration).
     slopes : DataFrame, optional
-        From :func:`dtwin.sensitivity.alpha_trends` for these values (columns ``m_A, m_B,
+        From :func:`dtwin.sensitivity_sweep.alpha_trends` for these values (columns ``m_A, m_B,
         replicate, slope_pct_per_unit_alpha``); computed from ``means`` when omitted.
 
     Returns
@@ -409,11 +409,11 @@ def fig11_sensitivity(
     Parameters
     ----------
     table : DataFrame
-        Every run (:func:`dtwin.sensitivity.sweep_table`).
+        Every run (:func:`dtwin.sensitivity_sweep.sweep_table`).
     summary : DataFrame
-        :func:`dtwin.sensitivity.summarize_sweep` of ``table``.
+        :func:`dtwin.sensitivity_sweep.summarize_sweep` of ``table``.
     r_sweep : DataFrame
-        R's re-run (:func:`dtwin.sensitivity.load_r_sweep`).
+        R's re-run (:func:`dtwin.reference.loaders.load_r_sweep`).
     sensitivity : mapping
         The ``sensitivity`` config section (grid, ``correction.method``, ``interval``, ...).
     """

@@ -2,7 +2,7 @@
 
 What the authors' ``TargetedIntervention.R`` does (REFERENCE.md §7A): the faulted surrogate
 streams are corrected with the posterior-weighted state bias of the fault-scenario HMM
-(:func:`dtwin.correction.correct_bias`), and the residuals before and after are compared. Two
+(:func:`dtwin.bias_correction.correct_bias`), and the residuals before and after are compared. Two
 variants are computed:
 
 - ``smoothed``: the paper's correction, with ``γ_t = P(S_t | e_1:T)`` (it looks ahead);
@@ -23,8 +23,8 @@ import numpy as np
 import pandas as pd
 
 from dtwin.artifacts import Check
-from dtwin.correction import BiasCorrection, correct_bias
-from dtwin.reference import load_r_physics
+from dtwin.bias_correction import BiasCorrection, correct_bias
+from dtwin.reference.loaders import load_r_physics
 from dtwin.stages._states import posterior_matrix
 from dtwin.wiring import RESIDUALS
 
@@ -59,7 +59,7 @@ def correct_twin(
     correction: Mapping[str, Any],
     state_means: np.ndarray | None = None,
 ) -> BiasCorrection:
-    """:func:`dtwin.correction.correct_bias` with the ``twin`` and ``correction`` sections."""
+    """:func:`dtwin.bias_correction.correct_bias` with the ``twin`` and ``correction`` sections."""
     return correct_bias(
         surrogate,
         physics,
@@ -104,7 +104,7 @@ def targeted_intervention(
         ``residuals``: ``t``, ``regime``, then ``<e>_before``, ``<e>_smoothed`` and
         ``<e>_filtered`` for every residual channel ``e`` (physical units);
         ``metrics``: one row per variant and channel with the columns of
-        :attr:`dtwin.correction.BiasCorrection.metrics` (``variant`` first).
+        :attr:`dtwin.bias_correction.BiasCorrection.metrics` (``variant`` first).
     """
     smoothed = correct_twin(faulted, physics, posterior_matrix(states, "gamma"), twin, correction)
     filtered = correct_twin(

@@ -22,19 +22,21 @@ import numpy as np
 import pandas as pd
 
 from dtwin.artifacts import Check
-from dtwin.faults import (
+from dtwin.fault_injection import (
     DRIFT_ORIGINS,
     REGIMES,
     FaultMagnitudes,
-    StateMapping,
-    classification_scores,
     fault_schedule,
-    hungarian_map,
     inject_faults,
-    mapped_posteriors,
     regime_features,
 )
 from dtwin.hmm import HmmFit
+from dtwin.regime_matching import (
+    StateMapping,
+    classification_scores,
+    hungarian_map,
+    mapped_posteriors,
+)
 from dtwin.stages.regimes import fit_regimes, hmm_summary, states_table
 from dtwin.surrogate import compute_residuals
 

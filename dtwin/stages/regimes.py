@@ -21,7 +21,7 @@ import pandas as pd
 
 from dtwin._validation import DtwinValueError
 from dtwin.artifacts import Check
-from dtwin.faults import regime_features
+from dtwin.fault_injection import regime_features
 from dtwin.hmm import HmmFit, ZScored, bic_sweep, fit_hmm, zscore
 from dtwin.stages._states import posterior_matrix, state_labels
 from dtwin.wiring import RESIDUALS

@@ -1,10 +1,10 @@
 """Stage "sensitivity" (paper §5, Fig. 11): run one configuration and replicate of the sweep.
 
 The sweep itself — grid, seeds, result records and their aggregation — is
-:mod:`dtwin.sensitivity` (numpy and pandas only, so the aggregate rule does not import hmmlearn);
-this module runs one point: simulate (or rebuild R's signals), refit the ARX surrogates, the HMM
-and both plant corrections. Config sections: ``simulation``, ``command``, ``twin``, ``arx``,
-``sensitivity``.
+:mod:`dtwin.sensitivity_sweep` (numpy and pandas only, so the aggregate rule does not import
+hmmlearn); this module runs one point: simulate (or rebuild R's signals), refit the ARX
+surrogates, the HMM and both plant corrections. Config sections: ``simulation``, ``command``,
+``twin``, ``arx``, ``sensitivity``.
 """
 
 from __future__ import annotations
@@ -21,11 +21,11 @@ from dtwin._validation import (
     require_mapping,
     require_nonnegative,
 )
-from dtwin.correction import correct_bias, correct_plant_bias_viterbi
+from dtwin.bias_correction import correct_bias, correct_plant_bias_viterbi
 from dtwin.hmm import fit_hmm, zscore
 from dtwin.params import twin_params_from_mapping
 from dtwin.physics import fuse, sensor_first_order
-from dtwin.sensitivity import (
+from dtwin.sensitivity_sweep import (
     CORRECTION_METHODS,
     CorrectionScore,
     SweepPoint,

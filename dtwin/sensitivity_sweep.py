@@ -12,11 +12,11 @@ six residuals, fit a K-state Gaussian HMM and correct the plant position; report
 Two corrections are computed on the same fit (both are cheap next to the HMM):
 
 - ``code`` — the authors' sweep (REFERENCE.md §7C,
-  :func:`dtwin.correction.correct_plant_bias_viterbi`): Viterbi-hard state means of z-scored
+  :func:`dtwin.bias_correction.correct_plant_bias_viterbi`): Viterbi-hard state means of z-scored
   ``e1``, κ 0.6, EMA 0.15, rate limit 5e-4 m/sample;
 - ``paper`` — the paper's targeted-intervention values (§4.3: κ 0.8, EMA 0.15, rate limit
   0.05) with posterior-weighted state means of the raw ``e1`` (Eq. (25),
-  :func:`dtwin.correction.correct_bias`), applied to the plant position only. (The sweep
+  :func:`dtwin.bias_correction.correct_bias`), applied to the plant position only. (The sweep
   paragraph of §5 itself describes Viterbi-state means converted back to physical units, i.e.
   the ``code`` variant; only κ and the rate limit come from §4.3.)
 
@@ -67,7 +67,6 @@ __all__ = [
     "sweep_grid",
     "replicate_seed",
     "scale_twin",
-    "load_r_sweep",
     "CorrectionScore",
     "SweepRun",
     "read_sweep_rows",
@@ -223,39 +222,6 @@ def scale_twin(twin: Mapping[str, Any], alpha: float, m_A: float, m_B: float) ->
         "sensor_B": noise["sensor_B"] * m_B,
     }
     return scaled
-
-
-#: R's sweep table column → ours (``config/reference/sensitivity_36_rerun.csv``).
-R_SWEEP_COLUMNS: dict[str, str] = {
-    "alpha_fuse": "alpha",
-    "sa_mult": "m_A",
-    "sb_mult": "m_B",
-    "RMSE_e1_orig": "rmse_e1_before",
-    "RMSE_e1_corr": "rmse_e1_after",
-    "MAE_e1_orig": "mae_e1_before",
-    "MAE_e1_corr": "mae_e1_after",
-    "L2_orig": "l2_before",
-    "L2_corr": "l2_after",
-    "dRMSE_e1_pct": "drmse_e1_pct",
-    "dMAE_e1_pct": "dmae_e1_pct",
-    "dL2_pct": "dl2_pct",
-}
-
-
-def load_r_sweep(path: str | os.PathLike) -> pd.DataFrame:
-    """Return R's 36-run sweep (``RobustnessAnalysis.R`` re-run) in our column names.
-
-    Returns
-    -------
-    DataFrame
-        Columns ``alpha, m_A, m_B`` and the scores of :class:`CorrectionScore` (R's ``code``
-        correction, one EM start per configuration).
-    """
-    raw = pd.read_csv(path)
-    missing = [c for c in R_SWEEP_COLUMNS if c not in raw.columns]
-    if missing:
-        raise DtwinValueError(f"{path} is missing column(s): {', '.join(missing)}")
-    return raw[list(R_SWEEP_COLUMNS)].rename(columns=R_SWEEP_COLUMNS)
 
 
 @dataclass(frozen=True)
