@@ -3,7 +3,7 @@
 The model is ``y_t = Σ_{i=1..na} a_i·y_{t−i} + Σ_{j=1..nb} b_j·u_{t−d−j} + e_t`` with no
 intercept (Eq. (22)). ``d`` is the paper's optional input delay: with ``d = 0`` the most recent
 input in the regressor is ``u_{t−1}`` (the convention of the paper and of the authors' code,
-which REFERENCE.md §2 calls "input delay 1").
+which r_notes.md §2 calls "input delay 1").
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Posterior-weighted bias correction of the surrogate chain (paper §4.3 Eq. (25); §5 Eq. (27)).
 
-The correction of the authors' ``TargetedIntervention.R`` (REFERENCE.md §7A):
+The correction of the authors' ``TargetedIntervention.R`` (r_notes.md §7A):
 
 1. state means of the raw, physical-unit residuals, ``μ_kj = Σ_t γ_t(k) e_j(t) / Σ_t γ_t(k)``;
 2. the posterior-weighted bias ``b̂_j(t) = Σ_k γ_t(k) μ_kj`` (Eq. (25));
@@ -11,7 +11,7 @@ The correction of the authors' ``TargetedIntervention.R`` (REFERENCE.md §7A):
 
 The posteriors may be smoothed (``P(S_t | e_1:T)``, the paper) or filtered
 (``P(S_t | e_1:t)``, a causal correction). The variant of the sensitivity sweep
-(``RobustnessAnalysis.R``, REFERENCE.md §7C) is :func:`correct_plant_bias_viterbi`.
+(``RobustnessAnalysis.R``, r_notes.md §7C) is :func:`correct_plant_bias_viterbi`.
 Arrays are time-first, shape ``(T,)`` or ``(T, n_channels)``.
 """
 
@@ -361,7 +361,7 @@ def correct_plant_bias_viterbi(
     ema_alpha: float = 0.15,
     rate_max: float = 5e-4,
 ) -> PlantBiasCorrection:
-    """Correct the plant position as the authors' sensitivity sweep does (REFERENCE.md §7C).
+    """Correct the plant position as the authors' sensitivity sweep does (r_notes.md §7C).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The ``dtwin`` command line: a thin front end over the library (issue #5).
+"""The ``dtwin`` command line: a thin front end over the library.
 
 Subcommands::
 

@@ -1,4 +1,4 @@
-"""Input command generator (paper §3.1, "Input Command Generator"; REFERENCE.md §1)."""
+"""Input command generator (paper §3.1, "Input Command Generator"; r_notes.md §1)."""
 
 from __future__ import annotations
 

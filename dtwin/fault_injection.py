@@ -1,4 +1,4 @@
-"""Fault injection and the regime features (paper §2.2, §4.4; REFERENCE.md §5).
+"""Fault injection and the regime features (paper §2.2, §4.4; r_notes.md §5).
 
 The fault scenario injects four scheduled regimes into the *surrogate* streams after the ARX
 rollout (the physics and the surrogate dynamics are untouched), exactly as the authors' code
@@ -54,7 +54,7 @@ __all__ = [
 #: Regime names in schedule order; each name is also the kind of fault it injects.
 REGIMES: tuple[str, ...] = ("Nominal", "SensorNoisy", "DynamicsOff", "Drift")
 
-#: The ten HMM features of the fault scenario (REFERENCE.md §5), before z-scoring.
+#: The ten HMM features of the fault scenario (r_notes.md §5), before z-scoring.
 FEATURES: tuple[str, ...] = (*RESIDUALS, "e_abs_sum", "e_rms", "e1_diff", "e3_diff")
 
 #: Where the drift ramp starts counting samples.
@@ -131,7 +131,7 @@ def fault_schedule(entries: Sequence[Mapping[str, Any] | RegimeWindow]) -> tuple
 
 @dataclass(frozen=True)
 class FaultMagnitudes:
-    """Fault sizes (defaults: the authors' code, REFERENCE.md §5).
+    """Fault sizes (defaults: the authors' code, r_notes.md §5).
 
     Attributes
     ----------

@@ -1,7 +1,7 @@
 """Gaussian hidden Markov model of the residual regimes (paper §2.1 Eqs. (2)–(10), §4.2, §5).
 
 A K-state HMM with diagonal-covariance Gaussian emissions (paper Eq. (3); depmixS4's
-independent ``gaussian()`` responses, REFERENCE.md §4) is fitted by EM to z-scored residual
+independent ``gaussian()`` responses, r_notes.md §4) is fitted by EM to z-scored residual
 features, arrays time-first ``(T, D)``. EM runs in :class:`hmmlearn.hmm.GaussianHMM` through its
 public methods only (``fit``, ``score``, ``decode``, ``predict_proba``); dtwin adds what
 depmixS4 did and hmmlearn does not:
@@ -206,7 +206,7 @@ class HmmFit:
     log_likelihood : float
         ``log p(X)`` at the returned parameters.
     n_params : int
-        ``(K−1) + K(K−1) + 2DK`` (REFERENCE.md §4).
+        ``(K−1) + K(K−1) + 2DK`` (r_notes.md §4).
     bic : float
         ``−2·log_likelihood + n_params·log(T)``.
     n_iter : int
@@ -231,7 +231,7 @@ class HmmFit:
     restart_viterbi : ndarray of int, shape (n_restarts, T)
         Viterbi path of every start's fitted model (row ``restart − 1``), ``−1`` throughout
         for starts that failed or degenerated; how much the starts disagree (paper §4.4;
-        REFERENCE.md §5: depmixS4's restarts agree on 69–100 % of the samples).
+        r_notes.md §5: depmixS4's restarts agree on 69–100 % of the samples).
     """
 
     startprob: np.ndarray

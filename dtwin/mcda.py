@@ -1,4 +1,4 @@
-"""Regime-aware action selection with TOPSIS (paper §5, Table 1; REFERENCE.md §8).
+"""Regime-aware action selection with TOPSIS (paper §5, Table 1; r_notes.md §8).
 
 Per time step the twin scores five mitigation actions on five benefit criteria (KPI gain,
 module gain, drift gain, stability = −penalty, cost negated), each gain weighted by the
@@ -52,7 +52,7 @@ CRITERIA: tuple[str, ...] = ("KPI_gain", "Module_gain", "Drift_gain", "Stability
 
 @dataclass(frozen=True)
 class Action:
-    """A mitigation action with its fixed cost and stability penalty (REFERENCE.md §8)."""
+    """A mitigation action with its fixed cost and stability penalty (r_notes.md §8)."""
 
     name: str
     cost: float
@@ -138,7 +138,7 @@ def _robust_scale(values: np.ndarray) -> np.ndarray:
 
 
 def mcda_features(residuals: pd.DataFrame, dt: float, roll_sec: float = 1.0) -> pd.DataFrame:
-    """Return the per-step MCDA features of REFERENCE.md §8.
+    """Return the per-step MCDA features of r_notes.md §8.
 
     Parameters
     ----------
@@ -181,7 +181,7 @@ def criteria_tensor(features: pd.DataFrame, probs: pd.DataFrame) -> np.ndarray:
     """Return the decision matrices of every step, shape ``(T, n_actions, n_criteria)``.
 
     ``probs`` has columns ``p_SensorNoisy``, ``p_DynamicsOff``, ``p_Drift`` (and
-    ``p_Nominal``); the expressions are those of REFERENCE.md §8 (paper Table 1).
+    ``p_Nominal``); the expressions are those of r_notes.md §8 (paper Table 1).
     """
     p_s = probs["p_SensorNoisy"].to_numpy()
     p_d = probs["p_DynamicsOff"].to_numpy()
@@ -319,7 +319,7 @@ def select_actions(
 def run_mcda(
     residuals: pd.DataFrame, probs: pd.DataFrame, dt: float, settings: McdaSettings
 ) -> McdaResult:
-    """Score, gate and select an action at every step (paper §5; REFERENCE.md §8).
+    """Score, gate and select an action at every step (paper §5; r_notes.md §8).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The physical asset: five discrete modules and the simulator (paper §3.1; REFERENCE.md §1).
+"""The physical asset: five discrete modules and the simulator (paper §3.1; r_notes.md §1).
 
 Every module applies its input with a one-sample delay (``u[k-1]`` drives step ``k``), as the
 paper's equations and the authors' R code do. Arrays are time-first, shape ``(n_steps,)``.

@@ -1,6 +1,6 @@
 """Sensitivity sweep of the HMM-guided plant correction (paper §5, Eq. (27), Fig. 11).
 
-The authors' ``RobustnessAnalysis.R`` (REFERENCE.md §9): for every fusion weight α and pair of
+The authors' ``RobustnessAnalysis.R`` (r_notes.md §9): for every fusion weight α and pair of
 sensor-noise multipliers ``(m_A, m_B)``, rerun the physics with the sensor noise standard
 deviations scaled by the multipliers, refit the ARX surrogates on the first half, z-score the
 six residuals, fit a K-state Gaussian HMM and correct the plant position; report
@@ -11,7 +11,7 @@ six residuals, fit a K-state Gaussian HMM and correct the plant position; report
 
 Two corrections are computed on the same fit (both are cheap next to the HMM):
 
-- ``code`` — the authors' sweep (REFERENCE.md §7C,
+- ``code`` — the authors' sweep (r_notes.md §7C,
   :func:`dtwin.bias_correction.correct_plant_bias_viterbi`): Viterbi-hard state means of z-scored
   ``e1``, κ 0.6, EMA 0.15, rate limit 5e-4 m/sample;
 - ``paper`` — the paper's targeted-intervention values (§4.3: κ 0.8, EMA 0.15, rate limit

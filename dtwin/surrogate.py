@@ -1,6 +1,6 @@
 """The digital twin: ARX surrogates wired as the physical chain, and module residuals.
 
-Paper §3.2 and §2 Eq. (1); REFERENCE.md §2–3. The wiring comes from
+Paper §3.2 and §2 Eq. (1); r_notes.md §2–3. The wiring comes from
 :data:`dtwin.wiring.MODULES`: each ARX module is fitted on the *physics* input/output pair of
 the training window and rolled out from its *surrogate* input (M0 from the true command, M1
 from the M0 surrogate, both sensors from the M1 surrogate); M3 and M4 are recomputed

@@ -1,4 +1,4 @@
-"""gap_benchmark: score every diagnosis against its withheld truth (issue #5).
+"""gap_benchmark: score every diagnosis against its withheld truth.
 
 Inputs: ``diagnoses`` (diagnosis.json per case), ``truths`` (key.json per case, same order).
 Outputs: ``paper_figures/gap_benchmark.{png,pdf}`` (confusion matrix, accuracy vs magnitude,

@@ -1,4 +1,4 @@
-"""gap_case: generate one recording with a withheld effect (issue #5).
+"""gap_case: generate one recording with a withheld effect.
 
 Inputs: none (the case name ``{case}`` = ``<effect>_<NN>`` picks the effect and the seed).
 Outputs: ``recording.csv`` (t in s, signals in the twin's units), ``twin.yaml`` (the nominal twin,

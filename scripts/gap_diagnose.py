@@ -1,4 +1,4 @@
-"""gap_diagnose: diagnose one recording's sim-to-real gap (issue #5), as `dtwin diagnose` does.
+"""gap_diagnose: diagnose one recording's sim-to-real gap, as `dtwin diagnose` does.
 
 Inputs: ``recording`` (CSV: t in s and module signals), ``twin`` (YAML twin file).
 Outputs: ``diagnosis.json`` (schema workflow/schemas/diagnosis.schema.json), ``report.md``,

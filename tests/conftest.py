@@ -50,5 +50,5 @@ def twin(config):
 
 @pytest.fixture(scope="session")
 def r_pipeline() -> pd.DataFrame:
-    """The authors' seed-11 fault-scenario signals (config/reference, REFERENCE.md §13)."""
+    """The authors' seed-11 fault-scenario signals (config/reference, r_notes.md §13)."""
     return pd.read_csv(REFERENCE / "faulted_pipeline_seed11_rerun.csv")

@@ -82,7 +82,7 @@ def test_shaping_validates_arguments():
         rate_limit(np.zeros(3), -1.0)
 
 
-# --- posterior-weighted correction, REFERENCE.md §7A ----------------------------------------
+# --- posterior-weighted correction, r_notes.md §7A ----------------------------------------
 
 
 def test_correction_reproduces_r_targeted_intervention(r_pipeline, r_signals):
@@ -152,7 +152,7 @@ def test_correction_validates_inputs(r_signals):
         correct_bias(surrogate, physics, gamma[:10], **TWIN)
 
 
-# --- sensitivity-sweep variant, REFERENCE.md §7C --------------------------------------------
+# --- sensitivity-sweep variant, r_notes.md §7C --------------------------------------------
 
 
 def test_plant_variant_reproduces_r_sensitivity_row_on_the_same_local_optimum(r_pipeline):

@@ -25,7 +25,7 @@ from dtwin.hmm import (
 )
 from dtwin.regime_matching import classification_scores, hungarian_map
 
-R_BEST_LOGLIK = -2115.852  # depmixS4, best of 10 starts (REFERENCE.md §5, §11)
+R_BEST_LOGLIK = -2115.852  # depmixS4, best of 10 starts (r_notes.md §5, §11)
 
 
 @pytest.fixture(scope="module")

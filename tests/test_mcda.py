@@ -1,4 +1,4 @@
-"""MCDA/TOPSIS action selection (paper §5, Table 1; REFERENCE.md §8)."""
+"""MCDA/TOPSIS action selection (paper §5, Table 1; r_notes.md §8)."""
 
 from __future__ import annotations
 

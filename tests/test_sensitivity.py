@@ -194,7 +194,7 @@ def test_summary_mean_interval_and_alpha_slopes():
 
 
 def test_claim_numbers_reproduce_references_summary_of_r(r_sweep):
-    """REFERENCE.md §9: R's 36 values: min 23.28, max 41.85, mean 29.54, median 24.95."""
+    """r_notes.md §9: R's 36 values: min 23.28, max 41.85, mean 29.54, median 24.95."""
     numbers = sweep_claim_numbers(
         r_sweep[["alpha", "m_A", "m_B"]].assign(value=r_sweep["drmse_e1_pct"])
     )

@@ -21,7 +21,7 @@ __all__ = ["fig09_bic", "plot_bic", "r_bic_tables"]
 #: K at which the paper (and both R experiments) find the BIC minimum (§5, Fig. 9).
 PAPER_K_MIN = 8
 
-#: Titles of the two data sets (REFERENCE.md §6 (a) and (b)).
+#: Titles of the two data sets (r_notes.md §6 (a) and (b)).
 TITLES = {
     "nominal_residuals": "A  Nominal run: six z-scored residuals",
     "fault_features": "B  Fault scenario: ten z-scored features",

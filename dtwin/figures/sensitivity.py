@@ -28,7 +28,7 @@ PAPER_RANGE_PCT = (23.0, 40.0)
 RANGE_SLACK_PCT = 3.0
 #: Paper §5: balanced noise (m_A = m_B) "clustered around the mid-20 % to high-20 % range".
 BALANCED_RANGE_PCT = (23.0, 30.0)
-#: Midpoint of R's two modes (~24 % and ~40 %, REFERENCE.md §9): values below it are "low mode".
+#: Midpoint of R's two modes (~24 % and ~40 %, r_notes.md §9): values below it are "low mode".
 R_MODE_SPLIT_PCT = 32.0
 #: Relative spread of e1's RMSE across configurations that still counts as "identical".
 E1_IDENTICAL_RTOL = 1e-12
@@ -36,7 +36,7 @@ E1_IDENTICAL_RTOL = 1e-12
 R_INPUT_RTOL = 1e-7
 
 _METHOD_TITLES = {
-    "code": "code: Viterbi state means, κ 0.6, rate 5e-4 (REFERENCE.md §7C)",
+    "code": "code: Viterbi state means, κ 0.6, rate 5e-4 (r_notes.md §7C)",
     "paper": "paper §4.3 values: posterior-weighted means, κ 0.8, rate 0.05",
 }
 _GRID = ["alpha", "m_A", "m_B"]
@@ -281,7 +281,7 @@ def _claims(numbers: Mapping[str, dict], alphas: Sequence[float], grid: Mapping)
         Check(
             id="one_mode_with_restarts",
             kind="claim",
-            statement="REFERENCE.md §9: R's 36 values are bimodal (~24 % or ~40 %) because each "
+            statement="r_notes.md §9: R's 36 values are bimodal (~24 % or ~40 %) because each "
             "configuration had one EM start and landed in one of two local optima; with several "
             "starts per fit ours should sit in one mode (Sarle's bimodality coefficient, > 5/9 "
             "suggesting two modes, is reported beside it)",

@@ -1,4 +1,4 @@
-"""Sim-to-real gap diagnosis (issue #5): where the gap lies, which effect causes it, how far
+"""Sim-to-real gap diagnosis: where the gap lies, which effect causes it, how far
 it shrinks once added — checked on generated recordings whose effect is withheld.
 
 Modules: :mod:`~dtwin.gap.recording` (load and validate a recording), :mod:`~dtwin.gap.effects`

@@ -1,4 +1,4 @@
-"""Scoring diagnoses against the withheld truth: the ``gap_benchmark`` artifact (issue #5).
+"""Scoring diagnoses against the withheld truth: the ``gap_benchmark`` artifact.
 
 :func:`score_cases` joins each case's key (the truth from :mod:`dtwin.gap.generator`) with its
 ``diagnosis.json`` and returns one row per case; :func:`benchmark_metrics` gives the accuracies
@@ -125,7 +125,7 @@ def benchmark_checks(table: pd.DataFrame, metrics: Mapping[str, Any]) -> list[Ch
             Check(
                 f"target_{name}",
                 "claim",
-                f"issue #5 target: {name} >= {target}",
+                f"docs/gap.md target: {name} >= {target}",
                 target,
                 observed,
                 bool(observed is not None and observed >= target),

@@ -1,6 +1,6 @@
 """The sim-to-real gap diagnoser: where the gap lies, which effect causes it, how far it shrinks.
 
-:func:`diagnose` implements issue #5 in three steps.
+:func:`diagnose` implements docs/gap.md in three steps.
 
 1. **Where.** Each module whose input and output are recorded is driven with its *recorded*
    input; its local gap (:mod:`dtwin.gap.localise`) is compared with the largest gap its noise

@@ -1,4 +1,4 @@
-"""The catalogue of candidate unmodelled effects of the gap diagnoser (issue #5, "Which").
+"""The catalogue of candidate unmodelled effects of the gap diagnoser (docs/gap.md, "Which").
 
 Each :class:`Effect` names the modules it can belong to, its parameters with units, bounds and
 starting points (scaled from the data, so the catalogue works in any units), and how it enters

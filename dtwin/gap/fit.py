@@ -1,4 +1,4 @@
-"""Fitting a module's twin, with or without a candidate effect, on the training part (issue #5).
+"""Fitting a module's twin, with or without a candidate effect, on the training part.
 
 Parameters are fitted by **simulation error**: the module is driven with its recorded input and
 its simulated output is compared with the recorded output over the training samples

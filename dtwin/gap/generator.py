@@ -1,4 +1,4 @@
-""" "Real" recordings with a withheld effect, for checking the gap diagnoser (issue #5).
+""" "Real" recordings with a withheld effect, for checking the gap diagnoser.
 
 :func:`generate_case` runs the paper's asset (§3.1) with one effect (or none, or one the
 catalogue does not know) and returns the recording, the nominal twin file and a separate key
@@ -66,7 +66,7 @@ OUT_OF_LIST_EFFECTS: dict[str, tuple[str, ...]] = {
 #: Every case type, ``none`` included.
 ALL_CASE_EFFECTS: tuple[str, ...] = (*IN_LIST_EFFECTS, *OUT_OF_LIST_EFFECTS, NONE)
 
-#: The paper's twin (REFERENCE.md §1), the nominal twin of every generated case.
+#: The paper's twin (r_notes.md §1), the nominal twin of every generated case.
 NOMINAL_TWIN: dict[str, Any] = {
     "dt": 0.02,
     "actuator": {"tau": 0.15},

@@ -1,4 +1,4 @@
-"""Where the gap lies: local gaps, the chain, and which gaps are only inherited (issue #5).
+"""Where the gap lies: local gaps, the chain, and which gaps are only inherited.
 
 The **gap** of a signal is a normalised RMS error over the held-out samples::
 

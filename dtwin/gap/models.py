@@ -2,7 +2,7 @@
 
 One function, :func:`simulate_module`, drives one module's twin with given input signals and
 returns its output, shape ``(n_samples,)``. The linear part of each module is the paper's
-(REFERENCE.md §1), with one-sample input delays:
+(r_notes.md §1), with one-sample input delays:
 
 - M0 ``u_act[k] = a·u_act[k−1] + (1−a)·u_cmd[k−1]``, ``a = exp(−dt/tau)``;
 - M1 explicit Euler ``a = (u[k−1] − u_offset − c·v[k−1] − k·x[k−1] − F(x, v))/m``,

@@ -1,4 +1,4 @@
-"""Recordings of the asset: load and validate a ``RECORDING.csv`` for the gap diagnoser (issue #5).
+"""Recordings of the asset: load and validate a ``RECORDING.csv`` for the gap diagnoser.
 
 A recording has a header row, then one row per sample: column ``t`` (seconds, uniform step) and
 any of the module signals of :data:`dtwin.wiring.SIGNALS` (``u_cmd, u_act, x, v, y_A, y_B,

@@ -1,4 +1,4 @@
-"""Reports of a diagnosis: ``diagnosis.json``, ``report.md`` and a figure (issue #5).
+"""Reports of a diagnosis: ``diagnosis.json``, ``report.md`` and a figure.
 
 :func:`diagnosis_to_dict` gives the JSON payload (schema: ``workflow/schemas/
 diagnosis.schema.json``); :func:`write_report` writes all three files into a folder, each

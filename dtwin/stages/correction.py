@@ -1,6 +1,6 @@
 """Stage "correction" (paper §4.3; Figs. 5, 6): the targeted intervention on the fault scenario.
 
-What the authors' ``TargetedIntervention.R`` does (REFERENCE.md §7A): the faulted surrogate
+What the authors' ``TargetedIntervention.R`` does (r_notes.md §7A): the faulted surrogate
 streams are corrected with the posterior-weighted state bias of the fault-scenario HMM
 (:func:`dtwin.bias_correction.correct_bias`), and the residuals before and after are compared. Two
 variants are computed:

@@ -1,4 +1,4 @@
-"""Stage "decisions" (paper §5, Table 1; REFERENCE.md §8): MCDA/TOPSIS action timeline.
+"""Stage "decisions" (paper §5, Table 1; r_notes.md §8): MCDA/TOPSIS action timeline.
 
 Config section ``mcda`` (weights, rolling window, gate, dwell, margin) plus ``twin.dt``.
 Inputs are the fault scenario's faulted residuals and Hungarian-mapped regime posteriors.

@@ -1,6 +1,6 @@
 """Stage "faults" (paper §4.4; Figs. 7, 8): fault injection, regime HMM, Hungarian scoring.
 
-The scheduled faults are injected into the twin's surrogate streams (REFERENCE.md §5), the
+The scheduled faults are injected into the twin's surrogate streams (r_notes.md §5), the
 faulted residuals give the ten z-scored features, a K-state HMM is fitted to them, its
 Viterbi path is mapped to the regimes by maximum overlap (Hungarian) and scored. The run is
 scored for both drift origins (the configured one writes the tables; the other is scored

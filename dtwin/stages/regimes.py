@@ -52,7 +52,7 @@ SEED_STREAMS: dict[str, int] = {
     "bic_fault_features": 5,
 }
 
-#: Data sets of the BIC sweep (REFERENCE.md §6 (a) and (b)).
+#: Data sets of the BIC sweep (r_notes.md §6 (a) and (b)).
 BIC_DATASETS: tuple[str, ...] = ("nominal_residuals", "fault_features")
 
 
@@ -250,7 +250,7 @@ def crosscheck_r_loglik(
     hmm : mapping
         The ``hmm`` section (starts and EM options; seed stream ``r_crosscheck_fit``).
     r_log_likelihood : float
-        depmixS4's best log-likelihood on the same features (REFERENCE.md §11: −2115.852).
+        depmixS4's best log-likelihood on the same features (r_notes.md §11: −2115.852).
     n_states : int, default 4
         K of R's fit (whatever ``hmm.n_states`` says).
     atol : float, default 1e-2
@@ -270,7 +270,7 @@ def crosscheck_r_loglik(
         statement=(
             f"our best of {hmm['n_restarts']} EM starts (K={n_states}) on R's ten "
             "z-scored fault features reaches depmixS4's best log-likelihood "
-            "(REFERENCE.md §11) or better"
+            "(r_notes.md §11) or better"
         ),
         expected=f">= {r_log_likelihood} - {atol:g}",
         observed=fit.log_likelihood,

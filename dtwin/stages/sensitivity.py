@@ -63,7 +63,7 @@ def r_sweep_physics(
     Notes
     -----
     R draws the same standard normals for every configuration (``set.seed(11)`` each time)
-    and scales them by the noise sd (REFERENCE.md §9), so a sensor reading is
+    and scales them by the noise sd (r_notes.md §9), so a sensor reading is
     ``ỹ + b + m·σ·ε`` with ``ỹ`` the noise-free first-order response to the physics position.
     ``σ·ε = y − ỹ − b`` is recovered from the nominal run and rescaled. Actuator, plant and KPI
     signals do not depend on the configuration.
