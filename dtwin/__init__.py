@@ -58,7 +58,7 @@ _EXPORTS: dict[str, str] = {
     "fit_hmm": "dtwin.hmm",
     "HmmFit": "dtwin.hmm",
     "filtered_posteriors": "dtwin.hmm",
-    "bic_sweep": "dtwin.hmm",
+    "bic_by_k": "dtwin.hmm",
     # bias correction (paper §4.3, Eq. (25))
     "correct_bias": "dtwin.bias_correction",
     # fault injection and regime scoring (paper §4.4)

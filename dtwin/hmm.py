@@ -17,7 +17,7 @@ depmixS4 did and hmmlearn does not:
   ``(LL − LL_old)/|LL_old| < tol``;
 - the filtered (causal) posteriors ``P(S_t = k | e_1:t)``, the normalised forward variables of
   Eq. (4), computed in log space by :func:`filtered_posteriors`;
-- BIC with depmixS4's parameter count ``p = (K−1) + K(K−1) + 2DK`` (Eq. (26)), :func:`bic_sweep`.
+- BIC with depmixS4's parameter count ``p = (K−1) + K(K−1) + 2DK`` (Eq. (26)), :func:`bic_by_k`.
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ __all__ = [
     "n_hmm_params",
     "filtered_posteriors",
     "to_hmmlearn",
-    "bic_sweep",
+    "bic_by_k",
 ]
 
 logger = logging.getLogger(__name__)
@@ -791,7 +791,7 @@ def filtered_posteriors(fit: HmmFit, X: Any) -> np.ndarray:
 # --- model order ----------------------------------------------------------------------------
 
 
-def bic_sweep(
+def bic_by_k(
     X: Any,
     ks: Sequence[int],
     *,
@@ -842,7 +842,7 @@ def bic_sweep(
             }
         )
         logger.info(
-            "bic_sweep K=%d: logL=%.3f BIC=%.3f (%d/%d usable starts)",
+            "bic_by_k K=%d: logL=%.3f BIC=%.3f (%d/%d usable starts)",
             k,
             fit.log_likelihood,
             fit.bic,

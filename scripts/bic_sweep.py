@@ -14,11 +14,11 @@ import pandas as pd
 
 from dtwin.artifacts import write_csv
 from dtwin.fault_injection import regime_features
-from dtwin.stages.regimes import sweep_bic
+from dtwin.stages.regimes import bic_sweep
 from dtwin.wiring import RESIDUALS
 
 datasets = {
     "nominal_residuals": pd.read_csv(snakemake.input.residuals)[list(RESIDUALS)],
     "fault_features": regime_features(pd.read_csv(snakemake.input.fault_residuals)),
 }
-write_csv(sweep_bic(datasets, snakemake.params.bic, snakemake.params.hmm), snakemake.output.table)
+write_csv(bic_sweep(datasets, snakemake.params.bic, snakemake.params.hmm), snakemake.output.table)

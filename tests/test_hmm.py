@@ -16,7 +16,7 @@ from dtwin._validation import DtwinValueError
 from dtwin.fault_injection import regime_features
 from dtwin.hmm import (
     HmmFitError,
-    bic_sweep,
+    bic_by_k,
     filtered_posteriors,
     fit_hmm,
     n_hmm_params,
@@ -194,8 +194,8 @@ def test_every_start_keeps_its_viterbi_path():
 
 def test_bic_sweep_accepts_a_seed_sequence():
     X = three_state_data(seed=7)
-    table = bic_sweep(X, [2, 3], n_restarts=2, seed=[5, 1])
-    again = bic_sweep(X, [3], n_restarts=2, seed=[5, 1])
+    table = bic_by_k(X, [2, 3], n_restarts=2, seed=[5, 1])
+    again = bic_by_k(X, [3], n_restarts=2, seed=[5, 1])
     assert table.loc[table["K"] == 3, "bic"].item() == again["bic"].item()
 
 
@@ -237,10 +237,10 @@ def test_bic_uses_depmix_parameter_count_and_matches_hmmlearn():
 def test_bic_sweep_selects_the_true_number_of_states(caplog):
     X = three_state_data(n_per=80)
     with caplog.at_level(logging.INFO, logger="dtwin.hmm"):
-        table = bic_sweep(X, [1, 2, 3, 4], n_restarts=3, seed=0)
+        table = bic_by_k(X, [1, 2, 3, 4], n_restarts=3, seed=0)
     assert list(table.columns[:4]) == ["K", "log_likelihood", "n_params", "bic"]
     assert table.loc[table["bic"].idxmin(), "K"] == 3
-    assert sum("bic_sweep K=" in message for message in caplog.messages) == 4
+    assert sum("bic_by_k K=" in message for message in caplog.messages) == 4
 
 
 # --- crosscheck against depmixS4 ------------------------------------------------------------

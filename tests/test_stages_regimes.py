@@ -21,11 +21,11 @@ from dtwin.stages.faults import (
 )
 from dtwin.stages.regimes import (
     SEED_STREAMS,
+    bic_sweep,
     crosscheck_r_loglik,
     fit_nominal_regimes,
     hmm_seed,
     posterior_matrix,
-    sweep_bic,
 )
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
 from dtwin.wiring import RESIDUALS
@@ -255,8 +255,8 @@ def test_bic_sweep_per_dataset_does_not_depend_on_the_other(scenario, twin_run, 
     nominal = residuals[list(RESIDUALS)].iloc[:300]
     faults = regime_features(scenario.residuals).iloc[:300]
     bic = {"ks": [2, 3], "n_restarts": 2}
-    both = sweep_bic({"nominal_residuals": nominal, "fault_features": faults}, bic, config["hmm"])
-    alone = sweep_bic({"nominal_residuals": nominal}, bic, config["hmm"])
+    both = bic_sweep({"nominal_residuals": nominal, "fault_features": faults}, bic, config["hmm"])
+    alone = bic_sweep({"nominal_residuals": nominal}, bic, config["hmm"])
     assert list(both.columns) == [
         "dataset",
         "n_features",
@@ -270,4 +270,4 @@ def test_bic_sweep_per_dataset_does_not_depend_on_the_other(scenario, twin_run, 
     assert list(both["n_features"]) == [6, 6, 10, 10]
     pd.testing.assert_frame_equal(both.iloc[:2], alone)
     with pytest.raises(DtwinValueError, match="datasets keys"):
-        sweep_bic({"other": nominal}, bic, config["hmm"])
+        bic_sweep({"other": nominal}, bic, config["hmm"])

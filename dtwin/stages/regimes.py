@@ -22,14 +22,14 @@ import pandas as pd
 from dtwin._validation import DtwinValueError
 from dtwin.artifacts import Check
 from dtwin.fault_injection import regime_features
-from dtwin.hmm import HmmFit, ZScored, bic_sweep, fit_hmm, zscore
+from dtwin.hmm import HmmFit, ZScored, bic_by_k, fit_hmm, zscore
 from dtwin.stages._states import posterior_matrix, state_labels
+from dtwin.stages.settings import HmmSettings
 from dtwin.wiring import RESIDUALS
 
 __all__ = [
     "SEED_STREAMS",
     "hmm_seed",
-    "hmm_fit_options",
     "state_labels",
     "fit_regimes",
     "states_table",
@@ -37,7 +37,7 @@ __all__ = [
     "hmm_summary",
     "fit_nominal_regimes",
     "BIC_DATASETS",
-    "sweep_bic",
+    "bic_sweep",
     "crosscheck_r_loglik",
 ]
 
@@ -69,11 +69,6 @@ def hmm_seed(hmm: Mapping[str, Any], use: str) -> list[int]:
     return [int(hmm["seed"]), SEED_STREAMS[use]]
 
 
-def hmm_fit_options(hmm: Mapping[str, Any]) -> dict[str, Any]:
-    """Return the EM options of :func:`dtwin.hmm.fit_hmm` from the ``hmm`` section."""
-    return {key: hmm[key] for key in ("max_iter", "tol", "var_floor")}
-
-
 def fit_regimes(features: pd.DataFrame, hmm: Mapping[str, Any], use: str) -> tuple[ZScored, HmmFit]:
     """z-score ``features`` (R's ``scale``) and fit the K-state HMM of the ``hmm`` section.
 
@@ -91,14 +86,11 @@ def fit_regimes(features: pd.DataFrame, hmm: Mapping[str, Any], use: str) -> tup
     -------
     (ZScored, HmmFit)
     """
+    settings = HmmSettings.from_mapping(hmm)
     scaled = zscore(features)
     start = time.perf_counter()
     fit = fit_hmm(
-        scaled.values,
-        hmm["n_states"],
-        n_restarts=hmm["n_restarts"],
-        seed=hmm_seed(hmm, use),
-        **hmm_fit_options(hmm),
+        scaled.values, settings.n_states, seed=hmm_seed(hmm, use), **settings.fit_options()
     )
     logger.info(
         "%s: K=%d, D=%d, T=%d, %d starts in %.3f s; best logL %.4f (start %d, %d EM iterations)",
@@ -106,7 +98,7 @@ def fit_regimes(features: pd.DataFrame, hmm: Mapping[str, Any], use: str) -> tup
         fit.n_states,
         fit.n_features,
         len(scaled.values),
-        hmm["n_restarts"],
+        settings.n_restarts,
         time.perf_counter() - start,
         fit.log_likelihood,
         fit.best_restart,
@@ -186,7 +178,7 @@ def fit_nominal_regimes(
     return states_table(residuals["t"], fit), hmm_summary(fit, scaled)
 
 
-def sweep_bic(
+def bic_sweep(
     datasets: Mapping[str, pd.DataFrame],
     bic: Mapping[str, Any],
     hmm: Mapping[str, Any],
@@ -208,17 +200,18 @@ def sweep_bic(
         Columns ``dataset``, ``n_features``, ``K``, ``log_likelihood``, ``n_params``,
         ``bic``, ``converged``, ``n_usable``; one row per data set and K.
     """
+    em_options = HmmSettings.from_mapping(hmm).em_options()
     tables = []
     for name, features in datasets.items():
         if name not in BIC_DATASETS:
             raise DtwinValueError(f"datasets keys must be in {BIC_DATASETS} (got {name!r})")
         start = time.perf_counter()
-        table = bic_sweep(
+        table = bic_by_k(
             zscore(features).values,
             list(bic["ks"]),
             n_restarts=bic["n_restarts"],
             seed=hmm_seed(hmm, f"bic_{name}"),
-            **hmm_fit_options(hmm),
+            **em_options,
         )
         logger.info(
             "BIC sweep on %s (D=%d): K=%s, %d starts each, %.2f s",

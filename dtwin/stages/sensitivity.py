@@ -33,6 +33,7 @@ from dtwin.sensitivity_sweep import (
     replicate_seed,
     scale_twin,
 )
+from dtwin.stages.settings import HmmSettings
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
 from dtwin.wiring import RESIDUALS
 
@@ -103,7 +104,7 @@ def _evaluate(
     hmm_seed: int,
     twin: Mapping[str, Any],
     arx: Mapping[str, Any],
-    hmm: Mapping[str, Any],
+    hmm: HmmSettings,
     correction: Mapping[str, Any],
 ) -> SweepRun:
     """Refit the surrogates and the HMM on ``physics`` and score both corrections."""
@@ -111,14 +112,7 @@ def _evaluate(
         physics, fit_twin_surrogates(physics, arx), twin, arx["rollout_init"]
     )
     residuals = residual_table[list(RESIDUALS)].to_numpy()
-    fit = fit_hmm(
-        zscore(residuals).values,
-        hmm["n_states"],
-        n_restarts=hmm["n_restarts"],
-        seed=hmm_seed,
-        max_iter=hmm["max_iter"],
-        tol=hmm["tol"],
-    )
+    fit = fit_hmm(zscore(residuals).values, hmm.n_states, seed=hmm_seed, **hmm.fit_options())
     code = correction["code"]
     plant = correct_plant_bias_viterbi(
         surrogate["x"],
@@ -160,9 +154,9 @@ def _evaluate(
     )
 
 
-def _require_sections(sensitivity: Mapping[str, Any]) -> tuple[Mapping, Mapping]:
+def _require_sections(sensitivity: Mapping[str, Any]) -> tuple[HmmSettings, Mapping]:
     sensitivity = require_mapping("sensitivity", sensitivity)
-    hmm = require_mapping("sensitivity.hmm", sensitivity["hmm"])
+    hmm = HmmSettings.from_mapping(sensitivity["hmm"], "sensitivity.hmm")
     correction = require_mapping("sensitivity.correction", sensitivity["correction"])
     missing = [m for m in CORRECTION_METHODS if m not in correction]
     if missing:
@@ -189,8 +183,8 @@ def run_sweep_point(
         overridden by the point, :func:`scale_twin`).
     sensitivity : mapping
         ``seed`` (EM seed of replicate 0), ``hmm`` (``n_states``, ``n_restarts``,
-        ``max_iter``, ``tol``) and ``correction`` (``code`` and ``paper``, each ``kappa``,
-        ``ema_alpha``, ``rate_max``).
+        ``max_iter``, ``tol``, ``var_floor``: :class:`dtwin.stages.settings.HmmSettings`) and
+        ``correction`` (``code`` and ``paper``, each ``kappa``, ``ema_alpha``, ``rate_max``).
 
     Returns
     -------
