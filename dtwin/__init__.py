@@ -80,7 +80,7 @@ _EXPORTS: dict[str, str] = {
     "replicate_seed": "dtwin.sensitivity_sweep",
     "sweep_table": "dtwin.sensitivity_sweep",
     "summarize_sweep": "dtwin.sensitivity_sweep",
-    "run_sweep_point": "dtwin.stages.sensitivity",
+    "sweep_point": "dtwin.stages.sensitivity",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -35,7 +35,7 @@ This module is the sweep as data — grid points (:class:`SweepPoint`), seeds, o
 (:class:`SweepRun`), the long table of all runs (:func:`sweep_table`) and its aggregation
 (:func:`summarize_sweep`, :func:`alpha_trends`) — and imports only numpy and pandas, so the
 aggregate rule stays light. Running one point is :mod:`dtwin.stages.sensitivity`
-(:func:`~dtwin.stages.sensitivity.run_sweep_point`). Arrays are time-first.
+(:func:`~dtwin.stages.sensitivity.sweep_point`). Arrays are time-first.
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ from dtwin.sensitivity_sweep import (
     sweep_grid,
     sweep_table,
 )
-from dtwin.stages.sensitivity import run_sweep_point, run_sweep_point_on_r_signals
+from dtwin.stages.sensitivity import sweep_point, sweep_point_on_r_signals
 from tests.conftest import REFERENCE
 
 
@@ -108,8 +108,8 @@ def test_scale_twin_changes_only_fusion_and_sensor_noise(config):
 
 def test_one_configuration_is_finite_and_reproducible(sections):
     point = SweepPoint(0.4, 1.5, 0.5, 0)
-    first = run_sweep_point(point, **sections)
-    second = run_sweep_point(point, **sections)
+    first = sweep_point(point, **sections)
+    second = sweep_point(point, **sections)
     assert first == second
     assert first.n_steps == 400 and first.physics_seed == 11 and first.hmm_seed == 11
     rows = first.rows()
@@ -124,9 +124,9 @@ def test_one_configuration_is_finite_and_reproducible(sections):
 
 
 def test_e1_is_shared_by_configurations_and_replicates_differ(sections):
-    a = run_sweep_point(SweepPoint(0.2, 0.5, 1.5, 0), **sections).rows()[0]
-    b = run_sweep_point(SweepPoint(0.8, 1.5, 0.5, 0), **sections).rows()[0]
-    c = run_sweep_point(SweepPoint(0.2, 0.5, 1.5, 1), **sections).rows()[0]
+    a = sweep_point(SweepPoint(0.2, 0.5, 1.5, 0), **sections).rows()[0]
+    b = sweep_point(SweepPoint(0.8, 1.5, 0.5, 0), **sections).rows()[0]
+    c = sweep_point(SweepPoint(0.2, 0.5, 1.5, 1), **sections).rows()[0]
     assert a["rmse_e1_before"] == b["rmse_e1_before"]
     assert a["l2_before"] != b["l2_before"]
     assert c["physics_seed"] == replicate_seed(11, 1) and c["rmse_e1_before"] != a["rmse_e1_before"]
@@ -136,7 +136,7 @@ def test_r_signals_rebuild_r_sweep_inputs_exactly(sections, r_sweep):
     """R's configurations, rebuilt from R's seed-11 signals, give R's pre-correction numbers."""
     r_physics, _ = load_r_physics(REFERENCE / "faulted_pipeline_seed11_rerun.csv")
     point = SweepPoint(0.2, 1.5, 0.5, 0)
-    run = run_sweep_point_on_r_signals(point, r_physics, **_r_sections(sections))
+    run = sweep_point_on_r_signals(point, r_physics, **_r_sections(sections))
     row = run.rows()[0]
     r_row = r_sweep.query("alpha == 0.2 and m_A == 1.5 and m_B == 0.5").iloc[0]
     assert run.n_steps == 1000 and run.physics_seed is None

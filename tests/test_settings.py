@@ -90,7 +90,7 @@ def test_bic_sweep_reads_the_hmm_section(config, recorded):
 def test_every_sweep_point_reads_the_sensitivity_hmm_section(config, recorded):
     sensitivity = {**config["sensitivity"], "hmm": {**config["sensitivity"]["hmm"], **ODD}}
     with pytest.raises(_FitReachedError):
-        dtwin.stages.sensitivity.run_sweep_point(
+        dtwin.stages.sensitivity.sweep_point(
             SweepPoint(0.6, 1.0, 1.0, 0),
             simulation={**config["simulation"], "T": 4.0},
             command=config["command"],

@@ -73,7 +73,7 @@ AFTER_RESIDUALS = AFTER_FAULTS | {
     "nominal_regimes",
     "fig04_hmm_posteriors",
 }
-SWEEP = {"sensitivity_config", "fig11_sensitivity"}
+SWEEP = {"sweep_point", "fig11_sensitivity"}
 
 
 def small_sweep(config: dict) -> None:
@@ -229,7 +229,7 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
 def test_growing_the_sweep_grid_plans_only_the_new_configurations(workflow_copy):
     edit_config(workflow_copy, lambda c: c["sensitivity"]["alphas"].append(0.5))
     assert planned_jobs(workflow_copy) == {
-        "sensitivity_config": 2,
+        "sweep_point": 2,
         "fig11_sensitivity": 1,
         "claims": 1,
     }
@@ -303,7 +303,7 @@ def test_sweep_dry_run_plans_one_job_per_configuration_and_replicate(tmp_path):
 
     edit_config(workdir, grid)
     assert planned_jobs(workdir, "fig11_sensitivity") == {
-        "sensitivity_config": 4,
+        "sweep_point": 4,
         "fig11_sensitivity": 1,
     }
 

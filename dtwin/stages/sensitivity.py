@@ -37,7 +37,7 @@ from dtwin.stages.settings import HmmSettings
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
 from dtwin.wiring import RESIDUALS
 
-__all__ = ["r_sweep_physics", "run_sweep_point", "run_sweep_point_on_r_signals"]
+__all__ = ["r_sweep_physics", "sweep_point", "sweep_point_on_r_signals"]
 
 
 def r_sweep_physics(
@@ -164,7 +164,7 @@ def _require_sections(sensitivity: Mapping[str, Any]) -> tuple[HmmSettings, Mapp
     return hmm, correction
 
 
-def run_sweep_point(
+def sweep_point(
     point: SweepPoint,
     *,
     simulation: Mapping[str, Any],
@@ -206,7 +206,7 @@ def run_sweep_point(
     return _evaluate(physics, point, "ours", physics_seed, hmm_seed, scaled, arx, hmm, correction)
 
 
-def run_sweep_point_on_r_signals(
+def sweep_point_on_r_signals(
     point: SweepPoint,
     r_physics: pd.DataFrame,
     *,

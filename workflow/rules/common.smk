@@ -110,7 +110,7 @@ ALL_TARGETS = [path for artifact in PAPER_ARTIFACTS for path in figure_outputs(a
 
 # --- the sensitivity sweep (paper §5, Fig. 11): one job per configuration and replicate ------
 
-SENSITIVITY_RUN = "alpha{alpha}_mA{ma}_mB{mb}_rep{rep}"
+SWEEP_POINT = "alpha{alpha}_mA{ma}_mB{mb}_rep{rep}"
 
 
 wildcard_constraints:
@@ -128,7 +128,7 @@ def sweep_value(value):
 def sensitivity_run_files(sensitivity):
     """The result file of every (alpha, m_A, m_B, replicate) of the configured grid."""
     return expand(
-        f"results/sensitivity/{SENSITIVITY_RUN}.json",
+        f"results/sensitivity/{SWEEP_POINT}.json",
         alpha=[sweep_value(v) for v in sensitivity["alphas"]],
         ma=[sweep_value(v) for v in sensitivity["sensor_A_mults"]],
         mb=[sweep_value(v) for v in sensitivity["sensor_B_mults"]],
@@ -136,8 +136,8 @@ def sensitivity_run_files(sensitivity):
     )
 
 
-def sensitivity_point(wildcards):
-    """The grid point of one sweep job, from its wildcards (params of sensitivity_config)."""
+def sweep_point_of(wildcards):
+    """The grid point of one sweep job, from its wildcards (params of sweep_point)."""
     return {
         "alpha": float(wildcards.alpha),
         "m_A": float(wildcards.ma),

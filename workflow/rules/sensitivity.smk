@@ -6,26 +6,26 @@ and R's reference signals), so a cluster executor can spread them out.
 """
 
 
-rule sensitivity_config:
+rule sweep_point:
     message:
         "Sensitivity sweep: alpha {wildcards.alpha}, m_A {wildcards.ma}, m_B {wildcards.mb}, "
         "replicate {wildcards.rep}"
     input:
-        lib=dtwin_sources("scripts/sensitivity_config.py"),
+        lib=dtwin_sources("scripts/sweep_point.py"),
         r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
     output:
-        json=f"results/sensitivity/{SENSITIVITY_RUN}.json",
+        json=f"results/sensitivity/{SWEEP_POINT}.json",
     params:
-        point=sensitivity_point,
+        point=sweep_point_of,
         simulation=config["simulation"],
         command=config["command"],
         twin=config["twin"],
         arx=config["arx"],
         sensitivity=SENSITIVITY_JOB_PARAMS,
     log:
-        f"logs/sensitivity_config/{SENSITIVITY_RUN}.log",
+        f"logs/sweep_point/{SWEEP_POINT}.log",
     benchmark:
-        f"benchmarks/rules/sensitivity_config/{SENSITIVITY_RUN}.tsv"
+        f"benchmarks/rules/sweep_point/{SWEEP_POINT}.tsv"
     threads: 1
     resources:
         mem_mb=500,
@@ -33,7 +33,7 @@ rule sensitivity_config:
     conda:
         "../envs/dtwin.yaml"
     script:
-        "../../scripts/sensitivity_config.py"
+        "../../scripts/sweep_point.py"
 
 
 rule fig11_sensitivity:

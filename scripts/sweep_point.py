@@ -1,4 +1,4 @@
-"""Rule sensitivity_config: one configuration and replicate of the sensitivity sweep (paper §5).
+"""Rule sweep_point: one configuration and replicate of the sensitivity sweep (paper §5).
 
 Input   config/reference/faulted_pipeline_seed11_rerun.csv   R's seed-11 signals (if r_signals)
 Output  results/sensitivity/alpha{alpha}_mA{ma}_mB{mb}_rep{rep}.json
@@ -16,14 +16,14 @@ start_rule(snakemake)
 from dtwin.artifacts import write_json
 from dtwin.reference.loaders import load_r_physics
 from dtwin.sensitivity_sweep import SweepPoint
-from dtwin.stages.sensitivity import run_sweep_point, run_sweep_point_on_r_signals
+from dtwin.stages.sensitivity import sweep_point, sweep_point_on_r_signals
 
 p = snakemake.params
 point = SweepPoint(**p.point)
 sections = {"twin": p.twin, "arx": p.arx, "sensitivity": p.sensitivity}
-runs = [run_sweep_point(point, simulation=p.simulation, command=p.command, **sections)]
+runs = [sweep_point(point, simulation=p.simulation, command=p.command, **sections)]
 if p.sensitivity["r_signals"]:
     r_physics, _ = load_r_physics(snakemake.input.r_pipeline)
-    runs.append(run_sweep_point_on_r_signals(point, r_physics, **sections))
+    runs.append(sweep_point_on_r_signals(point, r_physics, **sections))
 rows = [row for run in runs for row in run.rows()]
 write_json({"point": point._asdict(), "rows": rows}, snakemake.output.json)
