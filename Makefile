@@ -1,29 +1,38 @@
 # Two commands a new user needs: `make figures` and `make test`.
-# Both create .venv from the pinned lock file if it is missing (Python 3.11 required).
+# Both create .venv from the pinned lock files if it is missing (Python 3.11 required):
+# requirements.lock (runtime) and requirements-dev.lock (test and lint tools), both generated
+# by pip-compile from requirements.in and requirements-dev.in (`make lock`).
 PYTHON ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.dtwin-installed
 
-.PHONY: figures test fuzz lint report bench clean-results venv
+PIP_VERSION := 26.3
+PIP_TOOLS_VERSION := 7.6.2
+
+.PHONY: figures test test-fast fuzz lint report bench clean-results venv lock
 
 venv: $(STAMP)
 
-$(STAMP): requirements.lock pyproject.toml
+$(STAMP): requirements.lock requirements-dev.lock pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; install Python 3.11 or run 'make PYTHON=/path/to/python3.11'"; exit 1; }
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade "pip>=24"
-	$(BIN)/python -m pip install --quiet -r requirements.lock
+	$(BIN)/python -m pip install --quiet "pip==$(PIP_VERSION)"
+	$(BIN)/python -m pip install --quiet -r requirements.lock -r requirements-dev.lock
 	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
 figures: $(STAMP)
 	$(BIN)/snakemake --cores 2
 
-test: $(STAMP)
-	$(BIN)/ruff check .
-	$(BIN)/ruff format --check .
+# The full suite (CI runs this through .ci/run): `make lint`, then the unit tests, the
+# doctests of dtwin/ and the workflow tests that run Snakemake in a subprocess (marked slow).
+test: lint
 	$(BIN)/python -m pytest
+
+# For daily work: `make lint` and the tests without the slow workflow tests.
+test-fast: lint
+	$(BIN)/python -m pytest -m "not slow"
 
 report: figures
 	$(BIN)/snakemake --report paper_figures/report.html
@@ -33,7 +42,16 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
 	$(BIN)/snakemake --lint
+
+# Regenerate the lock files after editing requirements*.in (needs the package registry).
+# Existing pins are kept unless the .in files demand otherwise; upgrade on purpose with
+# `make lock PIP_COMPILE_ARGS=--upgrade`.
+lock:
+	test -x .lock-tools/bin/pip-compile || { $(PYTHON) -m venv .lock-tools && .lock-tools/bin/python -m pip install --quiet "pip-tools==$(PIP_TOOLS_VERSION)"; }
+	.lock-tools/bin/pip-compile --quiet --no-header --allow-unsafe --strip-extras --no-emit-index-url --no-emit-find-links --no-annotate $(PIP_COMPILE_ARGS) requirements.in -o requirements.lock
+	.lock-tools/bin/pip-compile --quiet --no-header --allow-unsafe --strip-extras --no-emit-index-url --no-emit-find-links --no-annotate $(PIP_COMPILE_ARGS) requirements-dev.in -o requirements-dev.lock
 
 clean-results:
 	rm -rf results logs benchmarks/rules paper_figures/*.png paper_figures/*.pdf paper_figures/*.json
