@@ -37,19 +37,11 @@ IGNORED = shutil.ignore_patterns(
     ".hypothesis",
     "*.egg-info",
 )
-ARTIFACTS = (
-    "fig01_pipeline",
-    "fig02_arx_vs_physics",
-    "fig03_residual_acf",
-    "fig04_hmm_posteriors",
-    "fig05_correction_timeseries",
-    "fig06_correction_distributions",
-    "fig07_fault_posteriors",
-    "fig08_feature_separability",
-    "fig09_bic",
-    "fig10_mcda_actions",
-    "fig11_sensitivity",
-    "gap_benchmark",
+#: Every published artifact (workflow/artifacts.yaml, the list `rule all` is built from).
+ARTIFACTS = tuple(
+    name
+    for names in yaml.safe_load((REPO / "workflow" / "artifacts.yaml").read_text()).values()
+    for name in names
 )
 #: Every rule downstream of `fault_regimes`.
 AFTER_FAULTS = {

@@ -81,19 +81,9 @@ def figure_outputs(artifact):
     return [f"paper_figures/{artifact}.{ext}" for ext in (*FIGURE_FORMATS, "json")]
 
 
-PAPER_ARTIFACTS = [
-    "fig01_pipeline",
-    "fig02_arx_vs_physics",
-    "fig03_residual_acf",
-    "fig04_hmm_posteriors",
-    "fig05_correction_timeseries",
-    "fig06_correction_distributions",
-    "fig07_fault_posteriors",
-    "fig08_feature_separability",
-    "fig09_bic",
-    "fig10_mcda_actions",
-    "fig11_sensitivity",
-]
+with open(os.path.join(workflow.basedir, "workflow", "artifacts.yaml")) as _handle:
+    ARTIFACTS = yaml.safe_load(_handle)
+PAPER_ARTIFACTS = ARTIFACTS["paper"]
 
 GAP_CASES = [
     f"{effect}_{number:02d}"
@@ -101,8 +91,9 @@ GAP_CASES = [
     for number in range(config["gap"]["benchmark"]["cases_per_effect"])
 ]
 
-ALL_TARGETS = [path for artifact in PAPER_ARTIFACTS for path in figure_outputs(artifact)] + [
-    *figure_outputs("gap_benchmark"),
+ALL_TARGETS = [
+    *(path for artifact in PAPER_ARTIFACTS for path in figure_outputs(artifact)),
+    *(path for artifact in ARTIFACTS["project"] for path in figure_outputs(artifact)),
     "paper_figures/CLAIMS.md",
     "paper_figures/claims.json",
 ]
