@@ -510,6 +510,39 @@ def _freeze(array: np.ndarray) -> np.ndarray:
     return array
 
 
+def _fit_starts(
+    X: np.ndarray,
+    n_states: int,
+    seed: int | Sequence[int],
+    n_restarts: int,
+    max_iter: int,
+    tol: float,
+    var_floor: float,
+) -> tuple[pd.DataFrame, dict[int, GaussianHMM]]:
+    """Run every EM start; return the table of starts and the usable models by start number.
+
+    The table has the columns of :data:`_RESTART_COLUMNS`, one row per start (1-based
+    ``restart``); failed and degenerate starts are in the table but not among the models.
+    """
+    rows = []
+    models: dict[int, GaussianHMM] = {}
+    for restart, start_seed in enumerate(_restart_seeds(seed, n_restarts), start=1):
+        row, model = _fit_one_start(X, n_states, start_seed, max_iter, tol, var_floor)
+        rows.append({"restart": restart, **row})
+        logger.info(
+            "fit_hmm K=%d restart %d/%d: status=%s logL=%.4f n_iter=%d",
+            n_states,
+            restart,
+            n_restarts,
+            row["status"],
+            row["log_likelihood"],
+            row["n_iter"],
+        )
+        if model is not None and row["status"] != "degenerate":
+            models[restart] = model
+    return pd.DataFrame(rows, columns=list(_RESTART_COLUMNS)), models
+
+
 def fit_hmm(
     X: Any,
     n_states: int,
@@ -580,24 +613,8 @@ def fit_hmm(
     if len(X) <= n_states:
         raise DtwinValueError(f"X must have more rows than n_states={n_states} (got {len(X)})")
 
-    rows = []
-    models: dict[int, GaussianHMM] = {}
     with threadpool_limits(limits=1):
-        for restart, start_seed in enumerate(_restart_seeds(seed, n_restarts), start=1):
-            row, model = _fit_one_start(X, n_states, start_seed, max_iter, tol, var_floor)
-            rows.append({"restart": restart, **row})
-            logger.info(
-                "fit_hmm K=%d restart %d/%d: status=%s logL=%.4f n_iter=%d",
-                n_states,
-                restart,
-                n_restarts,
-                row["status"],
-                row["log_likelihood"],
-                row["n_iter"],
-            )
-            if model is not None and row["status"] != "degenerate":
-                models[restart] = model
-        restarts = pd.DataFrame(rows, columns=list(_RESTART_COLUMNS))
+        restarts, models = _fit_starts(X, n_states, seed, n_restarts, max_iter, tol, var_floor)
         if not models:
             raise HmmFitError(
                 f"fit_hmm: all {n_restarts} starts failed or degenerated (K={n_states}); "
