@@ -11,7 +11,8 @@ statement of the paper, reported honestly, never failing the run) or ``crosschec
 with the authors' R code on the same inputs).
 
 Writes are atomic: a temporary file in the target folder, then :func:`os.replace`, so a
-killed job never leaves a half-written output behind.
+killed job never leaves a half-written output behind (:func:`atomic_write`); a folder of outputs
+is written the same way (:func:`atomic_write_folder`). All atomic writing of dtwin is here.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -39,6 +41,7 @@ __all__ = [
     "validity_probabilities",
     "validity_files_nonempty",
     "atomic_write",
+    "atomic_write_folder",
     "write_csv",
     "write_json",
     "write_artifact",
@@ -149,6 +152,40 @@ def atomic_write(path: str | os.PathLike, write: Callable[[str], None]) -> None:
         if os.path.exists(tmp_path):
             os.remove(tmp_path)
         raise
+
+
+def atomic_write_folder(out_dir: str | os.PathLike, write: Callable[[Path], object]) -> None:
+    """Call ``write(tmp_dir)`` on a fresh folder beside ``out_dir``, then rename it into place.
+
+    An existing ``out_dir`` is replaced only if it holds nothing but files this tool writes
+    (the files ``write`` produces); otherwise :class:`DtwinValueError`. On any error the
+    temporary folder is removed, so ``out_dir`` is either the old folder or the new one.
+    """
+    target = Path(out_dir)
+    if target.exists() and not target.is_dir():
+        raise DtwinValueError(f"--out {target} exists and is not a folder")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp"))
+    try:
+        write(tmp)
+        produced = {p.name for p in tmp.iterdir()}
+        if target.exists():
+            foreign = {p.name for p in target.iterdir()} - produced
+            if foreign:
+                raise DtwinValueError(
+                    f"--out {target} exists and holds other files ({', '.join(sorted(foreign))}); "
+                    "choose a new folder"
+                )
+            backup = target.with_name(f".{target.name}.old")
+            shutil.rmtree(backup, ignore_errors=True)
+            os.replace(target, backup)
+            os.replace(tmp, target)
+            shutil.rmtree(backup, ignore_errors=True)
+        else:
+            os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
 
 
 def write_csv(table: pd.DataFrame, path: str | os.PathLike, float_format: str = "%.12g") -> None:

@@ -7,8 +7,11 @@ Subcommands::
 
 Bad input gets a one-line message on stderr and exit status 2, never a traceback; an unexpected
 failure gets exit status 3 (set ``DTWIN_DEBUG=1`` for the traceback). Output folders are written
-into a temporary folder beside ``DIR`` and renamed into place, so ``DIR`` is never half-written.
-This is the only place besides the Snakemake scripts that reads files into the library.
+into a temporary folder beside ``DIR`` and renamed into place, so ``DIR`` is never half-written
+(:func:`dtwin.artifacts.atomic_write_folder`, beside :func:`~dtwin.artifacts.atomic_write`).
+Like the Snakemake scripts it is a front end: it parses arguments and the twin file, then calls
+the library (:func:`dtwin.gap.diagnose`, :func:`dtwin.gap.generate_case`), which reads the
+recording itself (:func:`dtwin.gap.read_recording`).
 """
 
 from __future__ import annotations
@@ -16,13 +19,11 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import shutil
 import sys
-import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["main", "build_parser", "load_twin_file", "write_folder_atomically"]
+__all__ = ["main", "build_parser", "load_twin_file"]
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 3
@@ -51,40 +52,8 @@ def load_twin_file(path: str | os.PathLike):
         raise CliError(f"twin file is not valid YAML: {path}: {first}") from error
 
 
-def write_folder_atomically(out_dir: str | os.PathLike, write: Callable[[Path], object]) -> None:
-    """Call ``write(tmp_dir)`` on a fresh folder beside ``out_dir``, then rename it into place.
-
-    An existing ``out_dir`` is replaced only if it holds nothing but files this tool writes
-    (``allowed``); otherwise :class:`CliError`. On any error the temporary folder is removed.
-    """
-    target = Path(out_dir)
-    if target.exists() and not target.is_dir():
-        raise CliError(f"--out {target} exists and is not a folder")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp"))
-    try:
-        write(tmp)
-        produced = {p.name for p in tmp.iterdir()}
-        if target.exists():
-            foreign = {p.name for p in target.iterdir()} - produced
-            if foreign:
-                raise CliError(
-                    f"--out {target} exists and holds other files ({', '.join(sorted(foreign))}); "
-                    "choose a new folder"
-                )
-            backup = target.with_name(f".{target.name}.old")
-            shutil.rmtree(backup, ignore_errors=True)
-            os.replace(target, backup)
-            os.replace(tmp, target)
-            shutil.rmtree(backup, ignore_errors=True)
-        else:
-            os.replace(tmp, target)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
-
-
 def _diagnose(args: argparse.Namespace) -> int:
+    from dtwin.artifacts import atomic_write_folder
     from dtwin.gap.diagnose import diagnose, twin_from_mapping
     from dtwin.gap.recording import read_recording
     from dtwin.gap.report import write_report
@@ -93,7 +62,7 @@ def _diagnose(args: argparse.Namespace) -> int:
     recording = read_recording(args.recording)
     twin = twin_from_mapping(twin_content, dt=recording.dt)
     result = diagnose(recording, twin, calibrate=args.calibrate, train_frac=args.train_frac)
-    write_folder_atomically(args.out, lambda tmp: write_report(result, tmp))
+    atomic_write_folder(args.out, lambda tmp: write_report(result, tmp))
     shrink = f", excess gap −{result.shrink_pct:.0f} %" if result.shrink_pct is not None else ""
     print(f"{result.module or '-'}: {result.effect}{shrink} -> {args.out}")
     return 0
@@ -102,7 +71,7 @@ def _diagnose(args: argparse.Namespace) -> int:
 def _generate(args: argparse.Namespace) -> int:
     import yaml
 
-    from dtwin.artifacts import write_csv, write_json
+    from dtwin.artifacts import atomic_write_folder, write_csv, write_json
     from dtwin.gap.generator import generate_case
 
     case = generate_case(
@@ -118,7 +87,7 @@ def _generate(args: argparse.Namespace) -> int:
         (folder / "twin.yaml").write_text(yaml.safe_dump(case.twin, sort_keys=False))
         write_json(case.key, folder / "key.json")
 
-    write_folder_atomically(args.out, write)
+    atomic_write_folder(args.out, write)
     print(f"{args.effect} (seed {args.seed}) -> {args.out}")
     return 0
 

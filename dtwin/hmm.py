@@ -2,9 +2,12 @@
 
 A K-state HMM with diagonal-covariance Gaussian emissions (paper Eq. (3); depmixS4's
 independent ``gaussian()`` responses, r_notes.md §4) is fitted by EM to z-scored residual
-features, arrays time-first ``(T, D)``. EM runs in :class:`hmmlearn.hmm.GaussianHMM` through its
-public methods only (``fit``, ``score``, ``decode``, ``predict_proba``); dtwin adds what
-depmixS4 did and hmmlearn does not:
+features, arrays time-first ``(T, D)``. EM runs in :class:`hmmlearn.hmm.GaussianHMM` through
+its public methods (``fit``, ``score``, ``score_samples``, ``decode``, ``predict_proba``) and two
+documented extension points: the convergence monitor (``monitor_``, here
+``_DepmixMonitor``, which also applies the variance floor) and the emission hook
+``_compute_log_likelihood`` (``_MatmulGaussianHMM``, O(T·K) memory; checked against hmmlearn's
+own density by the tests). dtwin adds what depmixS4 did and hmmlearn does not:
 
 - z-scoring with the sample standard deviation (R's ``scale``), :func:`zscore`;
 - depmixS4's random start: per-sample state weights drawn from Dirichlet(0.01) (almost a hard
@@ -16,7 +19,8 @@ depmixS4 did and hmmlearn does not:
 - an honest convergence verdict and depmixS4's relative stopping rule
   ``(LL − LL_old)/|LL_old| < tol``;
 - the filtered (causal) posteriors ``P(S_t = k | e_1:t)``, the normalised forward variables of
-  Eq. (4), computed in log space by :func:`filtered_posteriors`;
+  Eq. (4), :func:`filtered_posteriors`: rescaled products in √T blocks (vectorised), with an
+  exact log-space loop as the fallback when a row underflows;
 - BIC with depmixS4's parameter count ``p = (K−1) + K(K−1) + 2DK`` (Eq. (26)), :func:`bic_by_k`.
 """
 
