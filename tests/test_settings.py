@@ -79,7 +79,8 @@ def test_nominal_fault_and_crosscheck_fits_read_the_hmm_section(config, recorded
 
 
 def test_bic_sweep_reads_the_hmm_section(config, recorded):
-    hmm = {**config["hmm"], **ODD}
+    """The rule passes only seed and the EM options (a change of K must not rerun it)."""
+    hmm = {key: {**config["hmm"], **ODD}[key] for key in ("seed", "max_iter", "tol", "var_floor")}
     with pytest.raises(_FitReachedError):
         dtwin.stages.regimes.bic_sweep(
             {"nominal_residuals": _random_frame(RESIDUALS)}, config["bic"], hmm

@@ -24,7 +24,7 @@ from dtwin.artifacts import Check
 from dtwin.fault_injection import regime_features
 from dtwin.hmm import HmmFit, ZScored, bic_by_k, fit_hmm, zscore
 from dtwin.stages._states import posterior_matrix, state_labels
-from dtwin.stages.settings import HmmSettings
+from dtwin.stages.settings import EmSettings, HmmSettings
 from dtwin.wiring import RESIDUALS
 
 __all__ = [
@@ -200,7 +200,7 @@ def bic_sweep(
         Columns ``dataset``, ``n_features``, ``K``, ``log_likelihood``, ``n_params``,
         ``bic``, ``converged``, ``n_usable``; one row per data set and K.
     """
-    em_options = HmmSettings.from_mapping(hmm).em_options()
+    em_options = EmSettings.from_mapping(hmm).options()
     tables = []
     for name, features in datasets.items():
         if name not in BIC_DATASETS:
