@@ -13,7 +13,7 @@ Arrays are time-first: every signal has shape ``(n_samples,)``.
 
 from dtwin.gap.diagnose import Diagnosis, GapSettings, diagnose, twin_from_mapping
 from dtwin.gap.effects import EFFECT_NAMES, EFFECTS, Effect
-from dtwin.gap.generator import GeneratedCase, case_plan, generate_case
+from dtwin.gap.generator import GeneratedCase, generate_case
 from dtwin.gap.recording import Recording, read_recording, recording_from_frame
 from dtwin.gap.report import diagnosis_to_dict, write_report
 
@@ -26,7 +26,6 @@ __all__ = [
     "EFFECTS",
     "Effect",
     "GeneratedCase",
-    "case_plan",
     "generate_case",
     "Recording",
     "read_recording",

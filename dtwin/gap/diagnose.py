@@ -78,8 +78,6 @@ logger = logging.getLogger(__name__)
 #: Largest relative disagreement between the recording's dt and ``twin.dt``.
 DT_TOLERANCE = 0.01
 
-STATUSES = ("source", "gap", "inherited", "clean", "skipped")
-
 
 @dataclass(frozen=True)
 class GapSettings:

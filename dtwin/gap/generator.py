@@ -41,7 +41,6 @@ __all__ = [
     "NOMINAL_TWIN",
     "GeneratedCase",
     "generate_case",
-    "case_plan",
     "case_spec",
 ]
 
@@ -631,29 +630,11 @@ def _effect_contribution(asset, nominal, u_cmd, noises, specs, signals, module, 
     return signals[out] - (k["w1"] * signals["x"] + k["w2"] * signals["v"])
 
 
-def case_plan(
-    cases_per_effect: int, effects: tuple[str, ...] = ALL_CASE_EFFECTS, first_seed: int = 1000
-) -> list[dict[str, Any]]:
-    """Return the benchmark's cases: ``[{"case": "coulomb_friction_03", "effect", "seed"}]``.
-
-    Seeds are ``first_seed + 1000·(effect index) + case index``, so adding cases keeps the
-    earlier ones.
-    """
-    plan = []
-    for index, effect in enumerate(effects):
-        for number in range(cases_per_effect):
-            plan.append(
-                {
-                    "case": f"{effect}_{number:02d}",
-                    "effect": effect,
-                    "seed": first_seed + 1000 * index + number,
-                }
-            )
-    return plan
-
-
 def case_spec(case: str, effects: Sequence[str], first_seed: int = 1000) -> dict[str, Any]:
-    """Return ``{"case", "effect", "seed"}`` of a case name ``<effect>_<NN>`` (see case_plan).
+    """Return ``{"case", "effect", "seed"}`` of a case name ``<effect>_<NN>``.
+
+    The seed is ``first_seed + 1000·(index of effect in effects) + NN``, so adding cases keeps
+    the earlier ones (docs/gap.md §Benchmark).
 
     Raises
     ------
