@@ -1,6 +1,8 @@
 """Sim-to-real gap diagnosis: where the gap lies, which effect causes it, how far
 it shrinks once added — checked on generated recordings whose effect is withheld.
 
+Specification: docs/gap.md.
+
 Modules: :mod:`~dtwin.gap.recording` (load and validate a recording), :mod:`~dtwin.gap.effects`
 (the candidate catalogue), :mod:`~dtwin.gap.models` (module twins with effects),
 :mod:`~dtwin.gap.noise` (noise floors), :mod:`~dtwin.gap.fit` (fitting and calibration),

@@ -1,6 +1,6 @@
 """The sim-to-real gap diagnoser: where the gap lies, which effect causes it, how far it shrinks.
 
-:func:`diagnose` implements docs/gap.md in three steps.
+:func:`diagnose` implements docs/gap.md in three steps (§Where, §Which, §How far).
 
 1. **Where.** Each module whose input and output are recorded is driven with its *recorded*
    input; its local gap (:mod:`dtwin.gap.localise`) is compared with the largest gap its noise
@@ -82,6 +82,8 @@ DT_TOLERANCE = 0.01
 @dataclass(frozen=True)
 class GapSettings:
     """Decision constants of the diagnoser (the ``gap.diagnose`` config section).
+
+    See docs/gap.md §Settings; their roles in §Where and §Which.
 
     Attributes
     ----------
@@ -189,10 +191,11 @@ class Diagnosis:
 
 
 def twin_from_mapping(mapping: Any, dt: float | None = None) -> TwinParams:
-    """Return :class:`TwinParams` from a twin file's content (bare, or under a ``twin:`` key).
+    """Return :class:`TwinParams` from a twin file's content (docs/gap.md §Twin file).
 
-    Sections may be missing (the diagnoser then calibrates that module); ``dt`` may be missing
-    if given here (the recording's). An empty file is an empty mapping.
+    The content is a bare mapping or one under a ``twin:`` key. Sections may be missing (the
+    diagnoser then calibrates that module); ``dt`` may be missing if given here (the
+    recording's). An empty file is an empty mapping.
     """
     if mapping is None:
         mapping = {}

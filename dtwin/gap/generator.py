@@ -1,5 +1,7 @@
 """ "Real" recordings with a withheld effect, for checking the gap diagnoser.
 
+Specification: docs/gap.md §Generator.
+
 :func:`generate_case` runs the paper's asset (§3.1) with one effect (or none, or one the
 catalogue does not know) and returns the recording, the nominal twin file and a separate key
 holding the truth, which the diagnoser never reads. It is deliberately unkind:

@@ -1,5 +1,7 @@
 """The module twins of the gap diagnoser, each with an optional candidate effect (paper §3.1).
 
+Specification: docs/gap.md §Modules (recursions) and §Candidate effects (stages).
+
 One function, :func:`simulate_module`, drives one module's twin with given input signals and
 returns its output, shape ``(n_samples,)``. The linear part of each module is the paper's
 (r_notes.md §1), with one-sample input delays:

@@ -1,4 +1,4 @@
-"""What a module's noise explains: noise floors of the local gap (docs/gap.md, "Where").
+"""What a module's noise explains: noise floors of the local gap (docs/gap.md §Noise floors).
 
 The *noise floor* of a module is the RMS simulation error its twin would show if the twin were
 exact and only the noise of that module acted (output units):
