@@ -34,6 +34,7 @@ from dtwin._validation import DtwinValueError, require_in_range
 from dtwin.command import make_command, time_axis
 from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED, fractional_delay
 from dtwin.gap.noise import plant_noise_gain
+from dtwin.modules import CONTRACTS, fuse, kpi, lag_coefficient, lag_response, plant_response
 from dtwin.params import CommandParams
 
 __all__ = [
@@ -80,13 +81,11 @@ NOMINAL_TWIN: dict[str, Any] = {
     "noise": {"actuator": 0.005, "plant": 0.04, "sensor_A": 0.03, "sensor_B": 0.02},
 }
 
+#: Per module: its twin section and the parameter(s) a ``parameter_mismatch`` may change (a
+#: single name is taken without a random draw).
 _MISMATCH_PARAMS = {
-    "M0": ("actuator", "tau"),
-    "M1": ("plant", ("m", "c", "k")),
-    "M2a": ("sensor_A", ("tau", "bias")),
-    "M2b": ("sensor_B", ("tau", "bias")),
-    "M3": ("fusion", "alpha"),
-    "M4": ("kpi", ("w1", "w2")),
+    name: (c.section, c.params[0] if len(c.params) == 1 else c.params)
+    for name, c in CONTRACTS.items()
 }
 
 
@@ -300,47 +299,65 @@ def _actuator(u_cmd, tau, dt, noise, spec):
             u = np.where(u > high, u - high, np.where(u < -low, u + low, 0.0))
     elif spec.get("effect") == "actuator_delay":
         u = fractional_delay(u, spec["delay_samples"])
-    a = math.exp(-dt / tau)
+    # the contract's lag, but the process noise enters inside the recursion (physics adds it by
+    # superposition), a different rounding order: this loop stays so recordings keep their bits
+    a = lag_coefficient(tau, dt)
     out = np.zeros(len(u))
     for k in range(1, len(u)):
         out[k] = a * out[k - 1] + (1 - a) * u[k - 1] + noise[k]
     return out
 
 
-def _plant(u, m, c, k, dt, noise, spec, n):
+def _plant_force(spec, c, k):
+    """Return the real effect's force hook ``F(x, v)`` (N) of the plant, or None."""
     effect = spec.get("effect")
-    x = np.zeros(n)
-    v = np.zeros(n)
-    change_at = int(spec["at_frac"] * n) if effect == "stiffness_change" else n + 1
-    for j in range(1, n):
-        xp, vp = x[j - 1], v[j - 1]
-        stiff = k * spec["factor"] if effect == "stiffness_change" and j >= change_at else k
-        force = 0.0
-        if effect == "coulomb_friction":
-            level = spec["Fc"] + (spec["Fs"] - spec["Fc"]) * math.exp(-((vp / spec["vs"]) ** 2))
-            force = level * math.tanh(vp / (1e-3 * spec["vs"])) + spec["extra_c"] * vp
-        elif effect == "cubic_stiffness":
-            ref = spec["x_ref"]
-            force = (
-                spec["ratio"] * k * ref * math.copysign(abs(xp / ref) ** (spec["power"] + 1), xp)
-            )
-        elif effect == "quadratic_damping":
-            ref = spec["v_ref"]
-            force = spec["ratio"] * c * ref * math.copysign(abs(vp / ref) ** spec["power"], vp)
-        accel = (u[j - 1] - c * vp - stiff * xp - force) / m + noise[j]
-        v[j] = vp + dt * accel
-        x[j] = xp + dt * vp
-    return x, v
+    if effect == "coulomb_friction":
+        fc, fs, vs, extra = spec["Fc"], spec["Fs"], spec["vs"], spec["extra_c"]
+
+        def friction(xp, vp):
+            level = fc + (fs - fc) * math.exp(-((vp / vs) ** 2))
+            return level * math.tanh(vp / (1e-3 * vs)) + extra * vp
+
+        return friction
+    if effect == "cubic_stiffness":
+        ratio, ref, power = spec["ratio"], spec["x_ref"], spec["power"]
+        return lambda xp, vp: ratio * k * ref * math.copysign(abs(xp / ref) ** (power + 1), xp)
+    if effect == "quadratic_damping":
+        ratio, ref, power = spec["ratio"], spec["v_ref"], spec["power"]
+        return lambda xp, vp: ratio * c * ref * math.copysign(abs(vp / ref) ** power, vp)
+    return None
+
+
+def _plant(u, m, c, k, dt, noise, spec, n):
+    """Return ``(x, v)`` of the asset's plant: the contract's Euler plant with the effect's hook.
+
+    ``stiffness_change`` runs the plant in two parts, the second from the state at the change
+    with ``k·factor``.
+    """
+    force = _plant_force(spec, c, k)
+    if spec.get("effect") != "stiffness_change":
+        x, v = plant_response(u[:n], m, c, k, dt, force=force, accel_noise=noise[:n])
+        return x, v
+    at = int(spec["at_frac"] * n)
+    x, v = plant_response(u[:at], m, c, k, dt, accel_noise=noise[:at])
+    x2, v2 = plant_response(
+        u[at - 1 : n],
+        m,
+        c,
+        k * spec["factor"],
+        dt,
+        x0=x[-1],
+        v0=v[-1],
+        accel_noise=noise[at - 1 : n],
+    )
+    return np.concatenate([x, x2[1:]]), np.concatenate([v, v2[1:]])
 
 
 def _sensor(x, tau, bias, dt, noise, spec, t):
     effect = spec.get("effect")
     if effect == "sensor_delay":
         x = fractional_delay(x, spec["delay_samples"])
-    a = math.exp(-dt / tau)
-    lag = np.zeros(len(x))
-    for k in range(1, len(x)):
-        lag[k] = a * lag[k - 1] + (1 - a) * x[k - 1]
+    lag = lag_response(x, lag_coefficient(tau, dt))
     if effect == "sensor_scale_error":
         lag = spec["gain"] * lag
     y = lag + bias + noise
@@ -372,7 +389,7 @@ def _run_asset(asset, u_cmd, noises, specs, t):
         s = asset[f"sensor_{which}"]
         y[which] = _sensor(x, s["tau"], s["bias"], dt, noises[which], specs[module], t)
     alpha = asset["fusion"]["alpha"]
-    kpi = asset["kpi"]
+    weights = asset["kpi"]
     return {
         "u_cmd": u_cmd,
         "u_act": u_act,
@@ -380,21 +397,16 @@ def _run_asset(asset, u_cmd, noises, specs, t):
         "v": v,
         "y_A": y["A"],
         "y_B": y["B"],
-        "y_fused": alpha * y["A"] + (1 - alpha) * y["B"],
-        "z": kpi["w1"] * x + kpi["w2"] * v,
+        "y_fused": fuse(y["A"], y["B"], alpha),
+        "z": kpi(x, v, weights["w1"], weights["w2"]),
     }
 
 
-_MISCALIBRATED = (
-    ("actuator", "tau"),
-    ("plant", "m"),
-    ("plant", "c"),
-    ("plant", "k"),
-    ("sensor_A", "tau"),
-    ("sensor_B", "tau"),
-)
+#: The asset's parameters that are miscalibrated against the twin: the contract's parameters
+#: of the recursions (time constants and ``m, c, k``), in module order.
+_MISCALIBRATED = tuple((c.section, p) for c in CONTRACTS.values() for p in c.dynamic_params)
 
-_MODULE_OUTPUT = {"M0": "u_act", "M1": "x", "M2a": "y_A", "M2b": "y_B", "M3": "y_fused", "M4": "z"}
+_MODULE_OUTPUT = {name: c.output for name, c in CONTRACTS.items()}
 
 
 def generate_case(
@@ -626,10 +638,9 @@ def _effect_contribution(asset, nominal, u_cmd, noises, specs, signals, module, 
         other = _sensor(signals["x"], s["tau"], s["bias"], dt, noises[which], {}, t)
         return signals[out] - other
     if module == "M3":
-        a = nominal["fusion"]["alpha"]
-        return signals[out] - (a * signals["y_A"] + (1 - a) * signals["y_B"])
+        return signals[out] - fuse(signals["y_A"], signals["y_B"], nominal["fusion"]["alpha"])
     k = nominal["kpi"]
-    return signals[out] - (k["w1"] * signals["x"] + k["w2"] * signals["v"])
+    return signals[out] - kpi(signals["x"], signals["v"], k["w1"], k["w2"])
 
 
 def case_spec(case: str, effects: Sequence[str], first_seed: int = 1000) -> dict[str, Any]:
