@@ -1,5 +1,9 @@
 """The physical asset: five discrete modules and the simulator (paper §3.1; r_notes.md §1).
 
+The modules' laws are the contract of :mod:`dtwin.modules` (recursions, parameters, signals),
+run with the paper's explicit-Euler discretisation; this module adds the noise and the start at
+rest, and :func:`simulate_physics` runs them in the order of the wiring table.
+
 Every module applies its input with a one-sample delay (``u[k-1]`` drives step ``k``), as the
 paper's equations and the authors' R code do. Arrays are time-first, shape ``(n_steps,)``.
 
@@ -12,7 +16,6 @@ R's stream itself).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -20,6 +23,7 @@ from scipy.signal import lfilter
 
 from dtwin._validation import DtwinValueError, require_finite_array, require_min_length
 from dtwin.command import time_axis
+from dtwin.modules import PlantTrajectory, fuse, kpi, lag_response, plant_response
 from dtwin.params import TwinParams
 from dtwin.wiring import MODULES, SIGNALS
 
@@ -36,15 +40,15 @@ __all__ = [
 ]
 
 
-class PlantTrajectory(NamedTuple):
-    """Plant states, each shape ``(n_steps,)``: position ``x`` (m) and velocity ``v`` (m/s)."""
-
-    x: np.ndarray
-    v: np.ndarray
-
-
 def lag_coefficient(tau: float, dt: float) -> float:
-    """Return the exact-discrete first-order lag coefficient ``a = exp(−dt/τ)``."""
+    """Return the exact-discrete first-order lag coefficient ``a = exp(−dt/τ)``.
+
+    Notes
+    -----
+    Computed with ``numpy.exp``, as the paper simulator always has; the contract's
+    :func:`dtwin.modules.lag_coefficient` (``math.exp``, used by the gap diagnoser and
+    generator) can differ in the last bit, so this copy stays until outputs may move.
+    """
     return float(np.exp(-dt / tau))
 
 
@@ -55,11 +59,6 @@ def _noise_or_zeros(noise: np.ndarray | None, n_steps: int, name: str) -> np.nda
     if noise.shape != (n_steps,):
         raise DtwinValueError(f"{name} must have shape ({n_steps},) (got {noise.shape})")
     return noise
-
-
-def _delayed_lowpass(u: np.ndarray, a: float) -> np.ndarray:
-    """``y[0] = 0``, ``y[k] = a·y[k−1] + (1−a)·u[k−1]``, as one linear filter."""
-    return lfilter([0.0, 1.0 - a], [1.0, -a], u)
 
 
 def actuator_lpf(
@@ -93,7 +92,7 @@ def actuator_lpf(
     noise = _noise_or_zeros(process_noise, len(u_cmd), "process_noise").copy()
     noise[0] = 0.0
     a = lag_coefficient(tau, dt)
-    return _delayed_lowpass(u_cmd, a) + lfilter([1.0], [1.0, -a], noise)
+    return lag_response(u_cmd, a) + lfilter([1.0], [1.0, -a], noise)
 
 
 def plant_msd(
@@ -127,13 +126,7 @@ def plant_msd(
     u_act = require_finite_array("u_act", u_act)
     n_steps = len(u_act)
     noise = _noise_or_zeros(accel_noise, n_steps, "accel_noise")
-    x = np.zeros(n_steps)
-    v = np.zeros(n_steps)
-    for step in range(1, n_steps):
-        accel = (u_act[step - 1] - c * v[step - 1] - k * x[step - 1]) / m + noise[step]
-        v[step] = v[step - 1] + dt * accel
-        x[step] = x[step - 1] + dt * v[step - 1]
-    return PlantTrajectory(x=x, v=v)
+    return plant_response(u_act, m, c, k, dt, accel_noise=noise)
 
 
 def sensor_first_order(
@@ -152,17 +145,7 @@ def sensor_first_order(
     """
     x = require_finite_array("x", x)
     noise = _noise_or_zeros(measurement_noise, len(x), "measurement_noise")
-    return _delayed_lowpass(x, lag_coefficient(tau, dt)) + bias + noise
-
-
-def fuse(y_a: np.ndarray, y_b: np.ndarray, alpha: float) -> np.ndarray:
-    """Return the M3 fused measurement ``α·y_A + (1−α)·y_B`` (paper §3.1 M3)."""
-    return alpha * np.asarray(y_a, dtype=float) + (1.0 - alpha) * np.asarray(y_b, dtype=float)
-
-
-def kpi(x: np.ndarray, v: np.ndarray, w1: float, w2: float) -> np.ndarray:
-    """Return the M4 KPI ``z = w1·x + w2·v`` (paper §3.1 M4)."""
-    return w1 * np.asarray(x, dtype=float) + w2 * np.asarray(v, dtype=float)
+    return lag_response(x, lag_coefficient(tau, dt)) + bias + noise
 
 
 def backward_velocity(x: np.ndarray, dt: float) -> np.ndarray:

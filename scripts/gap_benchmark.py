@@ -2,8 +2,8 @@
 
 Inputs: ``diagnoses`` (diagnosis.json per case), ``truths`` (key.json per case, same order).
 Outputs: ``paper_figures/gap_benchmark.{png,pdf}`` (confusion matrix, accuracy vs magnitude,
-shrink per effect), ``gap_benchmark.json`` ({artifact, files, metrics, checks}; the issue's
-targets are claims), ``results/gap/benchmark.csv`` (one row per case, columns in
+shrink per effect), ``gap_benchmark.json`` ({artifact, files, metrics, checks}; the targets of
+docs/gap.md §Targets are claims), ``results/gap/benchmark.csv`` (one row per case, columns in
 :mod:`dtwin.gap.benchmark`). Config: none beyond the case list.
 """
 

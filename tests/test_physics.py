@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -103,3 +105,50 @@ def test_command_deterministic_part_matches_r(config):
     jumps = np.flatnonzero(np.abs(np.diff(offsets)) > 1e-9) + 1
     assert set(jumps) <= set(range(125, 1000, 125))
     assert np.ptp(offsets[:125]) < 1e-9
+
+
+# --- the module contract (dtwin.modules) ------------------------------------------------------
+
+
+def test_contract_follows_the_wiring_table_and_the_twin_sections():
+    import dataclasses
+
+    from dtwin.modules import CONTRACTS, LINEAR_PARAMS
+    from dtwin.params import TwinParams
+    from dtwin.wiring import MODULES
+
+    assert list(CONTRACTS) == [module.name for module in MODULES]
+    hints = {f.name: f.type for f in dataclasses.fields(TwinParams)}
+    for name, contract in CONTRACTS.items():
+        assert contract.section in hints, name
+        assert set(contract.dynamic_params) <= set(contract.params)
+        assert LINEAR_PARAMS[name] == contract.params
+
+
+def test_zoh_plant_matches_scipy_cont2discrete():
+    from scipy.signal import cont2discrete
+
+    from dtwin.modules import ZOH, plant_matrices
+
+    m, c, k, dt = 1.3, 0.4, 4.0, 0.05
+    a, b_force, _ = plant_matrices(m, c, k, dt, ZOH)
+    ad, bd, *_ = cont2discrete(
+        (np.array([[0, 1], [-k / m, -c / m]]), np.array([[0], [1 / m]]), np.eye(2), 0), dt
+    )
+    np.testing.assert_allclose(a, ad, rtol=1e-12)
+    np.testing.assert_allclose(b_force, bd, rtol=1e-12)
+
+
+def test_zoh_plant_step_response_is_exact_and_euler_is_the_papers():
+    from dtwin.modules import EULER, ZOH, plant_response
+
+    m, c, k, dt = 1.0, 0.4, 4.0, 0.02
+    u = np.ones(3000)
+    exact = plant_response(u, m, c, k, dt, discretisation=ZOH).x
+    wn, zeta = math.sqrt(k / m), c / (2 * math.sqrt(k * m))
+    wd = wn * math.sqrt(1 - zeta**2)
+    t = dt * np.arange(3000)  # u[j-1] is held over [(j-1)·dt, j·dt]: the step starts at t = 0
+    step = 1 - np.exp(-zeta * wn * t) * (np.cos(wd * t) + zeta * wn / wd * np.sin(wd * t))
+    np.testing.assert_allclose(exact, step / k, atol=1e-12)
+    euler = plant_response(u, m, c, k, dt, discretisation=EULER).x
+    np.testing.assert_array_equal(euler, plant_msd(u, m, c, k, dt).x)

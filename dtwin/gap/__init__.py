@@ -1,6 +1,8 @@
 """Sim-to-real gap diagnosis: where the gap lies, which effect causes it, how far
 it shrinks once added — checked on generated recordings whose effect is withheld.
 
+Specification: docs/gap.md.
+
 Modules: :mod:`~dtwin.gap.recording` (load and validate a recording), :mod:`~dtwin.gap.effects`
 (the candidate catalogue), :mod:`~dtwin.gap.models` (module twins with effects),
 :mod:`~dtwin.gap.noise` (noise floors), :mod:`~dtwin.gap.fit` (fitting and calibration),
@@ -13,7 +15,7 @@ Arrays are time-first: every signal has shape ``(n_samples,)``.
 
 from dtwin.gap.diagnose import Diagnosis, GapSettings, diagnose, twin_from_mapping
 from dtwin.gap.effects import EFFECT_NAMES, EFFECTS, Effect
-from dtwin.gap.generator import GeneratedCase, case_plan, generate_case
+from dtwin.gap.generator import GeneratedCase, generate_case
 from dtwin.gap.recording import Recording, read_recording, recording_from_frame
 from dtwin.gap.report import diagnosis_to_dict, write_report
 
@@ -26,7 +28,6 @@ __all__ = [
     "EFFECTS",
     "Effect",
     "GeneratedCase",
-    "case_plan",
     "generate_case",
     "Recording",
     "read_recording",

@@ -1,8 +1,10 @@
 """Scoring diagnoses against the withheld truth: the ``gap_benchmark`` artifact.
 
+Specification: docs/gap.md §Benchmark (cases, rules) and §Targets.
+
 :func:`score_cases` joins each case's key (the truth from :mod:`dtwin.gap.generator`) with its
 ``diagnosis.json`` and returns one row per case; :func:`benchmark_metrics` gives the accuracies
-the issue sets targets for; :func:`benchmark_checks` states them as checks;
+docs/gap.md §Targets sets targets for; :func:`benchmark_checks` states them as checks;
 :func:`draw_benchmark` draws the confusion matrix, accuracy vs magnitude and the shrinks per
 effect.
 
@@ -25,7 +27,7 @@ from dtwin.gap.effects import NONE, UNEXPLAINED
 
 __all__ = ["TARGETS", "score_cases", "benchmark_metrics", "benchmark_checks", "draw_benchmark"]
 
-#: The issue's targets on the full benchmark (≥ 10 cases per effect).
+#: The targets on the full benchmark (docs/gap.md §Targets) (≥ 10 cases per effect).
 TARGETS: dict[str, float] = {
     "module_accuracy": 0.95,
     "effect_accuracy": 0.90,
@@ -108,7 +110,10 @@ def benchmark_metrics(table: pd.DataFrame) -> dict[str, Any]:
 
 
 def benchmark_checks(table: pd.DataFrame, metrics: Mapping[str, Any]) -> list[Check]:
-    """Return the artifact's checks: validity (cases scored) and the issue's targets as claims."""
+    """Return the artifact's checks: validity (cases scored) and the targets as claims.
+
+    The targets are :data:`TARGETS` (docs/gap.md §Targets).
+    """
     checks = [
         Check(
             "cases_scored",

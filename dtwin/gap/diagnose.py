@@ -1,6 +1,6 @@
 """The sim-to-real gap diagnoser: where the gap lies, which effect causes it, how far it shrinks.
 
-:func:`diagnose` implements docs/gap.md in three steps.
+:func:`diagnose` implements docs/gap.md in three steps (§Where, §Which, §How far).
 
 1. **Where.** Each module whose input and output are recorded is driven with its *recorded*
    input; its local gap (:mod:`dtwin.gap.localise`) is compared with the largest gap its noise
@@ -78,12 +78,12 @@ logger = logging.getLogger(__name__)
 #: Largest relative disagreement between the recording's dt and ``twin.dt``.
 DT_TOLERANCE = 0.01
 
-STATUSES = ("source", "gap", "inherited", "clean", "skipped")
-
 
 @dataclass(frozen=True)
 class GapSettings:
     """Decision constants of the diagnoser (the ``gap.diagnose`` config section).
+
+    See docs/gap.md §Settings; their roles in §Where and §Which.
 
     Attributes
     ----------
@@ -191,10 +191,11 @@ class Diagnosis:
 
 
 def twin_from_mapping(mapping: Any, dt: float | None = None) -> TwinParams:
-    """Return :class:`TwinParams` from a twin file's content (bare, or under a ``twin:`` key).
+    """Return :class:`TwinParams` from a twin file's content (docs/gap.md §Twin file).
 
-    Sections may be missing (the diagnoser then calibrates that module); ``dt`` may be missing
-    if given here (the recording's). An empty file is an empty mapping.
+    The content is a bare mapping or one under a ``twin:`` key. Sections may be missing (the
+    diagnoser then calibrates that module); ``dt`` may be missing if given here (the
+    recording's). An empty file is an empty mapping.
     """
     if mapping is None:
         mapping = {}
@@ -437,6 +438,229 @@ def _score_candidates(work: _ModuleWork, n_train: int, settings: GapSettings):
     return sorted(reports, key=lambda r: r.score)
 
 
+# --- the steps of the entry point ------------------------------------------------------
+
+
+def _check_arguments(recording: Recording, twin: TwinParams, train_frac: float) -> tuple:
+    """Validate the arguments of :func:`diagnose`; return ``(train_frac, n_train)``.
+
+    ``n_train`` is the number of samples, from the start, in the training part
+    (docs/gap.md §Interface).
+    """
+    if not isinstance(recording, Recording):
+        raise DtwinTypeError(f"recording must be a Recording (got {type(recording).__name__})")
+    if not isinstance(twin, TwinParams):
+        raise DtwinTypeError(f"twin must be TwinParams (got {type(twin).__name__})")
+    train_frac = require_in_range("train_frac", train_frac, 0.05, 0.95)
+    if abs(recording.dt - twin.dt) > DT_TOLERANCE * twin.dt:
+        raise DtwinValueError(
+            f"recording dt ({recording.dt:.6g} s, from column 't') disagrees with twin.dt "
+            f"({twin.dt:.6g} s) by more than {DT_TOLERANCE:.0%}"
+        )
+    n = recording.n_samples
+    n_train = int(round(train_frac * n))
+    if min(n_train, n - n_train) < 100:
+        raise DtwinValueError(
+            f"train_frac must leave at least 100 samples for training and for the held-out "
+            f"part (got {n_train} and {n - n_train} of {n})"
+        )
+    return train_frac, n_train
+
+
+def _module_notes(works: Mapping[str, _ModuleWork], calibrate: bool) -> list[str]:
+    """Return the report's notes on calibrated modules and on data vs twin noise floors."""
+    notes = []
+    for work in works.values():
+        if work.calibrated:
+            why = "--calibrate" if calibrate else "no nominal parameters in the twin file"
+            notes.append(f"{work.name}: linear twin fitted on the training part ({why})")
+        if work.floor_twin is not None and work.floor_twin > 0:
+            ratio = work.floor_data / work.floor_twin
+            if not 0.67 <= ratio <= 1.5:
+                notes.append(
+                    f"{work.name}: noise floor estimated from the data is {ratio:.2f}× the "
+                    "twin's (coloured noise, or a high-frequency effect)"
+                )
+    return notes
+
+
+def _choose(flagged: list[_ModuleWork], ranked: Mapping[str, list], settings: GapSettings):
+    """Return ``(source, chosen)``: the source module's work and its winning candidate.
+
+    The source is the flagged module furthest above its threshold (``gap_cal/threshold``);
+    ``chosen`` is its best-scored candidate if that removes at least ``min_share`` of the
+    held-out excess gap, else None (docs/gap.md §Which). Both are None when nothing is flagged.
+    """
+    source = max(flagged, key=lambda w: w.gap_cal / w.threshold) if flagged else None
+    chosen = None
+    if source is not None:
+        best = ranked[source.name][0]
+        chosen = best if best.heldout_shrink_pct >= 100 * settings.min_share else None
+    return source, chosen
+
+
+def _chain_before_after(rec, twin, works, t, source, chosen) -> tuple[dict, dict]:
+    """Return the chain's signals before and after the chosen effect is added.
+
+    *Before* runs every module with its nominal (or calibrated) linear twin; *after* adds the
+    chosen candidate to the source module (the same signals as *before* when nothing is
+    chosen). Each signal has shape ``(n_samples,)`` (docs/gap.md §How far).
+    """
+    scales = {name: w.data.scales for name, w in works.items()}
+    models = {}
+    for module in MODULES:
+        if module.name in works:
+            models[module.name] = ModuleModel(works[module.name].lin_base)
+        else:
+            nominal = _nominal_lin(module.name, twin)
+            if nominal is not None:
+                models[module.name] = ModuleModel(nominal)
+    chain_before = run_chain(rec.signals, models, rec.dt, t, scales)
+    chain_after = chain_before
+    if chosen is not None:
+        effect = next(e for e, *_ in source.candidates if e.name == chosen.effect)
+        fitted = next(f for e, f, *_ in source.candidates if e.name == chosen.effect)
+        models_after = dict(models)
+        models_after[source.name] = ModuleModel(fitted.lin, effect, fitted.theta)
+        chain_after = run_chain(rec.signals, models_after, rec.dt, t, scales)
+    return chain_before, chain_after
+
+
+def _kpi_shrink(rec, chain_before, chain_after, source, chosen, held, notes) -> tuple:
+    """Return ``(kpi_signal, kpi_shrink_pct)`` on the held-out part; may append to ``notes``.
+
+    The KPI signal is the most downstream recorded signal the chain simulates (``z`` first);
+    its shrink is None when no effect was chosen or the source is not upstream of it.
+    """
+    kpi_signal = None
+    for signal in ("z", "y_fused", "y_A", "y_B", "x", "u_act"):
+        if signal in rec.signals and signal in chain_before:
+            kpi_signal = signal
+            break
+    kpi_shrink = None
+    if chosen is not None and kpi_signal is not None:
+        if source.name in upstream_modules(kpi_signal):
+            recorded = rec.signals[kpi_signal]
+            norm = float(np.std(recorded)) or 1.0
+            before = normalised_rms(recorded, chain_before[kpi_signal], held, norm)
+            after = normalised_rms(recorded, chain_after[kpi_signal], held, norm)
+            kpi_shrink = _shrink(before, after)
+        else:
+            notes.append(f"{source.name} is not upstream of the end-to-end signal {kpi_signal}")
+    return kpi_signal, kpi_shrink
+
+
+def _status(work: _ModuleWork, flagged, source, chain_gap: float | None) -> tuple[str, str]:
+    """Return ``(status, reason)`` of an analysed module (docs/gap.md §Statuses)."""
+    if work in flagged:
+        status = "source" if work is source else "gap"
+        return status, (
+            f"gap {work.gap_cal:.3g} after in-tolerance calibration exceeds the noise "
+            f"threshold {work.threshold:.3g}"
+        )
+    if chain_gap is not None and chain_gap > 2 * max(work.gap_before, work.threshold):
+        return "inherited", (
+            f"local gap {work.gap_before:.3g} is within noise; chain gap {chain_gap:.3g} "
+            "comes from upstream"
+        )
+    return "clean", f"gap {work.gap_cal:.3g} within the noise threshold {work.threshold:.3g}"
+
+
+def _skipped_report(module, rec: Recording) -> ModuleReport:
+    """Return the report of a module whose input or output column is missing."""
+    missing = [
+        s
+        for s in (*module.inputs, module.output)
+        if s not in rec.signals and not (module.name == "M4" and s == "v")
+    ]
+    return ModuleReport(
+        module.name, "skipped", f"column(s) not in the recording: {', '.join(missing)}"
+    )
+
+
+def _module_reports(rec, works, flagged, source, chosen, chains, held) -> dict[str, ModuleReport]:
+    """Return one :class:`ModuleReport` per module of the wiring table, in its order.
+
+    ``chains`` is ``(chain_before, chain_after)`` from :func:`_chain_before_after`.
+    """
+    chain_before, chain_after = chains
+    modules = {}
+    for module in MODULES:
+        name = module.name
+        if name not in works:
+            modules[name] = _skipped_report(module, rec)
+            continue
+        work = works[name]
+        out = module.output
+        chain_gap = chain_gap_after = None
+        if out in chain_before:
+            chain_gap = normalised_rms(work.data.output, chain_before[out], held, work.norm)
+            chain_gap_after = normalised_rms(work.data.output, chain_after[out], held, work.norm)
+        gap_after = work.gap_before
+        if source is not None and name == source.name and chosen is not None:
+            gap_after = chosen.gap_after
+        status, reason = _status(work, flagged, source, chain_gap)
+        modules[name] = ModuleReport(
+            name,
+            status,
+            reason,
+            work.calibrated,
+            work.gap_before,
+            work.gap_cal,
+            gap_after,
+            chain_gap,
+            chain_gap_after,
+            work.floor.rms / work.norm,
+            work.floor_twin,
+            work.floor_data,
+            work.threshold,
+            work.n_eff,
+            work.lin_nominal,
+            work.lin_base,
+        )
+    return modules
+
+
+def _heldout_series(rec: Recording, source, ranked, held: slice) -> dict[str, np.ndarray]:
+    """Return the source module's held-out series for the figure, each ``(n_held,)``.
+
+    Keys ``t`` (s), ``recorded``, ``before`` (the twin) and ``after`` (the best candidate);
+    empty when there is no source.
+    """
+    if source is None:
+        return {}
+    series = {
+        "t": rec.t[held],
+        "recorded": source.data.output[held],
+        "before": source.sim_before[held],
+    }
+    best_prediction = next(
+        p for e, f, p, g in source.candidates if e.name == ranked[source.name][0].effect
+    )
+    series["after"] = best_prediction[held]
+    return series
+
+
+def _verdict(source, chosen) -> tuple:
+    """Return ``(module, effect, params, confidence, shrink_pct, raw_shrink_pct)``.
+
+    ``none`` without a source, ``unexplained`` with a source but no chosen candidate
+    (docs/gap.md §Statuses).
+    """
+    if source is None:
+        return None, NONE, {}, None, None, None
+    if chosen is None:
+        return source.name, UNEXPLAINED, {}, None, None, None
+    return (
+        source.name,
+        chosen.effect,
+        chosen.params,
+        chosen.weight,
+        chosen.heldout_shrink_pct,
+        chosen.raw_shrink_pct,
+    )
+
+
 # --- the entry point -----------------------------------------------------------------
 
 
@@ -472,25 +696,15 @@ def diagnose(
     DtwinValueError
         If ``twin.dt`` disagrees with the recording's by more than 1 %, ``train_frac`` leaves
         fewer than 100 samples on either side, or a module input is constant.
+
+    Notes
+    -----
+    The three steps (where, which, how far) are specified in docs/gap.md §Where, §Which and
+    §How far.
     """
     settings = settings or GapSettings()
-    if not isinstance(recording, Recording):
-        raise DtwinTypeError(f"recording must be a Recording (got {type(recording).__name__})")
-    if not isinstance(twin, TwinParams):
-        raise DtwinTypeError(f"twin must be TwinParams (got {type(twin).__name__})")
-    train_frac = require_in_range("train_frac", train_frac, 0.05, 0.95)
-    if abs(recording.dt - twin.dt) > DT_TOLERANCE * twin.dt:
-        raise DtwinValueError(
-            f"recording dt ({recording.dt:.6g} s, from column 't') disagrees with twin.dt "
-            f"({twin.dt:.6g} s) by more than {DT_TOLERANCE:.0%}"
-        )
+    train_frac, n_train = _check_arguments(recording, twin, train_frac)
     n = recording.n_samples
-    n_train = int(round(train_frac * n))
-    if min(n_train, n - n_train) < 100:
-        raise DtwinValueError(
-            f"train_frac must leave at least 100 samples for training and for the held-out "
-            f"part (got {n_train} and {n - n_train} of {n})"
-        )
     names = diagnosable_modules(recording.signals)
     _check_inputs_vary(recording, names, n_train)
     t = recording.t - recording.t[0]
@@ -503,157 +717,22 @@ def diagnose(
         name: _analyse_module(name, recording, twin, t, n_train, calibrate, settings)
         for name in names
     }
-    for work in works.values():
-        if work.calibrated:
-            why = "--calibrate" if calibrate else "no nominal parameters in the twin file"
-            notes.append(f"{work.name}: linear twin fitted on the training part ({why})")
-        if work.floor_twin is not None and work.floor_twin > 0:
-            ratio = work.floor_data / work.floor_twin
-            if not 0.67 <= ratio <= 1.5:
-                notes.append(
-                    f"{work.name}: noise floor estimated from the data is {ratio:.2f}× the "
-                    "twin's (coloured noise, or a high-frequency effect)"
-                )
+    notes.extend(_module_notes(works, calibrate))
     flagged = [w for w in works.values() if w.gap_cal > w.threshold]
     for work in flagged:
         _fit_candidates(work, n_train)
     ranked = {w.name: _score_candidates(w, n_train, settings) for w in flagged}
+    source, chosen = _choose(flagged, ranked, settings)
 
-    source = max(flagged, key=lambda w: w.gap_cal / w.threshold) if flagged else None
-    chosen = None
-    if source is not None:
-        best = ranked[source.name][0]
-        chosen = best if best.heldout_shrink_pct >= 100 * settings.min_share else None
-
-    # chain: before (the twin as given / calibrated) and after (source module with the effect)
-    scales = {name: w.data.scales for name, w in works.items()}
-    models = {}
-    for module in MODULES:
-        if module.name in works:
-            models[module.name] = ModuleModel(works[module.name].lin_base)
-        else:
-            nominal = _nominal_lin(module.name, twin)
-            if nominal is not None:
-                models[module.name] = ModuleModel(nominal)
-    chain_before = run_chain(recording.signals, models, recording.dt, t, scales)
-    chain_after = chain_before
-    if chosen is not None:
-        effect = next(e for e, *_ in source.candidates if e.name == chosen.effect)
-        fitted = next(f for e, f, *_ in source.candidates if e.name == chosen.effect)
-        models_after = dict(models)
-        models_after[source.name] = ModuleModel(fitted.lin, effect, fitted.theta)
-        chain_after = run_chain(recording.signals, models_after, recording.dt, t, scales)
-
-    kpi_signal = None
-    for signal in ("z", "y_fused", "y_A", "y_B", "x", "u_act"):
-        if signal in recording.signals and signal in chain_before:
-            kpi_signal = signal
-            break
-    kpi_shrink = None
-    if chosen is not None and kpi_signal is not None:
-        if source.name in upstream_modules(kpi_signal):
-            norm = float(np.std(recording.signals[kpi_signal])) or 1.0
-            before = normalised_rms(
-                recording.signals[kpi_signal], chain_before[kpi_signal], held, norm
-            )
-            after = normalised_rms(
-                recording.signals[kpi_signal], chain_after[kpi_signal], held, norm
-            )
-            kpi_shrink = _shrink(before, after)
-        else:
-            notes.append(f"{source.name} is not upstream of the end-to-end signal {kpi_signal}")
-
-    modules = {}
-    for module in MODULES:
-        name = module.name
-        if name not in works:
-            missing = [
-                s
-                for s in (*module.inputs, module.output)
-                if s not in recording.signals and not (name == "M4" and s == "v")
-            ]
-            modules[name] = ModuleReport(
-                name, "skipped", f"column(s) not in the recording: {', '.join(missing)}"
-            )
-            continue
-        work = works[name]
-        out = module.output
-        chain_gap = chain_gap_after = None
-        if out in chain_before:
-            chain_gap = normalised_rms(work.data.output, chain_before[out], held, work.norm)
-            chain_gap_after = normalised_rms(work.data.output, chain_after[out], held, work.norm)
-        gap_after = work.gap_before
-        if source is not None and name == source.name and chosen is not None:
-            gap_after = chosen.gap_after
-        if work in flagged:
-            status = "source" if work is source else "gap"
-            reason = (
-                f"gap {work.gap_cal:.3g} after in-tolerance calibration exceeds the noise "
-                f"threshold {work.threshold:.3g}"
-            )
-        elif chain_gap is not None and chain_gap > 2 * max(work.gap_before, work.threshold):
-            status, reason = (
-                "inherited",
-                (
-                    f"local gap {work.gap_before:.3g} is within noise; chain gap {chain_gap:.3g} "
-                    "comes from upstream"
-                ),
-            )
-        else:
-            status, reason = (
-                "clean",
-                (f"gap {work.gap_cal:.3g} within the noise threshold {work.threshold:.3g}"),
-            )
-        modules[name] = ModuleReport(
-            name,
-            status,
-            reason,
-            work.calibrated,
-            work.gap_before,
-            work.gap_cal,
-            gap_after,
-            chain_gap,
-            chain_gap_after,
-            work.floor.rms / work.norm,
-            work.floor_twin,
-            work.floor_data,
-            work.threshold,
-            work.n_eff,
-            work.lin_nominal,
-            work.lin_base,
-        )
-
+    chains = _chain_before_after(recording, twin, works, t, source, chosen)
+    kpi_signal, kpi_shrink = _kpi_shrink(recording, *chains, source, chosen, held, notes)
+    modules = _module_reports(recording, works, flagged, source, chosen, chains, held)
     candidates = [
         c
         for name in sorted(ranked, key=lambda k: k != getattr(source, "name", None))
         for c in ranked[name]
     ]
-    series: dict[str, np.ndarray] = {}
-    if source is not None:
-        series = {
-            "t": recording.t[held],
-            "recorded": source.data.output[held],
-            "before": source.sim_before[held],
-        }
-        best_prediction = next(
-            p for e, f, p, g in source.candidates if e.name == ranked[source.name][0].effect
-        )
-        series["after"] = best_prediction[held]
-
-    if source is None:
-        module, effect, params, confidence = None, NONE, {}, None
-        shrink = raw_shrink = None
-    elif chosen is None:
-        module, effect, params, confidence = source.name, UNEXPLAINED, {}, None
-        shrink = raw_shrink = None
-    else:
-        module, effect, params = source.name, chosen.effect, chosen.params
-        confidence, shrink, raw_shrink = (
-            chosen.weight,
-            chosen.heldout_shrink_pct,
-            chosen.raw_shrink_pct,
-        )
-
+    module, effect, params, confidence, shrink, raw_shrink = _verdict(source, chosen)
     return Diagnosis(
         module=module,
         effect=effect,
@@ -672,5 +751,5 @@ def diagnose(
         calibrated=tuple(w.name for w in works.values() if w.calibrated),
         notes=tuple(notes),
         settings=settings,
-        series=series,
+        series=_heldout_series(recording, source, ranked, held),
     )

@@ -1,4 +1,6 @@
-"""The catalogue of candidate unmodelled effects of the gap diagnoser (docs/gap.md, "Which").
+"""The catalogue of candidate unmodelled effects of the gap diagnoser.
+
+Specification: docs/gap.md §Candidate effects (the catalogue table).
 
 Each :class:`Effect` names the modules it can belong to, its parameters with units, bounds and
 starting points (scaled from the data, so the catalogue works in any units), and how it enters

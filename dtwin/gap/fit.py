@@ -1,5 +1,7 @@
 """Fitting a module's twin, with or without a candidate effect, on the training part.
 
+Specification: docs/gap.md §Which (fitting) and §Calibration from data.
+
 Parameters are fitted by **simulation error**: the module is driven with its recorded input and
 its simulated output is compared with the recorded output over the training samples
 (:func:`scipy.optimize.least_squares`, trust-region reflective with bounds). Simulation error,

@@ -1,5 +1,7 @@
 """ "Real" recordings with a withheld effect, for checking the gap diagnoser.
 
+Specification: docs/gap.md §Generator.
+
 :func:`generate_case` runs the paper's asset (§3.1) with one effect (or none, or one the
 catalogue does not know) and returns the recording, the nominal twin file and a separate key
 holding the truth, which the diagnoser never reads. It is deliberately unkind:
@@ -32,6 +34,8 @@ from dtwin._validation import DtwinValueError, require_in_range
 from dtwin.command import make_command, time_axis
 from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED, fractional_delay
 from dtwin.gap.noise import plant_noise_gain
+from dtwin.modules import CONTRACTS, fuse, kpi, lag_coefficient, lag_response, plant_response
+from dtwin.params import CommandParams
 
 __all__ = [
     "IN_LIST_EFFECTS",
@@ -40,7 +44,6 @@ __all__ = [
     "NOMINAL_TWIN",
     "GeneratedCase",
     "generate_case",
-    "case_plan",
     "case_spec",
 ]
 
@@ -78,13 +81,11 @@ NOMINAL_TWIN: dict[str, Any] = {
     "noise": {"actuator": 0.005, "plant": 0.04, "sensor_A": 0.03, "sensor_B": 0.02},
 }
 
+#: Per module: its twin section and the parameter(s) a ``parameter_mismatch`` may change (a
+#: single name is taken without a random draw).
 _MISMATCH_PARAMS = {
-    "M0": ("actuator", "tau"),
-    "M1": ("plant", ("m", "c", "k")),
-    "M2a": ("sensor_A", ("tau", "bias")),
-    "M2b": ("sensor_B", ("tau", "bias")),
-    "M3": ("fusion", "alpha"),
-    "M4": ("kpi", ("w1", "w2")),
+    name: (c.section, c.params[0] if len(c.params) == 1 else c.params)
+    for name, c in CONTRACTS.items()
 }
 
 
@@ -123,103 +124,164 @@ def _ar1(rng: np.random.Generator, n: int, sigma: float, phi: float) -> np.ndarr
     return sigma * out
 
 
+def _draw_saturation(module, level, rng, scale) -> dict[str, Any]:
+    """Return an ``actuator_saturation``: tanh (``U``) or clip (``U_high``, ``U_low``), u units."""
+    form = str(rng.choice(["tanh", "clip", "asymmetric_clip"]))
+    umax = scale["u_max"]
+    if form == "tanh":
+        return {"form": form, "U": _log_between(2.0, 0.55, level) * umax}
+    high = _log_between(0.9, 0.4, level) * umax
+    low = high if form == "clip" else high * rng.uniform(1.1, 1.6)
+    return {"form": form, "U_high": high, "U_low": low}
+
+
+def _draw_deadzone(module, level, rng, scale) -> dict[str, Any]:
+    """Return an ``actuator_deadzone``: half-widths ``D_high``, ``D_low`` (u units)."""
+    form = str(rng.choice(["symmetric", "asymmetric", "smooth"]))
+    width = _log_between(0.05, 0.3, level) * scale["u_std"]
+    ratio = rng.uniform(0.6, 1.0) if form == "asymmetric" else 1.0
+    return {"form": form, "D_high": width, "D_low": width * ratio}
+
+
+def _draw_actuator_delay(module, level, rng, scale) -> dict[str, Any]:
+    """Return an ``actuator_delay`` of 0.8–6 samples (fractional)."""
+    return {"form": "fractional", "delay_samples": _log_between(0.8, 6.0, level)}
+
+
+def _draw_sensor_delay(module, level, rng, scale) -> dict[str, Any]:
+    """Return a ``sensor_delay`` of 4–15 samples (fractional)."""
+    return {"form": "fractional", "delay_samples": _log_between(4.0, 15.0, level)}
+
+
+def _draw_friction(module, level, rng, scale) -> dict[str, Any]:
+    """Return a ``coulomb_friction``: Stribeck or Coulomb + viscous (``Fc``, ``Fs`` in N)."""
+    fc = _log_between(0.012, 0.2, level) * scale["u_max"]
+    form = str(rng.choice(["stribeck", "coulomb_viscous"]))
+    return {
+        "form": form,
+        "Fc": fc,
+        "Fs": fc * rng.uniform(1.2, 2.0) if form == "stribeck" else fc,
+        "vs": rng.uniform(0.05, 0.3) * scale["v_std"],
+        "extra_c": rng.uniform(0.0, 0.05) if form == "coulomb_viscous" else 0.0,
+    }
+
+
+def _draw_stiffness(module, level, rng, scale) -> dict[str, Any]:
+    """Return a ``cubic_stiffness``: ``ratio·k·x_ref·|x/x_ref|^(power+1)``, power near 2."""
+    power = float(rng.choice([2.0, rng.uniform(1.6, 2.4)]))
+    # softening is capped so that the spring stays stiff over the whole run
+    ratio = (
+        _log_between(0.06, 0.8, level) if rng.uniform() < 0.75 else -_log_between(0.04, 0.2, level)
+    )
+    return {
+        "form": f"|x|^{power:.2f} hardening" if ratio > 0 else f"|x|^{power:.2f} softening",
+        "power": power,
+        "ratio": ratio,
+        "x_ref": scale["x_max"],
+    }
+
+
+def _draw_damping(module, level, rng, scale) -> dict[str, Any]:
+    """Return a ``quadratic_damping``: ``ratio·c·v_ref·|v/v_ref|^power``, power 1.7–2.3."""
+    power = float(rng.uniform(1.7, 2.3))
+    ratio = _log_between(0.15, 3.0, level)
+    return {"form": f"|v|^{power:.2f}", "power": power, "ratio": ratio, "v_ref": scale["v_max"]}
+
+
+def _draw_quantization(module, level, rng, scale) -> dict[str, Any]:
+    """Return a ``sensor_quantization`` with step ``q`` of 3–10 noise standard deviations."""
+    return {"form": "round after noise", "q": _log_between(3.0, 10.0, level) * scale["sigma"]}
+
+
+def _draw_scale_error(module, level, rng, scale) -> dict[str, Any]:
+    """Return a ``sensor_scale_error``: a gain 6–35 % away from 1."""
+    sign = 1 if rng.uniform() < 0.5 else -1
+    return {"form": "gain", "gain": 1 + sign * _log_between(0.06, 0.35, level)}
+
+
+def _draw_bias_drift(module, level, rng, scale) -> dict[str, Any]:
+    """Return a ``sensor_bias_drift`` of ``total`` (2.5–15 σ) with a non-linear shape."""
+    form = str(rng.choice(["power", "exponential", "linear_plus_wander"]))
+    total = _log_between(2.5, 15.0, level) * scale["sigma"] * (1 if rng.uniform() < 0.5 else -1)
+    return {
+        "form": form,
+        "total": total,
+        "power": rng.uniform(0.6, 1.6),
+        "tau_frac": rng.uniform(0.4, 1.5),
+    }
+
+
+def _draw_interference(module, level, rng, scale) -> dict[str, Any]:
+    """Return a ``sensor_interference``: a sinusoid of 1.5–6 σ at 0.8–8 Hz."""
+    return {
+        "form": "sinusoid",
+        "amplitude": _log_between(1.5, 6.0, level) * scale["sigma"],
+        "freq_hz": rng.uniform(0.8, 8.0),
+        "phase": rng.uniform(0, 2 * np.pi),
+    }
+
+
+def _draw_stiffness_change(module, level, rng, scale) -> dict[str, Any]:
+    """Return a ``stiffness_change``: k times ``factor`` from ``at_frac`` of the run on."""
+    factor = (
+        _log_between(1.25, 2.5, level)
+        if rng.uniform() < 0.7
+        else 1 / _log_between(1.25, 2.0, level)
+    )
+    return {"form": "step in k", "factor": factor, "at_frac": rng.uniform(0.35, 0.65)}
+
+
+def _draw_mismatch(module, level, rng, scale) -> dict[str, Any]:
+    """Return a ``parameter_mismatch``: one nominal parameter of ``module`` offset or scaled."""
+    section, names = _MISMATCH_PARAMS[module]
+    name = names if isinstance(names, str) else str(rng.choice(names))
+    sign = 1 if rng.uniform() < 0.5 else -1
+    if name == "bias":
+        delta = sign * _log_between(1.5, 10.0, level) * scale["sigma"]
+        return {"form": "offset", "section": section, "param": name, "delta": delta}
+    if name == "alpha":
+        delta = sign * _log_between(0.06, 0.35, level)
+        return {"form": "offset", "section": section, "param": name, "delta": delta}
+    low, high = (0.4, 2.0) if name == "tau" and module in ("M2a", "M2b") else (0.15, 0.6)
+    factor = (1 + _log_between(low, high, level)) ** sign
+    return {"form": "factor", "section": section, "param": name, "factor": factor}
+
+
+_DRAWS = {
+    "actuator_saturation": _draw_saturation,
+    "actuator_deadzone": _draw_deadzone,
+    "actuator_delay": _draw_actuator_delay,
+    "sensor_delay": _draw_sensor_delay,
+    "coulomb_friction": _draw_friction,
+    "cubic_stiffness": _draw_stiffness,
+    "quadratic_damping": _draw_damping,
+    "sensor_quantization": _draw_quantization,
+    "sensor_scale_error": _draw_scale_error,
+    "sensor_bias_drift": _draw_bias_drift,
+    "sensor_interference": _draw_interference,
+    "stiffness_change": _draw_stiffness_change,
+    PARAMETER_MISMATCH: _draw_mismatch,
+}
+
+
 def _draw_effect(effect, module, level, rng, scale) -> dict[str, Any]:
-    """Return the real effect's form and parameters (``scale`` holds signal sizes)."""
-    if effect == "actuator_saturation":
-        form = str(rng.choice(["tanh", "clip", "asymmetric_clip"]))
-        umax = scale["u_max"]
-        if form == "tanh":
-            return {"form": form, "U": _log_between(2.0, 0.55, level) * umax}
-        high = _log_between(0.9, 0.4, level) * umax
-        low = high if form == "clip" else high * rng.uniform(1.1, 1.6)
-        return {"form": form, "U_high": high, "U_low": low}
-    if effect == "actuator_deadzone":
-        form = str(rng.choice(["symmetric", "asymmetric", "smooth"]))
-        width = _log_between(0.05, 0.3, level) * scale["u_std"]
-        ratio = rng.uniform(0.6, 1.0) if form == "asymmetric" else 1.0
-        return {"form": form, "D_high": width, "D_low": width * ratio}
-    if effect == "actuator_delay":
-        return {"form": "fractional", "delay_samples": _log_between(0.8, 6.0, level)}
-    if effect == "sensor_delay":
-        return {"form": "fractional", "delay_samples": _log_between(4.0, 15.0, level)}
-    if effect == "coulomb_friction":
-        fc = _log_between(0.012, 0.2, level) * scale["u_max"]
-        form = str(rng.choice(["stribeck", "coulomb_viscous"]))
-        return {
-            "form": form,
-            "Fc": fc,
-            "Fs": fc * rng.uniform(1.2, 2.0) if form == "stribeck" else fc,
-            "vs": rng.uniform(0.05, 0.3) * scale["v_std"],
-            "extra_c": rng.uniform(0.0, 0.05) if form == "coulomb_viscous" else 0.0,
-        }
-    if effect == "cubic_stiffness":
-        power = float(rng.choice([2.0, rng.uniform(1.6, 2.4)]))
-        # softening is capped so that the spring stays stiff over the whole run
-        ratio = (
-            _log_between(0.06, 0.8, level)
-            if rng.uniform() < 0.75
-            else -_log_between(0.04, 0.2, level)
-        )
-        return {
-            "form": f"|x|^{power:.2f} hardening" if ratio > 0 else f"|x|^{power:.2f} softening",
-            "power": power,
-            "ratio": ratio,
-            "x_ref": scale["x_max"],
-        }
-    if effect == "quadratic_damping":
-        power = float(rng.uniform(1.7, 2.3))
-        ratio = _log_between(0.15, 3.0, level)
-        return {"form": f"|v|^{power:.2f}", "power": power, "ratio": ratio, "v_ref": scale["v_max"]}
-    if effect == "sensor_quantization":
-        return {"form": "round after noise", "q": _log_between(3.0, 10.0, level) * scale["sigma"]}
-    if effect == "sensor_scale_error":
-        sign = 1 if rng.uniform() < 0.5 else -1
-        return {"form": "gain", "gain": 1 + sign * _log_between(0.06, 0.35, level)}
-    if effect == "sensor_bias_drift":
-        form = str(rng.choice(["power", "exponential", "linear_plus_wander"]))
-        total = _log_between(2.5, 15.0, level) * scale["sigma"] * (1 if rng.uniform() < 0.5 else -1)
-        return {
-            "form": form,
-            "total": total,
-            "power": rng.uniform(0.6, 1.6),
-            "tau_frac": rng.uniform(0.4, 1.5),
-        }
-    if effect == "sensor_interference":
-        return {
-            "form": "sinusoid",
-            "amplitude": _log_between(1.5, 6.0, level) * scale["sigma"],
-            "freq_hz": rng.uniform(0.8, 8.0),
-            "phase": rng.uniform(0, 2 * np.pi),
-        }
-    if effect == "stiffness_change":
-        factor = (
-            _log_between(1.25, 2.5, level)
-            if rng.uniform() < 0.7
-            else 1 / _log_between(1.25, 2.0, level)
-        )
-        return {"form": "step in k", "factor": factor, "at_frac": rng.uniform(0.35, 0.65)}
-    if effect == PARAMETER_MISMATCH:
-        section, names = _MISMATCH_PARAMS[module]
-        name = names if isinstance(names, str) else str(rng.choice(names))
-        sign = 1 if rng.uniform() < 0.5 else -1
-        if name == "bias":
-            return {
-                "form": "offset",
-                "section": section,
-                "param": name,
-                "delta": sign * _log_between(1.5, 10.0, level) * scale["sigma"],
-            }
-        if name == "alpha":
-            return {
-                "form": "offset",
-                "section": section,
-                "param": name,
-                "delta": sign * _log_between(0.06, 0.35, level),
-            }
-        low, high = (0.4, 2.0) if name == "tau" and module in ("M2a", "M2b") else (0.15, 0.6)
-        factor = (1 + _log_between(low, high, level)) ** sign
-        return {"form": "factor", "section": section, "param": name, "factor": factor}
-    raise DtwinValueError(f"unknown case effect {effect!r}")
+    """Return the real effect's form and parameters.
+
+    Parameters
+    ----------
+    effect, module : str
+        The case's effect and the module it sits in.
+    level : float in [0, 1]
+        Magnitude, from barely above the noise (0) to strong (1), mapped log-uniformly.
+    rng : numpy.random.Generator
+        The case's generator (the draws of each form are in a fixed order).
+    scale : dict
+        Signal sizes of the clean run: ``u_max``, ``u_std``, ``x_max``, ``v_max``, ``v_std``,
+        ``sigma`` (the sensor's noise standard deviation).
+    """
+    if effect not in _DRAWS:
+        raise DtwinValueError(f"unknown case effect {effect!r}")
+    return _DRAWS[effect](module, level, rng, scale)
 
 
 def _actuator(u_cmd, tau, dt, noise, spec):
@@ -237,47 +299,65 @@ def _actuator(u_cmd, tau, dt, noise, spec):
             u = np.where(u > high, u - high, np.where(u < -low, u + low, 0.0))
     elif spec.get("effect") == "actuator_delay":
         u = fractional_delay(u, spec["delay_samples"])
-    a = math.exp(-dt / tau)
+    # the contract's lag, but the process noise enters inside the recursion (physics adds it by
+    # superposition), a different rounding order: this loop stays so recordings keep their bits
+    a = lag_coefficient(tau, dt)
     out = np.zeros(len(u))
     for k in range(1, len(u)):
         out[k] = a * out[k - 1] + (1 - a) * u[k - 1] + noise[k]
     return out
 
 
-def _plant(u, m, c, k, dt, noise, spec, n):
+def _plant_force(spec, c, k):
+    """Return the real effect's force hook ``F(x, v)`` (N) of the plant, or None."""
     effect = spec.get("effect")
-    x = np.zeros(n)
-    v = np.zeros(n)
-    change_at = int(spec["at_frac"] * n) if effect == "stiffness_change" else n + 1
-    for j in range(1, n):
-        xp, vp = x[j - 1], v[j - 1]
-        stiff = k * spec["factor"] if effect == "stiffness_change" and j >= change_at else k
-        force = 0.0
-        if effect == "coulomb_friction":
-            level = spec["Fc"] + (spec["Fs"] - spec["Fc"]) * math.exp(-((vp / spec["vs"]) ** 2))
-            force = level * math.tanh(vp / (1e-3 * spec["vs"])) + spec["extra_c"] * vp
-        elif effect == "cubic_stiffness":
-            ref = spec["x_ref"]
-            force = (
-                spec["ratio"] * k * ref * math.copysign(abs(xp / ref) ** (spec["power"] + 1), xp)
-            )
-        elif effect == "quadratic_damping":
-            ref = spec["v_ref"]
-            force = spec["ratio"] * c * ref * math.copysign(abs(vp / ref) ** spec["power"], vp)
-        accel = (u[j - 1] - c * vp - stiff * xp - force) / m + noise[j]
-        v[j] = vp + dt * accel
-        x[j] = xp + dt * vp
-    return x, v
+    if effect == "coulomb_friction":
+        fc, fs, vs, extra = spec["Fc"], spec["Fs"], spec["vs"], spec["extra_c"]
+
+        def friction(xp, vp):
+            level = fc + (fs - fc) * math.exp(-((vp / vs) ** 2))
+            return level * math.tanh(vp / (1e-3 * vs)) + extra * vp
+
+        return friction
+    if effect == "cubic_stiffness":
+        ratio, ref, power = spec["ratio"], spec["x_ref"], spec["power"]
+        return lambda xp, vp: ratio * k * ref * math.copysign(abs(xp / ref) ** (power + 1), xp)
+    if effect == "quadratic_damping":
+        ratio, ref, power = spec["ratio"], spec["v_ref"], spec["power"]
+        return lambda xp, vp: ratio * c * ref * math.copysign(abs(vp / ref) ** power, vp)
+    return None
+
+
+def _plant(u, m, c, k, dt, noise, spec, n):
+    """Return ``(x, v)`` of the asset's plant: the contract's Euler plant with the effect's hook.
+
+    ``stiffness_change`` runs the plant in two parts, the second from the state at the change
+    with ``k·factor``.
+    """
+    force = _plant_force(spec, c, k)
+    if spec.get("effect") != "stiffness_change":
+        x, v = plant_response(u[:n], m, c, k, dt, force=force, accel_noise=noise[:n])
+        return x, v
+    at = int(spec["at_frac"] * n)
+    x, v = plant_response(u[:at], m, c, k, dt, accel_noise=noise[:at])
+    x2, v2 = plant_response(
+        u[at - 1 : n],
+        m,
+        c,
+        k * spec["factor"],
+        dt,
+        x0=x[-1],
+        v0=v[-1],
+        accel_noise=noise[at - 1 : n],
+    )
+    return np.concatenate([x, x2[1:]]), np.concatenate([v, v2[1:]])
 
 
 def _sensor(x, tau, bias, dt, noise, spec, t):
     effect = spec.get("effect")
     if effect == "sensor_delay":
         x = fractional_delay(x, spec["delay_samples"])
-    a = math.exp(-dt / tau)
-    lag = np.zeros(len(x))
-    for k in range(1, len(x)):
-        lag[k] = a * lag[k - 1] + (1 - a) * x[k - 1]
+    lag = lag_response(x, lag_coefficient(tau, dt))
     if effect == "sensor_scale_error":
         lag = spec["gain"] * lag
     y = lag + bias + noise
@@ -309,7 +389,7 @@ def _run_asset(asset, u_cmd, noises, specs, t):
         s = asset[f"sensor_{which}"]
         y[which] = _sensor(x, s["tau"], s["bias"], dt, noises[which], specs[module], t)
     alpha = asset["fusion"]["alpha"]
-    kpi = asset["kpi"]
+    weights = asset["kpi"]
     return {
         "u_cmd": u_cmd,
         "u_act": u_act,
@@ -317,12 +397,16 @@ def _run_asset(asset, u_cmd, noises, specs, t):
         "v": v,
         "y_A": y["A"],
         "y_B": y["B"],
-        "y_fused": alpha * y["A"] + (1 - alpha) * y["B"],
-        "z": kpi["w1"] * x + kpi["w2"] * v,
+        "y_fused": fuse(y["A"], y["B"], alpha),
+        "z": kpi(x, v, weights["w1"], weights["w2"]),
     }
 
 
-_MODULE_OUTPUT = {"M0": "u_act", "M1": "x", "M2a": "y_A", "M2b": "y_B", "M3": "y_fused", "M4": "z"}
+#: The asset's parameters that are miscalibrated against the twin: the contract's parameters
+#: of the recursions (time constants and ``m, c, k``), in module order.
+_MISCALIBRATED = tuple((c.section, p) for c in CONTRACTS.values() for p in c.dynamic_params)
+
+_MODULE_OUTPUT = {name: c.output for name, c in CONTRACTS.items()}
 
 
 def generate_case(
@@ -385,91 +469,26 @@ def generate_case(
     module = module or (str(rng.choice(choices)) if choices[0] is not None else None)
     dt = float(nominal["dt"])
     t = time_axis(n, dt)
-
-    from dtwin.params import CommandParams  # local: the generator's excitation only
-
-    command = CommandParams(
-        amp=float(rng.uniform(0.6, 1.6)),
-        sine_amp=0.6,
-        sine_freq_hz=float(rng.uniform(0.15, 0.35)),
-        square_amp=0.4,
-        square_freq_hz=float(rng.uniform(0.03, 0.08)),
-        step_every_s=2.5,
-        step_std=float(rng.uniform(0.1, 0.3)),
-    )
-    u_cmd = make_command(n, dt, command, rng)
-
-    asset = {k: (dict(v) if isinstance(v, dict) else v) for k, v in nominal.items()}
-    for section, name in (
-        ("actuator", "tau"),
-        ("plant", "m"),
-        ("plant", "c"),
-        ("plant", "k"),
-        ("sensor_A", "tau"),
-        ("sensor_B", "tau"),
-    ):
-        asset[section][name] *= 1 + rng.uniform(-miscalibration, miscalibration)
+    command, u_cmd = _excitation(rng, n, dt)
+    asset = _miscalibrated_asset(nominal, rng, miscalibration)
     noise_true = dict(nominal["noise"])
-    phis = {"A": float(rng.uniform(0.0, 0.6)), "B": float(rng.uniform(0.0, 0.6))}
-    noises = {
-        "actuator": np.r_[0.0, noise_true["actuator"] * rng.standard_normal(n - 1)],
-        "plant": np.r_[0.0, noise_true["plant"] * rng.standard_normal(n - 1)],
-        "A": _ar1(rng, n, noise_true["sensor_A"], phis["A"]),
-        "B": _ar1(rng, n, noise_true["sensor_B"], phis["B"]),
-    }
+    phis, noises = _draw_noises(rng, n, noise_true)
     clean_specs = {m: {} for m in _MODULE_OUTPUT}
     baseline = _run_asset(asset, u_cmd, noises, clean_specs, t)
-    sigma = noise_true["sensor_A"] if module == "M2a" else noise_true["sensor_B"]
-    scale = {
-        # sizes from the first half, so that the effect shows in a default training part
-        "u_max": float(np.max(np.abs((u_cmd if module == "M0" else baseline["u_act"])[: n // 2]))),
-        "u_std": float(np.std(u_cmd)),
-        "x_max": float(np.max(np.abs(baseline["x"]))),
-        "v_max": float(np.max(np.abs(baseline["v"]))),
-        "v_std": float(np.std(baseline["v"])),
-        "sigma": sigma,
-    }
+    scale = _signal_scale(u_cmd, baseline, module, noise_true)
     specs = {m: {} for m in _MODULE_OUTPUT}
     true_effect = {}
     if effect != NONE:
         true_effect = _draw_effect(effect, module, level, rng, scale)
         if effect == PARAMETER_MISMATCH:
-            section, name = true_effect["section"], true_effect["param"]
-            before = asset[section][name]
-            if "factor" in true_effect:
-                asset[section][name] = before * true_effect["factor"]
-            else:
-                asset[section][name] = before + true_effect["delta"]
-                if name == "alpha":
-                    asset[section][name] = min(max(asset[section][name], 0.0), 1.0)
-            true_effect["value"] = asset[section][name]
-            true_effect["nominal"] = nominal[section][name]
+            _apply_mismatch(asset, nominal, true_effect)
         else:
             specs[module] = {"effect": effect, **true_effect}
     signals = _run_asset(asset, u_cmd, noises, specs, t)
     snr = None
     if effect != NONE:
-        out = _MODULE_OUTPUT[module]
-        contribution = _effect_contribution(
-            asset, nominal, u_cmd, noises, specs, signals, module, t
-        )
-        floor = {
-            "M0": noise_true["actuator"]
-            / math.sqrt(1 - math.exp(-2 * dt / asset["actuator"]["tau"])),
-            "M1": noise_true["plant"] * plant_noise_gain(**asset["plant"], dt=dt)[0],
-            "M2a": noise_true["sensor_A"],
-            "M2b": noise_true["sensor_B"],
-        }.get(module)
-        if floor is None:
-            floor = float(np.std(signals[out])) * 0.01
-        snr = float(np.sqrt(np.mean(contribution**2)) / floor)
-
-    twin_noise = {
-        k: float(v * (1 + rng.uniform(-noise_error, noise_error))) for k, v in noise_true.items()
-    }
-    twin_file = {
-        "twin": {**{k: v for k, v in nominal.items() if k != "noise"}, "noise": twin_noise}
-    }
+        snr = _effect_snr(asset, nominal, u_cmd, noises, specs, signals, module, t, noise_true)
+    twin_file = _twin_file(nominal, noise_true, rng, noise_error)
     expected_effect = (
         effect if effect in IN_LIST_EFFECTS else (NONE if effect == NONE else UNEXPLAINED)
     )
@@ -491,6 +510,107 @@ def generate_case(
     }
     frame = pd.DataFrame({"t": t, **signals})
     return GeneratedCase(recording=frame, twin=twin_file, key=key)
+
+
+def _excitation(rng: np.random.Generator, n: int, dt: float):
+    """Return ``(command, u_cmd)``: random excitation settings and the command, shape ``(n,)``."""
+    command = CommandParams(
+        amp=float(rng.uniform(0.6, 1.6)),
+        sine_amp=0.6,
+        sine_freq_hz=float(rng.uniform(0.15, 0.35)),
+        square_amp=0.4,
+        square_freq_hz=float(rng.uniform(0.03, 0.08)),
+        step_every_s=2.5,
+        step_std=float(rng.uniform(0.1, 0.3)),
+    )
+    return command, make_command(n, dt, command, rng)
+
+
+def _miscalibrated_asset(nominal, rng: np.random.Generator, miscalibration: float) -> dict:
+    """Return the asset: the nominal twin with ``m, c, k`` and the time constants perturbed.
+
+    Each is multiplied by ``1 + U(−miscalibration, miscalibration)``.
+    """
+    asset = {k: (dict(v) if isinstance(v, dict) else v) for k, v in nominal.items()}
+    for section, name in _MISCALIBRATED:
+        asset[section][name] *= 1 + rng.uniform(-miscalibration, miscalibration)
+    return asset
+
+
+def _draw_noises(rng: np.random.Generator, n: int, noise_true: Mapping[str, float]):
+    """Return ``(phis, noises)``: the sensors' AR(1) coefficients and every noise, ``(n,)``.
+
+    Process noises (``actuator``, ``plant``) are white with element 0 unused; sensor noises
+    (``A``, ``B``) are AR(1) with lag-1 correlation ``phis[which]`` in [0, 0.6].
+    """
+    phis = {"A": float(rng.uniform(0.0, 0.6)), "B": float(rng.uniform(0.0, 0.6))}
+    noises = {
+        "actuator": np.r_[0.0, noise_true["actuator"] * rng.standard_normal(n - 1)],
+        "plant": np.r_[0.0, noise_true["plant"] * rng.standard_normal(n - 1)],
+        "A": _ar1(rng, n, noise_true["sensor_A"], phis["A"]),
+        "B": _ar1(rng, n, noise_true["sensor_B"], phis["B"]),
+    }
+    return phis, noises
+
+
+def _signal_scale(u_cmd, baseline, module, noise_true) -> dict[str, float]:
+    """Return the clean run's signal sizes that set an effect's strength (see _draw_effect)."""
+    n = len(u_cmd)
+    sigma = noise_true["sensor_A"] if module == "M2a" else noise_true["sensor_B"]
+    return {
+        # sizes from the first half, so that the effect shows in a default training part
+        "u_max": float(np.max(np.abs((u_cmd if module == "M0" else baseline["u_act"])[: n // 2]))),
+        "u_std": float(np.std(u_cmd)),
+        "x_max": float(np.max(np.abs(baseline["x"]))),
+        "v_max": float(np.max(np.abs(baseline["v"]))),
+        "v_std": float(np.std(baseline["v"])),
+        "sigma": sigma,
+    }
+
+
+def _apply_mismatch(asset: dict, nominal, true_effect: dict) -> None:
+    """Change the asset's parameter named in a ``parameter_mismatch`` draw (in place).
+
+    Also records the parameter's new ``value`` and its ``nominal`` one in ``true_effect``.
+    """
+    section, name = true_effect["section"], true_effect["param"]
+    before = asset[section][name]
+    if "factor" in true_effect:
+        asset[section][name] = before * true_effect["factor"]
+    else:
+        asset[section][name] = before + true_effect["delta"]
+        if name == "alpha":
+            asset[section][name] = min(max(asset[section][name], 0.0), 1.0)
+    true_effect["value"] = asset[section][name]
+    true_effect["nominal"] = nominal[section][name]
+
+
+def _effect_snr(asset, nominal, u_cmd, noises, specs, signals, module, t, noise_true) -> float:
+    """Return the RMS of the effect's contribution over the module's noise floor.
+
+    The floors are those of docs/gap.md §Noise floors for the asset's true parameters; M3 and
+    M4 (no noise) use 1 % of the output's standard deviation.
+    """
+    dt = asset["dt"]
+    out = _MODULE_OUTPUT[module]
+    contribution = _effect_contribution(asset, nominal, u_cmd, noises, specs, signals, module, t)
+    floor = {
+        "M0": noise_true["actuator"] / math.sqrt(1 - math.exp(-2 * dt / asset["actuator"]["tau"])),
+        "M1": noise_true["plant"] * plant_noise_gain(**asset["plant"], dt=dt)[0],
+        "M2a": noise_true["sensor_A"],
+        "M2b": noise_true["sensor_B"],
+    }.get(module)
+    if floor is None:
+        floor = float(np.std(signals[out])) * 0.01
+    return float(np.sqrt(np.mean(contribution**2)) / floor)
+
+
+def _twin_file(nominal, noise_true, rng: np.random.Generator, noise_error: float) -> dict:
+    """Return the twin file's content: the nominal twin, noise levels off by ±``noise_error``."""
+    twin_noise = {
+        k: float(v * (1 + rng.uniform(-noise_error, noise_error))) for k, v in noise_true.items()
+    }
+    return {"twin": {**{k: v for k, v in nominal.items() if k != "noise"}, "noise": twin_noise}}
 
 
 def _effect_contribution(asset, nominal, u_cmd, noises, specs, signals, module, t):
@@ -518,35 +638,16 @@ def _effect_contribution(asset, nominal, u_cmd, noises, specs, signals, module, 
         other = _sensor(signals["x"], s["tau"], s["bias"], dt, noises[which], {}, t)
         return signals[out] - other
     if module == "M3":
-        a = nominal["fusion"]["alpha"]
-        return signals[out] - (a * signals["y_A"] + (1 - a) * signals["y_B"])
+        return signals[out] - fuse(signals["y_A"], signals["y_B"], nominal["fusion"]["alpha"])
     k = nominal["kpi"]
-    return signals[out] - (k["w1"] * signals["x"] + k["w2"] * signals["v"])
-
-
-def case_plan(
-    cases_per_effect: int, effects: tuple[str, ...] = ALL_CASE_EFFECTS, first_seed: int = 1000
-) -> list[dict[str, Any]]:
-    """Return the benchmark's cases: ``[{"case": "coulomb_friction_03", "effect", "seed"}]``.
-
-    Seeds are ``first_seed + 1000·(effect index) + case index``, so adding cases keeps the
-    earlier ones.
-    """
-    plan = []
-    for index, effect in enumerate(effects):
-        for number in range(cases_per_effect):
-            plan.append(
-                {
-                    "case": f"{effect}_{number:02d}",
-                    "effect": effect,
-                    "seed": first_seed + 1000 * index + number,
-                }
-            )
-    return plan
+    return signals[out] - kpi(signals["x"], signals["v"], k["w1"], k["w2"])
 
 
 def case_spec(case: str, effects: Sequence[str], first_seed: int = 1000) -> dict[str, Any]:
-    """Return ``{"case", "effect", "seed"}`` of a case name ``<effect>_<NN>`` (see case_plan).
+    """Return ``{"case", "effect", "seed"}`` of a case name ``<effect>_<NN>``.
+
+    The seed is ``first_seed + 1000·(index of effect in effects) + NN``, so adding cases keeps
+    the earlier ones (docs/gap.md §Benchmark).
 
     Raises
     ------

@@ -1,5 +1,7 @@
 """Where the gap lies: local gaps, the chain, and which gaps are only inherited.
 
+Specification: docs/gap.md §Gaps and §Statuses.
+
 The **gap** of a signal is a normalised RMS error over the held-out samples::
 
     gap = RMS_{k in held-out}(recorded[k] − twin[k]) / std(recorded over the whole recording)

@@ -1,8 +1,12 @@
 """The module twins of the gap diagnoser, each with an optional candidate effect (paper §3.1).
 
+Specification: docs/gap.md §Modules (recursions) and §Candidate effects (stages).
+
 One function, :func:`simulate_module`, drives one module's twin with given input signals and
-returns its output, shape ``(n_samples,)``. The linear part of each module is the paper's
-(r_notes.md §1), with one-sample input delays:
+returns its output, shape ``(n_samples,)``. The linear part of each module is the module contract
+(:mod:`dtwin.modules`: :func:`~dtwin.modules.lag_response`,
+:func:`~dtwin.modules.plant_response`, :func:`~dtwin.modules.fuse`, :func:`~dtwin.modules.kpi`;
+the paper's laws of r_notes.md §1 with the Euler discretisation), with one-sample input delays:
 
 - M0 ``u_act[k] = a·u_act[k−1] + (1−a)·u_cmd[k−1]``, ``a = exp(−dt/tau)``;
 - M1 explicit Euler ``a = (u[k−1] − u_offset − c·v[k−1] − k·x[k−1] − F(x, v))/m``,
@@ -22,7 +26,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import lfilter, savgol_filter
+from scipy.signal import savgol_filter
 
 from dtwin.gap.effects import (
     Effect,
@@ -32,6 +36,7 @@ from dtwin.gap.effects import (
     smooth_quantize,
     soft_saturation,
 )
+from dtwin.modules import LINEAR_PARAMS, fuse, kpi, lag_coefficient, lag_response, plant_response
 
 __all__ = [
     "LINEAR_PARAMS",
@@ -40,16 +45,6 @@ __all__ = [
     "simulate_module",
     "first_order_lag",
 ]
-
-#: The linear twin parameters of each module (their section in :class:`dtwin.params.TwinParams`).
-LINEAR_PARAMS: dict[str, tuple[str, ...]] = {
-    "M0": ("tau",),
-    "M1": ("m", "c", "k"),
-    "M2a": ("tau", "bias"),
-    "M2b": ("tau", "bias"),
-    "M3": ("alpha",),
-    "M4": ("w1", "w2"),
-}
 
 #: Friction smoothing velocity as a fraction of std(v) (the tanh in ``coulomb_friction``).
 FRICTION_SMOOTHING = 0.01
@@ -106,10 +101,13 @@ def velocity_from_position(x: np.ndarray, dt: float) -> np.ndarray:
 
 
 def first_order_lag(u: np.ndarray, tau: float, dt: float, initial: float) -> np.ndarray:
-    """Return ``y[k] = a·y[k−1] + (1−a)·u[k−1]``, ``y[0] = initial``, ``a = exp(−dt/tau)``."""
-    a = math.exp(-dt / tau) if tau > 0 else 0.0
-    response = lfilter([0.0, 1.0 - a], [1.0, -a], u)
-    return response + initial * np.power(a, np.arange(len(u)))
+    """Return ``y[k] = a·y[k−1] + (1−a)·u[k−1]``, ``y[0] = initial``, ``a = exp(−dt/tau)``.
+
+    The contract's lag (:func:`dtwin.modules.lag_response`); ``tau ≤ 0`` (a fit's trial value)
+    gives ``a = 0``, the input delayed by one sample.
+    """
+    a = lag_coefficient(tau, dt) if tau > 0 else 0.0
+    return lag_response(u, a, initial)
 
 
 def _effect_input(u: np.ndarray, effect: Effect | None, theta: Sequence[float], dt: float):
@@ -162,19 +160,6 @@ def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float):
     raise ValueError(f"effect {effect.name} cannot act on the plant")
 
 
-def _plant_segment(u, m, c, k, dt, x, v, start, stop, force, out, limit):
-    """Explicit-Euler plant from state (x, v) at ``start``; writes ``out[start:stop]``."""
-    for j in range(start, stop):
-        out[j] = x
-        f = force(x, v) if force is not None else 0.0
-        a = (u[j] - c * v - k * x - f) / m
-        x, v = x + dt * v, v + dt * a
-        if not -limit < x < limit:
-            for rest in range(j + 1, stop):
-                out[rest] = limit
-            return
-
-
 def _simulate_plant(data, lin, effect, theta, stop, segments):
     u = data.inputs["u_act"][:stop]
     delay = int(lin.get("delay_samples", 0))
@@ -183,14 +168,22 @@ def _simulate_plant(data, lin, effect, theta, stop, segments):
     u = (u - lin.get("u_offset", 0.0)).tolist()
     x_rec, v_rec = data.output, data.velocity
     force = _force(effect, theta, data.scales.velocity_std if data.scales else 1.0)
-    out = [0.0] * len(u)
+    out = np.zeros(len(u))
     limit = 1e6 * (np.abs(x_rec).max() + 1e-12)
     m, c, k = float(lin["m"]), float(lin["c"]), float(lin["k"])
     for start, end in segments or [(0, len(u))]:
-        _plant_segment(
-            u, m, c, k, data.dt, x_rec[start], v_rec[start], start, end, force, out, limit
-        )
-    return np.asarray(out)
+        out[start:end] = plant_response(
+            u[start:end],
+            m,
+            c,
+            k,
+            data.dt,
+            x0=x_rec[start],
+            v0=v_rec[start],
+            force=force,
+            limit=limit,
+        ).x
+    return out
 
 
 def simulate_module(
@@ -235,8 +228,7 @@ def simulate_module(
     if name in ("M2a", "M2b"):
         return _simulate_sensor(data, lin, effect, theta, stop)
     if name == "M3":
-        alpha = lin["alpha"]
-        return alpha * data.inputs["y_A"][:stop] + (1.0 - alpha) * data.inputs["y_B"][:stop]
+        return fuse(data.inputs["y_A"][:stop], data.inputs["y_B"][:stop], lin["alpha"])
     if name == "M4":
-        return lin["w1"] * data.inputs["x"][:stop] + lin["w2"] * data.velocity[:stop]
+        return kpi(data.inputs["x"][:stop], data.velocity[:stop], lin["w1"], lin["w2"])
     raise ValueError(f"unknown module {name!r}")

@@ -1,4 +1,4 @@
-"""What a module's noise explains: noise floors of the local gap (docs/gap.md, "Where").
+"""What a module's noise explains: noise floors of the local gap (docs/gap.md §Noise floors).
 
 The *noise floor* of a module is the RMS simulation error its twin would show if the twin were
 exact and only the noise of that module acted (output units):
@@ -34,6 +34,7 @@ from scipy.linalg import solve_discrete_lyapunov
 from scipy.optimize import nnls
 from scipy.stats import chi2
 
+from dtwin.modules import lag_coefficient, plant_matrices
 from dtwin.params import NoiseParams
 
 __all__ = [
@@ -75,20 +76,16 @@ def robust_std(values: np.ndarray) -> float:
     return float(_MAD_TO_STD * np.median(np.abs(values - np.median(values))))
 
 
-def _plant_matrices(m: float, c: float, k: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    a = np.array([[1.0, dt], [-dt * k / m, 1.0 - dt * c / m]])
-    b = np.array([[0.0], [dt]])
-    return a, b
-
-
 def plant_noise_gain(m: float, c: float, k: float, dt: float, n_lags: int = 400) -> tuple:
     """Return ``(√P_xx, acf)``: position std per unit acceleration noise and its autocorrelation.
 
-    ``P = A·P·Aᵀ + b·bᵀ`` for the Euler plant's state ``(x, v)``; ``acf[l] = (A^l P)_xx / P_xx``.
+    ``P = A·P·Aᵀ + b·bᵀ`` for the Euler plant's state ``(x, v)``
+    (:func:`dtwin.modules.plant_matrices`, ``b`` its acceleration input);
+    ``acf[l] = (A^l P)_xx / P_xx``.
     An unstable or undamped plant has no stationary variance; then the variance after
     ``n_lags`` steps is used.
     """
-    a, b = _plant_matrices(m, c, k, dt)
+    a, _, b = plant_matrices(m, c, k, dt)
     if np.max(np.abs(np.linalg.eigvals(a))) < 1.0 - 1e-9:
         cov = solve_discrete_lyapunov(a, b @ b.T)
     else:
@@ -111,7 +108,7 @@ def _white_acf() -> np.ndarray:
 def twin_noise_floor(module: str, noise: NoiseParams, lin: dict, dt: float) -> NoiseFloor:
     """Return the floor implied by the twin's noise levels (see the module docstring)."""
     if module == "M0":
-        a = math.exp(-dt / lin["tau"])
+        a = lag_coefficient(lin["tau"], dt)
         n_lags = max(2, min(400, int(10 / max(1e-9, 1 - a))))
         return NoiseFloor(noise.actuator / math.sqrt(1 - a * a), "twin", a ** np.arange(n_lags))
     if module == "M1":
@@ -168,7 +165,7 @@ def data_noise_floor(
         Sample period, s.
     """
     if module == "M0":
-        a = math.exp(-dt / lin["tau"])
+        a = lag_coefficient(lin["tau"], dt)
         u = inputs["u_cmd"]
         step_error = output[1:] - a * output[:-1] - (1 - a) * u[:-1]
         sigma = robust_std(np.diff(step_error)) / math.sqrt(2.0)

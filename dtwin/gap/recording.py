@@ -1,5 +1,7 @@
 """Recordings of the asset: load and validate a ``RECORDING.csv`` for the gap diagnoser.
 
+Specification: docs/gap.md §Recording format and §Bad input.
+
 A recording has a header row, then one row per sample: column ``t`` (seconds, uniform step) and
 any of the module signals of :data:`dtwin.wiring.SIGNALS` (``u_cmd, u_act, x, v, y_A, y_B,
 y_fused, z``). Columns with other names are ignored (and listed in the report). Arrays are

@@ -1,5 +1,7 @@
 """Reports of a diagnosis: ``diagnosis.json``, ``report.md`` and a figure.
 
+Specification: docs/gap.md §Output files.
+
 :func:`diagnosis_to_dict` gives the JSON payload (schema: ``workflow/schemas/
 diagnosis.schema.json``); :func:`write_report` writes all three files into a folder, each
 atomically. The figure answers in one look: where the gap lies (local vs chain gap per module

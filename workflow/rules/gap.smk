@@ -1,6 +1,7 @@
-# Issue #5: sim-to-real gap diagnosis, checked on generated recordings with a withheld effect.
+# Sim-to-real gap diagnosis (docs/gap.md), checked on generated recordings with a withheld effect.
 # gap_case (one job per case) -> gap_diagnose (one job per case) -> gap_benchmark (aggregate).
-# Config: config["gap"]; the case list GAP_CASES is built in common.smk.
+# Config: config["gap"] (docs/gap.md §Settings, §Cases and rules); the case list GAP_CASES is
+# built in common.smk.
 
 rule gap_case:
     input:
