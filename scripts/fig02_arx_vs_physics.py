@@ -14,7 +14,7 @@ import pandas as pd
 
 from dtwin.artifacts import load_yaml
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.arx_vs_physics import fig02_arx_vs_physics
+from dtwin.figures.fig02_arx_vs_physics import fig02_arx_vs_physics
 
 inputs = snakemake.input
 artifact = fig02_arx_vs_physics(

@@ -16,7 +16,7 @@ import pandas as pd
 
 from dtwin.artifacts import load_yaml
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.hmm_posteriors import fig04_hmm_posteriors
+from dtwin.figures.fig04_hmm_posteriors import fig04_hmm_posteriors
 
 inputs = snakemake.input
 with open(inputs.model, encoding="utf-8") as handle:

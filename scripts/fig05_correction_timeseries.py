@@ -13,7 +13,7 @@ start_rule(snakemake)
 import pandas as pd
 
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.correction_timeseries import fig05_correction_timeseries
+from dtwin.figures.fig05_correction_timeseries import fig05_correction_timeseries
 
 inputs = snakemake.input
 artifact = fig05_correction_timeseries(

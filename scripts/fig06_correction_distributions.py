@@ -12,7 +12,7 @@ start_rule(snakemake)
 import pandas as pd
 
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.correction_distributions import fig06_correction_distributions
+from dtwin.figures.fig06_correction_distributions import fig06_correction_distributions
 
 inputs = snakemake.input
 artifact = fig06_correction_distributions(

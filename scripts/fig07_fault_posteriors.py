@@ -15,7 +15,7 @@ import json
 import pandas as pd
 
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.fault_posteriors import fig07_fault_posteriors
+from dtwin.figures.fig07_fault_posteriors import fig07_fault_posteriors
 
 inputs = snakemake.input
 with open(inputs.summary, encoding="utf-8") as handle:

@@ -14,7 +14,7 @@ import pandas as pd
 
 from dtwin.artifacts import load_yaml
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.bic import fig09_bic
+from dtwin.figures.fig09_bic import fig09_bic
 
 inputs = snakemake.input
 artifact = fig09_bic(

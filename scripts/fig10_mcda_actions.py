@@ -12,7 +12,7 @@ start_rule(snakemake)
 import pandas as pd
 
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.mcda_actions import fig10_mcda_actions
+from dtwin.figures.fig10_mcda_actions import fig10_mcda_actions
 
 inputs = snakemake.input
 artifact = fig10_mcda_actions(

@@ -9,8 +9,8 @@ variants are computed:
 - ``filtered``: the same state means ``μ_kj`` (learned offline from the smoothed fit), but the
   bias at t uses only ``P(S_t | e_1:t)``, which is what a live twin can do.
 
-Figures of this stage live in :mod:`dtwin.figures.correction_timeseries` and
-:mod:`dtwin.figures.correction_distributions`. Config sections: ``correction`` and the
+Figures of this stage live in :mod:`dtwin.figures.fig05_correction_timeseries` and
+:mod:`dtwin.figures.fig06_correction_distributions`. Config sections: ``correction`` and the
 ``dt``/``fusion``/``kpi`` keys of ``twin``.
 """
 

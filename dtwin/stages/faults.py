@@ -7,8 +7,8 @@ scored for both drift origins (the configured one writes the tables; the other i
 beside it), and every EM start's Viterbi path is scored too, to show how much the answer
 depends on the start.
 
-Figures of this stage live in :mod:`dtwin.figures.fault_posteriors` and
-:mod:`dtwin.figures.feature_separability`. Config sections: ``faults``, ``hmm`` and the
+Figures of this stage live in :mod:`dtwin.figures.fig07_fault_posteriors` and
+:mod:`dtwin.figures.fig08_feature_separability`. Config sections: ``faults``, ``hmm`` and the
 ``dt``/``fusion``/``kpi`` keys of ``twin``.
 """
 

@@ -1,6 +1,7 @@
 """Stage "regimes" (paper §4.2, §5; Figs. 4, 9): K-state HMM on the nominal residuals, BIC over K.
 
-Figures of this stage live in :mod:`dtwin.figures.hmm_posteriors` and :mod:`dtwin.figures.bic`.
+Figures of this stage live in :mod:`dtwin.figures.fig04_hmm_posteriors` and
+:mod:`dtwin.figures.fig09_bic`.
 Config sections (``config/config.yaml``): ``hmm`` and ``bic``.
 
 Every EM random start derives from the one config seed ``hmm.seed``: each *use* of it (the
