@@ -15,7 +15,8 @@ from matplotlib.ticker import MaxNLocator
 from dtwin.artifacts import Check, FigureArtifact, validity_finite, validity_probabilities
 from dtwin.fault_injection import REGIMES
 from dtwin.figures._style import R_COLOR, REGIME_COLORS, apply_style, regime_spans
-from dtwin.stages.faults import crosscheck_hungarian
+from dtwin.reference.columns import R_RESTART_AGREEMENT_COLUMN
+from dtwin.reference.crosscheck_result import CrosscheckResult
 
 __all__ = ["fig07_fault_posteriors", "plot_fault_posteriors", "onset_lags"]
 
@@ -186,22 +187,30 @@ def plot_fault_posteriors(
 def fig07_fault_posteriors(
     posteriors: pd.DataFrame,
     summary: Mapping[str, Any],
-    r_pipeline: pd.DataFrame,
-    r_confusion: pd.DataFrame,
-    r_summary: pd.DataFrame,
+    r_scores: Mapping[str, float],
     r_multistart: pd.DataFrame,
+    crosscheck: CrosscheckResult,
 ) -> FigureArtifact:
-    """Paper Fig. 7 with accuracy, macro-F1, κ for both drift origins and over the EM starts."""
+    """Paper Fig. 7 with accuracy, macro-F1, κ for both drift origins and over the EM starts.
+
+    Parameters
+    ----------
+    posteriors : DataFrame
+        ``results/faults/posteriors.csv``.
+    summary : mapping
+        ``results/faults/summary.json``.
+    r_scores : mapping
+        R's ``accuracy``, ``macro_f1``, ``kappa``
+        (:func:`dtwin.reference.loaders.load_r_classification`).
+    r_multistart : DataFrame
+        ``multistart_restarts_K4.csv`` as R wrote it (reported as is).
+    crosscheck : CrosscheckResult
+        :func:`dtwin.reference.hungarian_crosscheck.crosscheck_hungarian`.
+    """
     origin = summary["drift_origin"]
     scenario = summary["origins"][origin]
-    r_values = dict(zip(r_summary["metric"], r_summary["value"], strict=True))
-    r_scores = {
-        "accuracy": r_values["accuracy"],
-        "macro_f1": r_values["macro_f1"],
-        "kappa": r_values["cohen_kappa"],
-    }
+    r_scores = dict(r_scores)
     figure = plot_fault_posteriors(posteriors, scenario, r_scores)
-    crosschecks, crosscheck_metrics = crosscheck_hungarian(r_pipeline, r_confusion, r_summary)
     ours = {key: scenario[key] for key in r_scores}
     lags = onset_lags(posteriors)
     aligned = {r: lags.get(r) for r in ALIGNED_ONSETS if r in lags}
@@ -248,7 +257,7 @@ def fig07_fault_posteriors(
             passed=bool(aligned)
             and all(lag is not None and lag <= ONSET_LAG_S for lag in aligned.values()),
         ),
-        *crosschecks,
+        *crosscheck.checks,
     ]
     per_origin = {
         name: {
@@ -277,13 +286,13 @@ def fig07_fault_posteriors(
         "restarts": scenario["restarts"],
         "r_restarts": r_multistart.to_dict(orient="records"),
         "r_restart_agreement_pct": {
-            "min": float(r_multistart["viterbi_agreement_pct_loop2_vs_best"].min()),
-            "max": float(r_multistart["viterbi_agreement_pct_loop2_vs_best"].max()),
+            "min": float(r_multistart[R_RESTART_AGREEMENT_COLUMN].min()),
+            "max": float(r_multistart[R_RESTART_AGREEMENT_COLUMN].max()),
         },
         "model": {
             key: scenario["model"][key]
             for key in ("log_likelihood", "bic", "n_iter", "converged", "transmat", "means_z")
         },
-        "crosscheck_r": crosscheck_metrics,
+        "crosscheck_r": crosscheck.metrics,
     }
     return FigureArtifact("fig07_fault_posteriors", figure, metrics, checks)
