@@ -27,7 +27,6 @@ from dtwin.stages.regimes import (
 )
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
 from dtwin.wiring import RESIDUALS
-from tests.conftest import REFERENCE
 
 TWIN_KEYS = ("dt", "fusion", "kpi")
 

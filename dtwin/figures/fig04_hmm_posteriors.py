@@ -130,6 +130,14 @@ def plot_hmm_posteriors(states: pd.DataFrame, summary: Mapping[str, Any]) -> Fig
     return figure
 
 
+def _filtered_vs_smoothed(smoothed: np.ndarray, filtered: np.ndarray) -> dict[str, float]:
+    """Share of steps whose most likely state agrees, and the mean total-variation distance."""
+    return {
+        "argmax_agreement": float(np.mean(smoothed.argmax(1) == filtered.argmax(1))),
+        "mean_total_variation": float(0.5 * np.abs(smoothed - filtered).sum(1).mean()),
+    }
+
+
 def fig04_hmm_posteriors(
     states: pd.DataFrame,
     summary: Mapping[str, Any],
@@ -216,10 +224,7 @@ def fig04_hmm_posteriors(
             label: int((states["state"] == k).sum())
             for k, label in enumerate(summary["states"], start=1)
         },
-        "filtered_vs_smoothed": {
-            "argmax_agreement": float(np.mean(smoothed.argmax(1) == filtered.argmax(1))),
-            "mean_total_variation": float(0.5 * np.abs(smoothed - filtered).sum(1).mean()),
-        },
+        "filtered_vs_smoothed": _filtered_vs_smoothed(smoothed, filtered),
         "restarts": summary["restarts"],
         "crosscheck_on_r_features": crosscheck.metrics,
     }
