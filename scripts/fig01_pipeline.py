@@ -9,7 +9,7 @@ from dtwin._script import start_rule
 start_rule(snakemake)
 
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.pipeline import fig01_pipeline
+from dtwin.figures.fig01_pipeline import fig01_pipeline
 
 artifact = fig01_pipeline(snakemake.params.arx)
 publish_artifact(artifact, [snakemake.output.png, snakemake.output.pdf], snakemake.output.json)

@@ -1,9 +1,9 @@
 """Rule fig02_arx_vs_physics: paper Fig. 2, physics vs ARX per module, with the R crosschecks.
 
-Input   results/physics.csv, results/surrogate.csv, results/residuals.csv,
-        config/reference/{faulted_pipeline_seed11_rerun,arx_theta_seed11_rerun}.csv, r_numbers.yaml
+Input   results/physics.csv, results/surrogate.csv, results/residuals.csv, results/arx_theta.csv,
+        results/arx_crosscheck.json, config/reference/r_numbers.yaml
 Output  paper_figures/fig02_arx_vs_physics.{png,pdf,json}
-Params  twin, arx
+Params  arx (rollout_init is reported)
 """
 
 from dtwin._script import start_rule
@@ -14,15 +14,15 @@ import pandas as pd
 
 from dtwin.artifacts import load_yaml
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.arx_vs_physics import fig02_arx_vs_physics
+from dtwin.figures.fig02_arx_vs_physics import fig02_arx_vs_physics
+from dtwin.reference.crosscheck_result import read_crosscheck
 
 inputs = snakemake.input
 artifact = fig02_arx_vs_physics(
     *(pd.read_csv(path) for path in (inputs.physics, inputs.surrogate, inputs.residuals)),
-    snakemake.params.twin,
+    pd.read_csv(inputs.theta),
     snakemake.params.arx,
-    inputs.r_pipeline,
-    inputs.r_theta,
+    read_crosscheck(inputs.crosscheck),
     load_yaml(inputs.r_numbers),
 )
 publish_artifact(artifact, [snakemake.output.png, snakemake.output.pdf], snakemake.output.json)

@@ -13,7 +13,7 @@ import pandas as pd
 
 from dtwin.artifacts import load_yaml
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.residual_acf import fig03_residual_acf
+from dtwin.figures.fig03_residual_acf import fig03_residual_acf
 
 artifact = fig03_residual_acf(
     pd.read_csv(snakemake.input.residuals),

@@ -15,17 +15,18 @@ import json
 import pandas as pd
 
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.fault_posteriors import fig07_fault_posteriors
+from dtwin.figures.fig07_fault_posteriors import fig07_fault_posteriors
+from dtwin.reference.hungarian_crosscheck import crosscheck_hungarian
+from dtwin.reference.loaders import load_r_classification, load_r_confusion
 
 inputs = snakemake.input
 with open(inputs.summary, encoding="utf-8") as handle:
     summary = json.load(handle)
+r_scores = load_r_classification(inputs.r_summary)
+crosscheck = crosscheck_hungarian(
+    pd.read_csv(inputs.r_pipeline), load_r_confusion(inputs.r_confusion), r_scores
+)
 artifact = fig07_fault_posteriors(
-    pd.read_csv(inputs.posteriors),
-    summary,
-    pd.read_csv(inputs.r_pipeline),
-    pd.read_csv(inputs.r_confusion, index_col=0),
-    pd.read_csv(inputs.r_summary),
-    pd.read_csv(inputs.r_multistart),
+    pd.read_csv(inputs.posteriors), summary, r_scores, pd.read_csv(inputs.r_multistart), crosscheck
 )
 publish_artifact(artifact, [snakemake.output.png, snakemake.output.pdf], snakemake.output.json)

@@ -11,7 +11,7 @@ start_rule(snakemake)
 import pandas as pd
 
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.feature_separability import fig08_feature_separability
+from dtwin.figures.fig08_feature_separability import fig08_feature_separability
 
 artifact = fig08_feature_separability(pd.read_csv(snakemake.input.residuals))
 publish_artifact(artifact, [snakemake.output.png, snakemake.output.pdf], snakemake.output.json)

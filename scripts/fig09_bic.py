@@ -14,14 +14,17 @@ import pandas as pd
 
 from dtwin.artifacts import load_yaml
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.bic import fig09_bic
+from dtwin.figures.fig09_bic import fig09_bic
+from dtwin.reference.bic_crosscheck import crosscheck_bic_formula
+from dtwin.reference.loaders import load_r_bic
 
 inputs = snakemake.input
+r_tables = load_r_bic(inputs.r_nominal, inputs.r_features)
+r_log_likelihood = load_yaml(inputs.r_numbers)["bic_nominal_log_likelihood"]
 artifact = fig09_bic(
     pd.read_csv(inputs.table),
-    pd.read_csv(inputs.r_nominal),
-    pd.read_csv(inputs.r_features),
-    load_yaml(inputs.r_numbers),
+    r_tables,
+    crosscheck_bic_formula(r_tables, r_log_likelihood),
     snakemake.params.bic,
 )
 publish_artifact(artifact, [snakemake.output.png, snakemake.output.pdf], snakemake.output.json)

@@ -14,7 +14,7 @@ start_rule(snakemake)
 
 from dtwin.artifacts import write_csv
 from dtwin.figures._style import publish_artifact
-from dtwin.figures.sensitivity import fig11_sensitivity
+from dtwin.figures.fig11_sensitivity import fig11_sensitivity
 from dtwin.reference.loaders import load_r_sweep
 from dtwin.sensitivity_sweep import read_sweep_rows, summarize_sweep, sweep_grid, sweep_table
 

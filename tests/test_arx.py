@@ -8,7 +8,7 @@ import pytest
 
 from dtwin._validation import DtwinValueError
 from dtwin.arx import ArxFit, ArxOrders, fit_arx, simulate_arx
-from dtwin.reference.crosschecks import crosscheck_arx
+from dtwin.reference.arx_crosscheck import crosscheck_arx
 from tests.conftest import REFERENCE
 
 

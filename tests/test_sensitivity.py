@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from dtwin._validation import DtwinTypeError, DtwinValueError
-from dtwin.figures.sensitivity import sweep_claim_numbers
+from dtwin.figures._fig11_claims import sweep_claim_numbers
 from dtwin.reference.loaders import load_r_physics, load_r_sweep
 from dtwin.sensitivity_sweep import (
     SWEEP_COLUMNS,

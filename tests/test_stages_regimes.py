@@ -12,24 +12,21 @@ from dtwin._validation import DtwinValueError
 from dtwin.artifacts import to_jsonable
 from dtwin.fault_injection import FEATURES, REGIMES, regime_features
 from dtwin.hmm import zscore
-from dtwin.stages.correction import crosscheck_correction, targeted_intervention
+from dtwin.stages.correction import targeted_intervention
 from dtwin.stages.faults import (
     POSTERIOR_COLUMNS,
-    crosscheck_hungarian,
     inject_scenario,
     run_fault_scenario,
 )
 from dtwin.stages.regimes import (
     SEED_STREAMS,
     bic_sweep,
-    crosscheck_r_loglik,
     fit_nominal_regimes,
     hmm_seed,
     posterior_matrix,
 )
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
 from dtwin.wiring import RESIDUALS
-from tests.conftest import REFERENCE
 
 TWIN_KEYS = ("dt", "fusion", "kpi")
 
@@ -192,27 +189,6 @@ def test_a_short_run_with_two_regimes_still_gives_four_regime_columns(twin_run, 
     )
 
 
-def test_hungarian_crosscheck_reproduces_r(r_pipeline):
-    checks, metrics = crosscheck_hungarian(
-        r_pipeline,
-        pd.read_csv(REFERENCE / "hungarian_confusion_K4_diag.csv", index_col=0),
-        pd.read_csv(REFERENCE / "classification_summary_K4.csv"),
-    )
-    assert [c.passed for c in checks] == [True, True]
-    assert metrics["r_mapping"] == {
-        "S1": "Drift",
-        "S2": "Nominal",
-        "S3": "SensorNoisy",
-        "S4": "DynamicsOff",
-    }
-
-
-def test_loglik_crosscheck_on_r_features(r_pipeline, config):
-    check, metrics = crosscheck_r_loglik(r_pipeline, config["hmm"], -2115.852)
-    assert check.passed, check.observed
-    assert metrics["n_starts_reaching_r"] >= 1
-
-
 # --- correction -----------------------------------------------------------------------------
 
 
@@ -237,14 +213,6 @@ def test_zero_gain_leaves_the_residuals_unchanged(twin_run, scenario, twin, conf
         for variant in ("smoothed", "filtered"):
             np.testing.assert_allclose(residuals[f"{e}_{variant}"], residuals[f"{e}_before"])
     np.testing.assert_allclose(metrics["drmse_pct"], 0.0, atol=1e-9)
-
-
-def test_correction_crosscheck_reproduces_r_table(config, twin):
-    r_metrics = pd.read_csv(REFERENCE / "targeted_intervention_metrics_rerun.csv")
-    check, deviations = crosscheck_correction(
-        REFERENCE / "faulted_pipeline_seed11_rerun.csv", r_metrics, twin, config["correction"]
-    )
-    assert check.passed, deviations
 
 
 # --- BIC ------------------------------------------------------------------------------------

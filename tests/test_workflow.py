@@ -237,8 +237,8 @@ def test_a_library_edit_reruns_the_rules_that_import_it(workflow_copy):
         path: path.read_text()
         for path in (
             workflow_copy / "dtwin" / "residual_stats.py",
-            workflow_copy / "dtwin" / "figures" / "pipeline.py",
-            workflow_copy / "dtwin" / "correction.py",
+            workflow_copy / "dtwin" / "figures" / "fig01_pipeline.py",
+            workflow_copy / "dtwin" / "bias_correction.py",
         )
     }
     residual_stats, pipeline, correction = edited

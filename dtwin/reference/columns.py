@@ -10,8 +10,21 @@ from __future__ import annotations
 __all__ = [
     "R_PHYSICS_COLUMNS",
     "R_SURROGATE_COLUMNS",
+    "R_FAULTED_SURROGATE_COLUMNS",
+    "R_N_STATES",
+    "R_GAMMA_COLUMNS",
+    "R_VITERBI_COLUMN",
     "R_THETA_MODULES",
     "R_SWEEP_COLUMNS",
+    "R_CORRECTION_METRICS",
+    "R_CONFUSION_PREFIX",
+    "R_CLASSIFICATION_METRICS",
+    "R_RESTART_AGREEMENT_COLUMN",
+    "R_BIC_NOMINAL_COLUMNS",
+    "R_BIC_FEATURE_COLUMNS",
+    "R_MCDA_VERSION",
+    "R_MCDA_TIMELINE_COLUMNS",
+    "R_MCDA_COUNT_COLUMNS",
 ]
 
 #: Our signal name → column of R's physics signals in the seed-11 pipeline CSV.
@@ -34,6 +47,23 @@ R_SURROGATE_COLUMNS: dict[str, str] = {
     "y_A": "yA_A_nofault",
     "y_B": "yB_A_nofault",
 }
+
+#: Our surrogate signal → R's faulted surrogate column (the fault scenario's streams).
+R_FAULTED_SURROGATE_COLUMNS: dict[str, str] = {
+    "u_act": "u_act_A",
+    "x": "xpos_A_fault",
+    "y_A": "yA_A_fault",
+    "y_B": "yB_A_fault",
+}
+
+#: Number of states of R's fault-scenario HMM (``depmixS4``, K = 4).
+R_N_STATES = 4
+
+#: R's smoothed state posteriors of the fault-scenario HMM, ``gamma_S1 … gamma_S4``.
+R_GAMMA_COLUMNS: tuple[str, ...] = tuple(f"gamma_S{k}" for k in range(1, R_N_STATES + 1))
+
+#: R's Viterbi state (1 … 4) of the fault-scenario HMM.
+R_VITERBI_COLUMN = "viterbi_state"
 
 #: R's module label in ``arx_theta_seed11_rerun.csv`` → our module name.
 R_THETA_MODULES: dict[str, str] = {
@@ -58,3 +88,48 @@ R_SWEEP_COLUMNS: dict[str, str] = {
     "dMAE_e1_pct": "dmae_e1_pct",
     "dL2_pct": "dl2_pct",
 }
+
+#: Our correction metric → column of R's ``targeted_intervention_metrics_rerun.csv``.
+R_CORRECTION_METRICS: dict[str, str] = {
+    "rmse_before": "RMSE_Original",
+    "rmse_after": "RMSE_Corrected",
+    "mae_before": "MAE_Original",
+    "mae_after": "MAE_Corrected",
+    "drmse_pct": "dRMSE_pct",
+    "dmae_pct": "dMAE_pct",
+}
+
+#: Prefix of the actual-regime columns of ``hungarian_confusion_K4_diag.csv``.
+R_CONFUSION_PREFIX = "Actual_"
+
+#: Our score → R's ``metric`` in ``classification_summary_K4.csv``.
+R_CLASSIFICATION_METRICS: dict[str, str] = {
+    "accuracy": "accuracy",
+    "macro_f1": "macro_f1",
+    "kappa": "cohen_kappa",
+}
+
+#: Column of ``multistart_restarts_K4.csv``: Viterbi agreement (%) of each start with the best.
+R_RESTART_AGREEMENT_COLUMN = "viterbi_agreement_pct_loop2_vs_best"
+
+#: Ours → R's column of ``bic_vs_K_6ch_nofault_singlefit_rerun.csv`` (r_notes.md §6 (a)).
+R_BIC_NOMINAL_COLUMNS: dict[str, str] = {"K": "K", "bic": "BIC"}
+
+#: Ours → R's column of ``bic_vs_K_10feat_faulted_multistart5.csv`` (r_notes.md §6 (b)).
+R_BIC_FEATURE_COLUMNS: dict[str, str] = {
+    "K": "K",
+    "bic": "BIC_diag_published",
+    "log_likelihood": "best_logLik_diag_published",
+}
+
+#: The RMCDA release whose timeline and counts we compare with (``legacy_r`` mode).
+R_MCDA_VERSION = "0.3.1"
+
+#: Our timeline column → R's column of ``mcda_actions_timeline_rerun.csv`` (RMCDA 0.3.1).
+R_MCDA_TIMELINE_COLUMNS: dict[str, str] = {
+    "best": f"action_raw_rmcda{R_MCDA_VERSION}",
+    "action": f"action_hyst_rmcda{R_MCDA_VERSION}",
+}
+
+#: Columns of ``mcda_action_counts_rerun.csv`` (one row per version, stage, regime, action).
+R_MCDA_COUNT_COLUMNS: tuple[str, ...] = ("RMCDA_version", "stage", "regime", "action", "count")

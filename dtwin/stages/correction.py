@@ -9,8 +9,8 @@ variants are computed:
 - ``filtered``: the same state means ``μ_kj`` (learned offline from the smoothed fit), but the
   bias at t uses only ``P(S_t | e_1:t)``, which is what a live twin can do.
 
-Figures of this stage live in :mod:`dtwin.figures.correction_timeseries` and
-:mod:`dtwin.figures.correction_distributions`. Config sections: ``correction`` and the
+Figures of this stage live in :mod:`dtwin.figures.fig05_correction_timeseries` and
+:mod:`dtwin.figures.fig06_correction_distributions`. Config sections: ``correction`` and the
 ``dt``/``fusion``/``kpi`` keys of ``twin``.
 """
 
@@ -22,9 +22,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dtwin.artifacts import Check
 from dtwin.bias_correction import BiasCorrection, correct_bias
-from dtwin.reference.loaders import load_r_physics
 from dtwin.stages._states import posterior_matrix
 from dtwin.wiring import RESIDUALS
 
@@ -32,23 +30,10 @@ __all__ = [
     "VARIANTS",
     "correct_twin",
     "targeted_intervention",
-    "R_METRIC_COLUMNS",
-    "crosscheck_correction",
-    "metrics_beside_r",
 ]
 
 #: Correction variants: which posteriors weight the state means.
 VARIANTS: tuple[str, ...] = ("smoothed", "filtered")
-
-#: Our metric column → column of R's ``targeted_intervention_metrics_rerun.csv``.
-R_METRIC_COLUMNS: dict[str, str] = {
-    "rmse_before": "RMSE_Original",
-    "rmse_after": "RMSE_Corrected",
-    "mae_before": "MAE_Original",
-    "mae_after": "MAE_Corrected",
-    "drmse_pct": "dRMSE_pct",
-    "dmae_pct": "dMAE_pct",
-}
 
 
 def correct_twin(
@@ -129,88 +114,3 @@ def targeted_intervention(
     )
     metrics = metrics[["variant", *(c for c in metrics.columns if c != "variant")]]
     return residuals, metrics
-
-
-def crosscheck_correction(
-    r_pipeline_path: str,
-    r_metrics: pd.DataFrame,
-    twin: Mapping[str, Any],
-    correction: Mapping[str, Any],
-    rtol: float = 1e-6,
-) -> tuple[Check, dict[str, float]]:
-    """Run our correction on R's faulted signals and posteriors; compare with R's table.
-
-    Parameters
-    ----------
-    r_pipeline_path : path
-        ``faulted_pipeline_seed11_rerun.csv``: R's physics, faulted surrogate streams and
-        smoothed posteriors ``gamma_S1 … gamma_S4``.
-    r_metrics : DataFrame
-        ``targeted_intervention_metrics_rerun.csv``.
-    twin, correction : mapping
-        As :func:`targeted_intervention`.
-    rtol : float, default 1e-6
-        Allowed relative deviation of every number of the table.
-
-    Returns
-    -------
-    (Check, deviations)
-        A ``crosscheck`` and the largest relative deviation per metric column.
-    """
-    raw = pd.read_csv(r_pipeline_path)
-    physics, _ = load_r_physics(r_pipeline_path)
-    surrogate = pd.DataFrame(
-        {
-            "u_act": raw["u_act_A"],
-            "x": raw["xpos_A_fault"],
-            "y_A": raw["yA_A_fault"],
-            "y_B": raw["yB_A_fault"],
-        }
-    )
-    result = correct_twin(surrogate, physics, posterior_matrix(raw, "gamma"), twin, correction)
-    ours = result.metrics.set_index("channel").loc[list(r_metrics["channel"])]
-    deviations = {
-        column: float(
-            np.max(
-                np.abs(ours[column].to_numpy() - r_metrics[r_column].to_numpy())
-                / np.abs(r_metrics[r_column].to_numpy())
-            )
-        )
-        for column, r_column in R_METRIC_COLUMNS.items()
-    }
-    check = Check(
-        id="correction_on_r_signals_gives_r_table",
-        kind="crosscheck",
-        statement=(
-            "our correction of R's faulted surrogate streams with R's smoothed posteriors "
-            "reproduces R's RMSE/MAE table (targeted_intervention_metrics_rerun.csv)"
-        ),
-        expected=f"relative deviation <= {rtol:g} in every column",
-        observed=deviations,
-        passed=all(dev <= rtol for dev in deviations.values()),
-    )
-    return check, deviations
-
-
-def metrics_beside_r(metrics: pd.DataFrame, r_metrics: pd.DataFrame) -> dict[str, Any]:
-    """Return our metrics per variant and channel beside R's (TargetedIntervention.R)."""
-    ours = {
-        variant: group.drop(columns="variant").set_index("channel").to_dict(orient="index")
-        for variant, group in metrics.groupby("variant", sort=False)
-    }
-    r_table = {
-        row["channel"]: {ours_key: row[r_key] for ours_key, r_key in R_METRIC_COLUMNS.items()}
-        for row in r_metrics.to_dict(orient="records")
-    }
-    smoothed = ours["smoothed"]
-    side_by_side = {
-        e: {
-            "drmse_pct": smoothed[e]["drmse_pct"],
-            "drmse_pct_causal": ours["filtered"][e]["drmse_pct"],
-            "r_drmse_pct": r_table[e]["drmse_pct"],
-            "dmae_pct": smoothed[e]["dmae_pct"],
-            "r_dmae_pct": r_table[e]["dmae_pct"],
-        }
-        for e in RESIDUALS
-    }
-    return {"ours": ours, "r": r_table, "drmse_side_by_side": side_by_side}

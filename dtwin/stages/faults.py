@@ -7,8 +7,8 @@ scored for both drift origins (the configured one writes the tables; the other i
 beside it), and every EM start's Viterbi path is scored too, to show how much the answer
 depends on the start.
 
-Figures of this stage live in :mod:`dtwin.figures.fault_posteriors` and
-:mod:`dtwin.figures.feature_separability`. Config sections: ``faults``, ``hmm`` and the
+Figures of this stage live in :mod:`dtwin.figures.fig07_fault_posteriors` and
+:mod:`dtwin.figures.fig08_feature_separability`. Config sections: ``faults``, ``hmm`` and the
 ``dt``/``fusion``/``kpi`` keys of ``twin``.
 """
 
@@ -21,7 +21,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dtwin.artifacts import Check
 from dtwin.fault_injection import (
     DRIFT_ORIGINS,
     REGIMES,
@@ -47,7 +46,6 @@ __all__ = [
     "score_regime_fit",
     "FaultScenario",
     "run_fault_scenario",
-    "crosscheck_hungarian",
 ]
 
 #: Columns of ``results/faults/posteriors.csv`` (a contract other stages rely on).
@@ -266,68 +264,3 @@ def run_fault_scenario(
     summary["model"] = summary["origins"][configured]["model"]
     faulted, residuals, states, posteriors = tables
     return FaultScenario(faulted, residuals, states, posteriors, summary)
-
-
-def crosscheck_hungarian(
-    r_pipeline: pd.DataFrame, r_confusion: pd.DataFrame, r_summary: pd.DataFrame
-) -> tuple[list[Check], dict[str, Any]]:
-    """Map R's Viterbi path with our Hungarian matching and compare with R's results.
-
-    Parameters
-    ----------
-    r_pipeline : DataFrame
-        ``faulted_pipeline_seed11_rerun.csv`` (``regime``, ``viterbi_state``).
-    r_confusion : DataFrame
-        ``hungarian_confusion_K4_diag.csv`` (index ``Predicted``, columns ``Actual_<regime>``).
-    r_summary : DataFrame
-        ``classification_summary_K4.csv`` (``metric``, ``value``).
-
-    Returns
-    -------
-    (checks, metrics)
-        Two ``crosscheck`` checks: the confusion matrix equals R's exactly; accuracy,
-        macro-F1 and κ equal R's printed values (4 decimals).
-    """
-    regimes = r_pipeline["regime"].to_numpy(dtype=str)
-    states = r_pipeline["viterbi_state"].to_numpy()
-    mapping = hungarian_map(states, regimes, all_regimes=REGIMES)
-    scores = classification_scores(mapping.predicted, regimes, labels=REGIMES)
-    reference = r_confusion.rename(columns=lambda c: c.removeprefix("Actual_"))
-    reference = reference.loc[list(REGIMES), list(REGIMES)]
-    ours = scores.confusion.loc[list(REGIMES), list(REGIMES)]
-    r_values = dict(zip(r_summary["metric"], r_summary["value"], strict=True))
-    observed = {"accuracy": scores.accuracy, "macro_f1": scores.macro_f1, "kappa": scores.kappa}
-    expected = {
-        "accuracy": r_values["accuracy"],
-        "macro_f1": r_values["macro_f1"],
-        "kappa": r_values["cohen_kappa"],
-    }
-    checks = [
-        Check(
-            id="hungarian_on_r_viterbi_gives_r_confusion",
-            kind="crosscheck",
-            statement=(
-                "our Hungarian matching of R's Viterbi path (faulted_pipeline_seed11_rerun.csv) "
-                "reproduces R's confusion matrix (hungarian_confusion_K4_diag.csv) exactly"
-            ),
-            expected=reference.to_dict(orient="index"),
-            observed=ours.to_dict(orient="index"),
-            passed=bool((ours.to_numpy() == reference.to_numpy()).all()),
-        ),
-        Check(
-            id="scores_on_r_viterbi_equal_r",
-            kind="crosscheck",
-            statement=(
-                "accuracy, macro-F1 and Cohen's kappa of R's mapped path equal R's printed "
-                "values (classification_summary_K4.csv, 4 decimals)"
-            ),
-            expected=expected,
-            observed=observed,
-            passed=all(abs(observed[k] - expected[k]) <= 5e-5 for k in expected),
-        ),
-    ]
-    metrics = {
-        "r_mapping": {f"S{k}": v for k, v in mapping.mapping.items()},
-        "r_scores": observed,
-    }
-    return checks, metrics

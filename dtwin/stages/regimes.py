@@ -1,6 +1,7 @@
 """Stage "regimes" (paper §4.2, §5; Figs. 4, 9): K-state HMM on the nominal residuals, BIC over K.
 
-Figures of this stage live in :mod:`dtwin.figures.hmm_posteriors` and :mod:`dtwin.figures.bic`.
+Figures of this stage live in :mod:`dtwin.figures.fig04_hmm_posteriors` and
+:mod:`dtwin.figures.fig09_bic`.
 Config sections (``config/config.yaml``): ``hmm`` and ``bic``.
 
 Every EM random start derives from the one config seed ``hmm.seed``: each *use* of it (the
@@ -20,8 +21,6 @@ import numpy as np
 import pandas as pd
 
 from dtwin._validation import DtwinValueError
-from dtwin.artifacts import Check
-from dtwin.fault_injection import regime_features
 from dtwin.hmm import HmmFit, ZScored, bic_by_k, fit_hmm, zscore
 from dtwin.stages._states import posterior_matrix, state_labels
 from dtwin.stages.settings import EmSettings, HmmSettings
@@ -38,7 +37,6 @@ __all__ = [
     "fit_nominal_regimes",
     "BIC_DATASETS",
     "bic_sweep",
-    "crosscheck_r_loglik",
 ]
 
 logger = logging.getLogger(__name__)
@@ -225,57 +223,3 @@ def bic_sweep(
         table.insert(0, "dataset", name)
         tables.append(table)
     return pd.concat(tables, ignore_index=True)
-
-
-def crosscheck_r_loglik(
-    r_pipeline: pd.DataFrame,
-    hmm: Mapping[str, Any],
-    r_log_likelihood: float,
-    n_states: int = 4,
-    atol: float = 1e-2,
-) -> tuple[Check, dict[str, Any]]:
-    """Fit our HMM to R's ten fault features and compare with depmixS4's best log-likelihood.
-
-    Parameters
-    ----------
-    r_pipeline : DataFrame
-        ``faulted_pipeline_seed11_rerun.csv`` (R's faulted residuals ``e0 … e4``).
-    hmm : mapping
-        The ``hmm`` section (starts and EM options; seed stream ``r_crosscheck_fit``).
-    r_log_likelihood : float
-        depmixS4's best log-likelihood on the same features (r_notes.md §11: −2115.852).
-    n_states : int, default 4
-        K of R's fit (whatever ``hmm.n_states`` says).
-    atol : float, default 1e-2
-        Allowed shortfall.
-
-    Returns
-    -------
-    (Check, metrics)
-        A ``crosscheck`` that our best start reaches ``r_log_likelihood − atol`` or better,
-        and the numbers behind it (our best, every start's log-likelihood).
-    """
-    options = {**hmm, "n_states": n_states}
-    _, fit = fit_regimes(regime_features(r_pipeline), options, "r_crosscheck_fit")
-    check = Check(
-        id="loglik_on_r_features_reaches_depmix",
-        kind="crosscheck",
-        statement=(
-            f"our best of {hmm['n_restarts']} EM starts (K={n_states}) on R's ten "
-            "z-scored fault features reaches depmixS4's best log-likelihood "
-            "(r_notes.md §11) or better"
-        ),
-        expected=f">= {r_log_likelihood} - {atol:g}",
-        observed=fit.log_likelihood,
-        passed=bool(fit.log_likelihood >= r_log_likelihood - atol),
-    )
-    metrics = {
-        "log_likelihood": fit.log_likelihood,
-        "r_log_likelihood": r_log_likelihood,
-        "bic": fit.bic,
-        "n_starts_reaching_r": int(
-            (fit.restarts["log_likelihood"] >= r_log_likelihood - atol).sum()
-        ),
-        "start_log_likelihoods": fit.restarts["log_likelihood"].tolist(),
-    }
-    return check, metrics

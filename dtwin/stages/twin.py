@@ -1,8 +1,8 @@
 """Stage "twin" (paper §3, §4.1; Figs. 1–3): simulate, fit ARX surrogates, residuals, figures.
 
-Figures of this stage live in :mod:`dtwin.figures.pipeline`, :mod:`dtwin.figures.arx_vs_physics`
-and :mod:`dtwin.figures.residual_acf`. Config sections (``config/config.yaml``): ``simulation``,
-``command``, ``twin``, ``arx``.
+Figures of this stage live in :mod:`dtwin.figures.fig01_pipeline`,
+:mod:`dtwin.figures.fig02_arx_vs_physics` and :mod:`dtwin.figures.fig03_residual_acf`. Config
+sections (``config/config.yaml``): ``simulation``, ``command``, ``twin``, ``arx``.
 """
 
 from __future__ import annotations

@@ -10,9 +10,12 @@ rule targeted_intervention:
         physics=rules.simulate.output.physics,
         surrogate=rules.fault_regimes.output.surrogate,
         states=rules.fault_regimes.output.states,
+        r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
+        r_metrics=f"{REFERENCE_DIR}/targeted_intervention_metrics_rerun.csv",
     output:
         residuals="results/correction/residuals.csv",
         metrics="results/correction/metrics.csv",
+        crosscheck="results/correction/crosscheck.json",
     params:
         correction=config["correction"],
         twin={k: config["twin"][k] for k in ("dt", "fusion", "kpi")},
@@ -32,13 +35,13 @@ rule targeted_intervention:
 
 rule fig05_correction_timeseries:
     message:
-        "Drawing paper Fig. 5 (residuals before/after) and crosschecking the correction on R's signals"
+        "Drawing paper Fig. 5 (residuals before/after) beside R's table and the crosscheck"
     input:
         lib=dtwin_sources("scripts/fig05_correction_timeseries.py"),
         residuals=rules.targeted_intervention.output.residuals,
         metrics=rules.targeted_intervention.output.metrics,
+        crosscheck=rules.targeted_intervention.output.crosscheck,
         r_metrics=f"{REFERENCE_DIR}/targeted_intervention_metrics_rerun.csv",
-        r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
     output:
         png=report(
             "paper_figures/fig05_correction_timeseries.png",
@@ -49,7 +52,6 @@ rule fig05_correction_timeseries:
         json="paper_figures/fig05_correction_timeseries.json",
     params:
         correction=config["correction"],
-        twin={k: config["twin"][k] for k in ("dt", "fusion", "kpi")},
     log:
         "logs/fig05_correction_timeseries.log",
     benchmark:

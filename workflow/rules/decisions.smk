@@ -3,13 +3,17 @@
 
 rule mcda_actions:
     message:
-        "Selecting a mitigation action per step with TOPSIS (gate, dwell, margin)"
+        "Selecting a mitigation action per step with TOPSIS (gate, dwell, margin) and "
+        "crosschecking the legacy mode against R"
     input:
         lib=dtwin_sources("scripts/mcda_actions.py"),
         residuals="results/faults/residuals.csv",
         posteriors="results/faults/posteriors.csv",
+        r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
+        r_timeline=f"{REFERENCE_DIR}/mcda_actions_timeline_rerun.csv",
     output:
         timeline="results/mcda/actions.csv",
+        crosscheck="results/mcda/crosscheck.json",
     params:
         mcda=config["mcda"],
         dt=config["twin"]["dt"],
@@ -29,12 +33,11 @@ rule mcda_actions:
 
 rule fig10_mcda_actions:
     message:
-        "Drawing paper Fig. 10 (actions over the true regimes) and crosschecking against R"
+        "Drawing paper Fig. 10 (actions over the true regimes) with the crosscheck against R"
     input:
         lib=dtwin_sources("scripts/fig10_mcda_actions.py"),
         timeline=rules.mcda_actions.output.timeline,
-        r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
-        r_timeline=f"{REFERENCE_DIR}/mcda_actions_timeline_rerun.csv",
+        crosscheck=rules.mcda_actions.output.crosscheck,
         r_counts=f"{REFERENCE_DIR}/mcda_action_counts_rerun.csv",
     output:
         png=report(

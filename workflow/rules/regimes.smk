@@ -7,13 +7,16 @@ bic_sweep also reads the fault scenario's residuals, so faults.smk is included f
 rule nominal_regimes:
     message:
         "Fitting the K={params.hmm[n_states]} HMM to the nominal residuals "
-        "({params.hmm[n_restarts]} EM starts)"
+        "({params.hmm[n_restarts]} EM starts) and crosschecking the EM on R's features"
     input:
         lib=dtwin_sources("scripts/nominal_regimes.py"),
         residuals=rules.residuals.output.residuals,
+        r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
+        r_numbers=f"{REFERENCE_DIR}/r_numbers.yaml",
     output:
         states="results/regimes/nominal_states.csv",
         model="results/regimes/nominal_model.json",
+        crosscheck="results/regimes/crosscheck.json",
     params:
         hmm=config["hmm"],
     log:
@@ -32,12 +35,12 @@ rule nominal_regimes:
 
 rule fig04_hmm_posteriors:
     message:
-        "Drawing paper Fig. 4 (state posteriors) and crosschecking the EM fit on R's features"
+        "Drawing paper Fig. 4 (state posteriors) with the EM crosscheck on R's features"
     input:
         lib=dtwin_sources("scripts/fig04_hmm_posteriors.py"),
         states=rules.nominal_regimes.output.states,
         model=rules.nominal_regimes.output.model,
-        r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
+        crosscheck=rules.nominal_regimes.output.crosscheck,
         r_numbers=f"{REFERENCE_DIR}/r_numbers.yaml",
     output:
         png=report(
@@ -47,8 +50,6 @@ rule fig04_hmm_posteriors:
         ),
         pdf="paper_figures/fig04_hmm_posteriors.pdf",
         json="paper_figures/fig04_hmm_posteriors.json",
-    params:
-        hmm={k: config["hmm"][k] for k in ("n_restarts", "seed", "max_iter", "tol", "var_floor")},
     log:
         "logs/fig04_hmm_posteriors.log",
     benchmark:

@@ -28,14 +28,19 @@ rule simulate:
 
 rule fit_surrogates:
     message:
-        "Fitting the ARX surrogates on the first {params.arx[train_frac]} of the run"
+        "Fitting the ARX surrogates on the first {params.arx[train_frac]} of the run and "
+        "crosschecking the fit and rollout on R's signals"
     input:
         lib=dtwin_sources("scripts/fit_surrogates.py"),
         physics=rules.simulate.output.physics,
+        r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
+        r_theta=f"{REFERENCE_DIR}/arx_theta_seed11_rerun.csv",
     output:
         theta="results/arx_theta.csv",
+        crosscheck="results/arx_crosscheck.json",
     params:
         arx={k: config["arx"][k] for k in ("orders", "train_frac")},
+        twin=config["twin"],
     log:
         "logs/fit_surrogates.log",
     benchmark:
@@ -108,14 +113,14 @@ rule fig01_pipeline:
 
 rule fig02_arx_vs_physics:
     message:
-        "Drawing paper Fig. 2 (physics vs ARX) and crosschecking the ARX fit against R"
+        "Drawing paper Fig. 2 (physics vs ARX) with the ARX crosschecks against R"
     input:
         lib=dtwin_sources("scripts/fig02_arx_vs_physics.py"),
         physics=rules.simulate.output.physics,
         surrogate=rules.residuals.output.surrogate,
         residuals=rules.residuals.output.residuals,
-        r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
-        r_theta=f"{REFERENCE_DIR}/arx_theta_seed11_rerun.csv",
+        theta=rules.fit_surrogates.output.theta,
+        crosscheck=rules.fit_surrogates.output.crosscheck,
         r_numbers=f"{REFERENCE_DIR}/r_numbers.yaml",
     output:
         png=report(
@@ -126,7 +131,6 @@ rule fig02_arx_vs_physics:
         pdf="paper_figures/fig02_arx_vs_physics.pdf",
         json="paper_figures/fig02_arx_vs_physics.json",
     params:
-        twin=config["twin"],
         arx=config["arx"],
     log:
         "logs/fig02_arx_vs_physics.log",

@@ -11,8 +11,8 @@ from matplotlib.figure import Figure
 from scipy.stats import gaussian_kde
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
+from dtwin.figures._correction_metrics import metrics_beside_r
 from dtwin.figures._style import AFTER_COLOR, BEFORE_COLOR, RESIDUAL_UNITS, apply_style
-from dtwin.stages.correction import metrics_beside_r
 from dtwin.wiring import MODULES, RESIDUALS
 
 __all__ = ["fig06_correction_distributions", "plot_correction_distributions", "kde_curve"]

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
 from typing import Any
 
@@ -13,9 +12,9 @@ from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.figures._style import PHYSICS_COLOR, apply_style, regime_spans, shade_regimes
-from dtwin.mcda import ACTIONS, NO_ACTION, run_mcda
-from dtwin.reference.loaders import load_r_fault_scenario
-from dtwin.stages.decisions import mcda_settings_from_mapping
+from dtwin.mcda import ACTIONS, NO_ACTION
+from dtwin.reference.columns import R_MCDA_VERSION
+from dtwin.reference.crosscheck_result import CrosscheckResult
 
 __all__ = ["fig10_mcda_actions", "plot_mcda_actions"]
 
@@ -77,25 +76,30 @@ def fig10_mcda_actions(
     timeline: pd.DataFrame,
     mcda: Mapping[str, Any],
     dt: float,
-    r_pipeline_path: str | os.PathLike,
-    r_timeline_path: str | os.PathLike,
-    r_counts_path: str | os.PathLike,
+    r_table: pd.DataFrame,
+    crosscheck: CrosscheckResult,
 ) -> FigureArtifact:
-    """Paper Fig. 10 with action counts per regime, the limitation fixes, and the R crosscheck."""
+    """Paper Fig. 10 with action counts per regime, the limitation fixes, and the R crosscheck.
+
+    Parameters
+    ----------
+    timeline : DataFrame
+        ``results/mcda/actions.csv``.
+    mcda : mapping
+        The ``mcda`` config section (dwell and weights).
+    dt : float
+        Sample time, s.
+    r_table : DataFrame
+        R's RMCDA 0.3.1 counts per regime and action
+        (:func:`dtwin.reference.loaders.load_r_mcda_counts`).
+    crosscheck : CrosscheckResult
+        ``results/mcda/crosscheck.json`` (legacy mode on R's inputs vs R's timeline).
+    """
     figure = plot_mcda_actions(timeline)
     counts = pd.crosstab(timeline["regime"], timeline["action"])
-    r_counts = pd.read_csv(r_counts_path)
-    r_hyst = r_counts[
-        (r_counts["RMCDA_version"].astype(str) == "0.3.1") & (r_counts["stage"] == "hysteresis")
-    ]
-    r_table = r_hyst[r_hyst["regime"] != "ALL"].pivot(
-        index="regime", columns="action", values="count"
-    )
-    r_table = r_table.fillna(0).astype(int)
     actions = timeline["action"].to_numpy()
     after_action = np.flatnonzero(actions != NO_ACTION)
     returns = int(np.sum((actions[1:] == NO_ACTION) & (actions[:-1] != NO_ACTION)))
-    crosscheck = _legacy_crosscheck(mcda, dt, r_pipeline_path, r_timeline_path)
     checks = [
         validity_finite("scores_finite", "TOPSIS closeness scores", timeline.filter(like="score_")),
         Check(
@@ -110,7 +114,7 @@ def fig10_mcda_actions(
     for regime, action in (("DynamicsOff", "ReidentifyPlant"), ("Drift", "BiasCorrect")):
         share, is_mode = _mostly(counts, regime, action)
         r_share, _ = _mostly(r_table, regime, action)
-        r_words = f"R with RMCDA 0.3.1: {r_share:.1%}"
+        r_words = f"R with RMCDA {R_MCDA_VERSION}: {r_share:.1%}"
         checks.append(
             Check(
                 id=f"{regime}_mostly_{action}",
@@ -132,7 +136,7 @@ def fig10_mcda_actions(
             observed=_gate_violations(timeline, round(mcda["min_dwell_sec"] / dt)),
             passed=_gate_violations(timeline, round(mcda["min_dwell_sec"] / dt)) == 0,
         ),
-        crosscheck,
+        *crosscheck.checks,
     ]
     metrics = {
         "counts_per_action": timeline["action"].value_counts().sort_index().to_dict(),
@@ -161,27 +165,3 @@ def _gate_violations(timeline: pd.DataFrame, dwell: int) -> int:
         if gate[step] and actions[step] != NO_ACTION and since_switch > dwell:
             violations += 1
     return violations
-
-
-def _legacy_crosscheck(mcda, dt, r_pipeline_path, r_timeline_path) -> Check:
-    """Our selection in legacy mode on R's residuals and posteriors vs R's RMCDA 0.3.1 timeline."""
-    residuals, probs = load_r_fault_scenario(r_pipeline_path)
-    legacy = run_mcda(
-        residuals, probs, dt, mcda_settings_from_mapping(mcda, legacy_r=True)
-    ).timeline
-    r_timeline = pd.read_csv(r_timeline_path)
-    raw = float(
-        np.mean(legacy["best"].to_numpy() == r_timeline["action_raw_rmcda0.3.1"].to_numpy())
-    )
-    final = float(
-        np.mean(legacy["action"].to_numpy() == r_timeline["action_hyst_rmcda0.3.1"].to_numpy())
-    )
-    return Check(
-        id="legacy_matches_r_031",
-        kind="crosscheck",
-        statement="with R's quirks switched back on (legacy_r), our selection on R's residuals and "
-        "posteriors reproduces R's RMCDA 0.3.1 timeline",
-        expected="100 % of raw and final actions agree",
-        observed={"raw_agreement": raw, "final_agreement": final},
-        passed=raw == 1.0 and final == 1.0,
-    )

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -12,11 +11,8 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
-from dtwin.arx import arx_orders_from_mapping
 from dtwin.figures._style import PHYSICS_COLOR, SURROGATE_COLOR, apply_style
-from dtwin.params import twin_params_from_mapping
-from dtwin.reference.crosschecks import crosscheck_arx
-from dtwin.surrogate import n_train_samples
+from dtwin.reference.crosscheck_result import CrosscheckResult
 from dtwin.wiring import MODULES, RESIDUALS, Module
 
 __all__ = ["fig02_arx_vs_physics", "plot_arx_vs_physics"]
@@ -64,23 +60,29 @@ def fig02_arx_vs_physics(
     physics: pd.DataFrame,
     surrogate: pd.DataFrame,
     residuals: pd.DataFrame,
-    twin: Mapping[str, Any],
+    theta: pd.DataFrame,
     arx: Mapping[str, Any],
-    r_pipeline_path: str | os.PathLike,
-    r_theta_path: str | os.PathLike,
+    crosscheck: CrosscheckResult,
     r_numbers: Mapping[str, Any],
 ) -> FigureArtifact:
-    """Paper Fig. 2 with its RMSE metrics and the ARX crosschecks against R."""
-    n_train = n_train_samples(len(physics), arx["train_frac"])
+    """Paper Fig. 2 with its RMSE metrics and the ARX crosschecks against R.
+
+    Parameters
+    ----------
+    physics, surrogate, residuals : DataFrame
+        ``results/physics.csv``, ``results/surrogate.csv``, ``results/residuals.csv``.
+    theta : DataFrame
+        ``results/arx_theta.csv`` (its ``n_train`` is the training window, samples).
+    arx : mapping
+        The ``arx`` config section (``rollout_init`` is reported).
+    crosscheck : CrosscheckResult
+        ``results/arx_crosscheck.json`` (our ARX fit and rollout on R's signals).
+    r_numbers : mapping
+        ``config/reference/r_numbers.yaml`` (R's RMSEs).
+    """
+    n_train = int(theta["n_train"].iloc[0])
     t_train_end = float(physics["t"].iloc[n_train - 1])
     figure = plot_arx_vs_physics(physics, surrogate, MODULES, t_train_end)
-    crosschecks, deviations = crosscheck_arx(
-        r_pipeline_path,
-        r_theta_path,
-        arx_orders_from_mapping(arx),
-        arx["train_frac"],
-        twin_params_from_mapping(twin),
-    )
     rmse_all = {e: _rmse(residuals[e].to_numpy()) for e in RESIDUALS}
     rmse_test = {e: _rmse(residuals[e].to_numpy()[n_train:]) for e in RESIDUALS}
     correlation = {
@@ -101,7 +103,7 @@ def fig02_arx_vs_physics(
             observed=correlation,
             passed=all(value >= 0.9 for value in correlation.values()),
         ),
-        *crosschecks,
+        *crosscheck.checks,
     ]
     metrics = {
         "n_steps": len(physics),
@@ -112,6 +114,6 @@ def fig02_arx_vs_physics(
         "r_rmse_all_samples_zero_seed": dict(r_numbers["nominal_rmse_zeroseed"]),
         "r_rmse_test_half": dict(r_numbers["nominal_rmse_test_half"]),
         "correlation_physics_twin": correlation,
-        "crosscheck_deviations": deviations,
+        "crosscheck_deviations": crosscheck.metrics,
     }
     return FigureArtifact("fig02_arx_vs_physics", figure, metrics, checks)

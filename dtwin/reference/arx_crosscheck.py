@@ -1,9 +1,10 @@
-"""Crosschecks against the authors' R code on exactly the same signals.
+"""Crosscheck of the ARX surrogates (paper §3.2) against the authors' R code on R's signals.
 
 numpy cannot replay R's random stream, so the seed-11 signals R produced are read from
 ``config/reference/faulted_pipeline_seed11_rerun.csv`` and our code is run on them: the ARX
 coefficients must match R's (``arx_theta_seed11_rerun.csv``) and the rollouts R's unfaulted
-surrogate signals.
+surrogate signals. Run by rule ``fit_surrogates`` (``results/arx_crosscheck.json``) and
+reported by Fig. 2.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from dtwin.artifacts import Check
 from dtwin.arx import ArxFit, ArxOrders
 from dtwin.params import TwinParams
 from dtwin.reference.columns import R_SURROGATE_COLUMNS
+from dtwin.reference.crosscheck_result import CrosscheckResult
 from dtwin.reference.loaders import load_r_physics, load_r_theta
 from dtwin.surrogate import fit_surrogates, run_surrogate_chain
 
@@ -31,14 +33,30 @@ def crosscheck_arx(
     twin: TwinParams,
     theta_rtol: float = 1e-6,
     rollout_atol: float = 1e-9,
-) -> tuple[list[Check], dict[str, dict[str, float]]]:
+) -> CrosscheckResult:
     """Fit our ARX models on R's physics signals and compare with R.
+
+    Parameters
+    ----------
+    r_pipeline_path, r_theta_path : path
+        ``faulted_pipeline_seed11_rerun.csv`` and ``arx_theta_seed11_rerun.csv``.
+    orders : mapping of str to ArxOrders
+        ARX orders per module (the ``arx.orders`` config).
+    train_frac : float
+        Share of the run the ARX models are fitted on.
+    twin : TwinParams
+        The twin's parameters (fusion and KPI of the rollout).
+    theta_rtol : float, default 1e-6
+        Allowed relative deviation of every coefficient.
+    rollout_atol : float, default 1e-9
+        Allowed absolute deviation of every rollout sample.
 
     Returns
     -------
-    (checks, metrics)
+    CrosscheckResult
         Two ``crosscheck`` checks (coefficients within ``theta_rtol`` relative, rollouts
-        within ``rollout_atol`` absolute) and the per-module deviations behind them.
+        within ``rollout_atol`` absolute); metrics ``theta_max_rel_dev`` and
+        ``rollout_max_abs_dev``, the per-module deviations behind them.
     """
     physics, r_surrogate = load_r_physics(r_pipeline_path)
     r_theta = load_r_theta(r_theta_path)
@@ -70,4 +88,6 @@ def crosscheck_arx(
             passed=all(dev <= rollout_atol for dev in rollout_dev.values()),
         ),
     ]
-    return checks, {"theta_max_rel_dev": theta_dev, "rollout_max_abs_dev": rollout_dev}
+    return CrosscheckResult(
+        checks, {"theta_max_rel_dev": theta_dev, "rollout_max_abs_dev": rollout_dev}
+    )

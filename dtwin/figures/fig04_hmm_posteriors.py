@@ -13,7 +13,8 @@ from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite, validity_probabilities
 from dtwin.figures._style import STATE_COLORS, apply_style
-from dtwin.stages.regimes import crosscheck_r_loglik, posterior_matrix
+from dtwin.reference.crosscheck_result import CrosscheckResult
+from dtwin.stages._states import posterior_matrix
 
 __all__ = ["fig04_hmm_posteriors", "plot_hmm_posteriors"]
 
@@ -129,14 +130,33 @@ def plot_hmm_posteriors(states: pd.DataFrame, summary: Mapping[str, Any]) -> Fig
     return figure
 
 
+def _filtered_vs_smoothed(smoothed: np.ndarray, filtered: np.ndarray) -> dict[str, float]:
+    """Share of steps whose most likely state agrees, and the mean total-variation distance."""
+    return {
+        "argmax_agreement": float(np.mean(smoothed.argmax(1) == filtered.argmax(1))),
+        "mean_total_variation": float(0.5 * np.abs(smoothed - filtered).sum(1).mean()),
+    }
+
+
 def fig04_hmm_posteriors(
     states: pd.DataFrame,
     summary: Mapping[str, Any],
-    hmm: Mapping[str, Any],
-    r_pipeline: pd.DataFrame,
+    crosscheck: CrosscheckResult,
     r_numbers: Mapping[str, Any],
 ) -> FigureArtifact:
-    """Paper Fig. 4 with the model in the JSON and the log-likelihood crosscheck on R's data."""
+    """Paper Fig. 4 with the model in the JSON and the log-likelihood crosscheck on R's data.
+
+    Parameters
+    ----------
+    states : DataFrame
+        ``results/regimes/nominal_states.csv``.
+    summary : mapping
+        ``results/regimes/nominal_model.json`` (:func:`dtwin.stages.regimes.hmm_summary`).
+    crosscheck : CrosscheckResult
+        ``results/regimes/crosscheck.json`` (our EM on R's fault features vs depmixS4).
+    r_numbers : mapping
+        ``config/reference/r_numbers.yaml`` (R's nominal K = 4 fit).
+    """
     smoothed = posterior_matrix(states, "gamma")
     filtered = posterior_matrix(states, "filtered")
     figure = plot_hmm_posteriors(states, summary)
@@ -147,8 +167,6 @@ def fig04_hmm_posteriors(
         label: (dt / (1.0 - p) if p < 1 else float("inf"))
         for label, p in zip(summary["states"], self_prob, strict=True)
     }
-    r_fault = r_numbers["hmm_fault_k4"]
-    crosscheck, crosscheck_metrics = crosscheck_r_loglik(r_pipeline, hmm, r_fault["log_likelihood"])
     r_nominal = r_numbers["hmm_nominal_k4"]
     checks = [
         validity_finite("posteriors_finite", "smoothed and filtered posteriors", states),
@@ -177,7 +195,7 @@ def fig04_hmm_posteriors(
             observed=dict(zip(summary["states"], self_prob.tolist(), strict=True)),
             passed=bool(np.all(self_prob >= 0.5)),
         ),
-        crosscheck,
+        *crosscheck.checks,
     ]
     metrics = {
         "n_samples": len(states),
@@ -206,11 +224,8 @@ def fig04_hmm_posteriors(
             label: int((states["state"] == k).sum())
             for k, label in enumerate(summary["states"], start=1)
         },
-        "filtered_vs_smoothed": {
-            "argmax_agreement": float(np.mean(smoothed.argmax(1) == filtered.argmax(1))),
-            "mean_total_variation": float(0.5 * np.abs(smoothed - filtered).sum(1).mean()),
-        },
+        "filtered_vs_smoothed": _filtered_vs_smoothed(smoothed, filtered),
         "restarts": summary["restarts"],
-        "crosscheck_on_r_features": crosscheck_metrics,
+        "crosscheck_on_r_features": crosscheck.metrics,
     }
     return FigureArtifact("fig04_hmm_posteriors", figure, metrics, checks)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -14,9 +13,9 @@ from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.figures._style import PHYSICS_COLOR, R_COLOR, apply_style
-from dtwin.hmm import n_hmm_params
+from dtwin.reference.crosscheck_result import CrosscheckResult
 
-__all__ = ["fig09_bic", "plot_bic", "r_bic_tables"]
+__all__ = ["fig09_bic", "plot_bic"]
 
 #: K at which the paper (and both R experiments) find the BIC minimum (§5, Fig. 9).
 PAPER_K_MIN = 8
@@ -26,20 +25,6 @@ TITLES = {
     "nominal_residuals": "A  Nominal run: six z-scored residuals",
     "fault_features": "B  Fault scenario: ten z-scored features",
 }
-
-
-def r_bic_tables(r_nominal: pd.DataFrame, r_features: pd.DataFrame) -> dict[str, pd.DataFrame]:
-    """R's BIC by K per data set: columns ``K``, ``bic`` (and ``log_likelihood`` if known)."""
-    return {
-        "nominal_residuals": pd.DataFrame({"K": r_nominal["K"], "bic": r_nominal["BIC"]}),
-        "fault_features": pd.DataFrame(
-            {
-                "K": r_features["K"],
-                "bic": r_features["BIC_diag_published"],
-                "log_likelihood": r_features["best_logLik_diag_published"],
-            }
-        ),
-    }
 
 
 #: Curves whose small-K values dwarf the rest (range > this × the range for K >= 4) are drawn
@@ -92,7 +77,7 @@ def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restar
     table : DataFrame
         Our sweep: ``dataset``, ``K``, ``bic``.
     r_tables : mapping
-        :func:`r_bic_tables`.
+        :func:`dtwin.reference.loaders.load_r_bic`.
     n_restarts : int
         Starts per K of our sweep (for the legend).
     """
@@ -128,13 +113,23 @@ def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restar
 
 def fig09_bic(
     table: pd.DataFrame,
-    r_nominal: pd.DataFrame,
-    r_features: pd.DataFrame,
-    r_numbers: Mapping[str, Any],
+    r_tables: Mapping[str, pd.DataFrame],
+    crosscheck: CrosscheckResult,
     bic: Mapping[str, Any],
 ) -> FigureArtifact:
-    """Paper Fig. 9 with the BIC minima beside the paper's K = 8 and a formula crosscheck."""
-    r_tables = r_bic_tables(r_nominal, r_features)
+    """Paper Fig. 9 with the BIC minima beside the paper's K = 8 and a formula crosscheck.
+
+    Parameters
+    ----------
+    table : DataFrame
+        ``results/bic_sweep.csv``.
+    r_tables : mapping of str to DataFrame
+        R's BIC by K per data set (:func:`dtwin.reference.loaders.load_r_bic`).
+    crosscheck : CrosscheckResult
+        :func:`dtwin.reference.bic_crosscheck.crosscheck_bic_formula`.
+    bic : mapping
+        The ``bic`` config section (``n_restarts`` is reported).
+    """
     figure = plot_bic(table, r_tables, bic["n_restarts"])
     minima = {
         name: int(group.loc[group["bic"].idxmin(), "K"])
@@ -142,33 +137,6 @@ def fig09_bic(
     }
     r_minima = {name: int(r.loc[r["bic"].idxmin(), "K"]) for name, r in r_tables.items()}
     r_min_values = {name: float(r["bic"].min()) for name, r in r_tables.items()}
-
-    # Crosscheck: our parameter count and formula turn R's log-likelihoods into R's BIC.
-    n_samples = 1000
-    formula_dev = {}
-    r_nominal_ll = {int(k): v for k, v in r_numbers["bic_nominal_log_likelihood"].items()}
-    for name, r, n_features, loglik in (
-        ("nominal_residuals", r_tables["nominal_residuals"], 6, r_nominal_ll),
-        (
-            "fault_features",
-            r_tables["fault_features"],
-            10,
-            dict(
-                zip(
-                    r_tables["fault_features"]["K"],
-                    r_tables["fault_features"]["log_likelihood"],
-                    strict=True,
-                )
-            ),
-        ),
-    ):
-        ours = {
-            int(k): -2 * loglik[int(k)] + n_hmm_params(int(k), n_features) * math.log(n_samples)
-            for k in r["K"]
-        }
-        formula_dev[name] = float(
-            max(abs(ours[int(k)] - b) for k, b in zip(r["K"], r["bic"], strict=True))
-        )
     checks = [
         validity_finite("bic_finite", "BIC values", table[["log_likelihood", "bic"]]),
         Check(
@@ -185,17 +153,7 @@ def fig09_bic(
             ),
             passed=bool((table["n_usable"] >= 1).all()),
         ),
-        Check(
-            id="bic_formula_matches_r",
-            kind="crosscheck",
-            statement=(
-                "our parameter count p = (K-1) + K(K-1) + 2DK and BIC = -2 log L + p log n, "
-                "applied to R's log-likelihoods (n = 1000), give R's printed BIC values"
-            ),
-            expected="max |deviation| <= 0.05 (R prints 0.1 / 3-decimal log-likelihoods)",
-            observed=formula_dev,
-            passed=all(dev <= 0.05 for dev in formula_dev.values()),
-        ),
+        *crosscheck.checks,
     ]
     for name, k_min in minima.items():
         checks.append(
@@ -224,7 +182,7 @@ def fig09_bic(
         },
         "sweep": table.to_dict(orient="records"),
         "r_sweep": {name: r.to_dict(orient="records") for name, r in r_tables.items()},
-        "formula_max_abs_deviation": formula_dev,
+        "formula_max_abs_deviation": crosscheck.metrics,
         "still_decreasing_at_max_k": {
             name: bool(np.diff(group.sort_values("K")["bic"].to_numpy())[-1] < 0)
             for name, group in table.groupby("dataset", sort=False)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
 from typing import Any
 
@@ -13,6 +12,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
+from dtwin.figures._correction_metrics import metrics_beside_r
 from dtwin.figures._style import (
     AFTER_COLOR,
     BEFORE_COLOR,
@@ -22,7 +22,7 @@ from dtwin.figures._style import (
     regime_spans,
     shade_regimes,
 )
-from dtwin.stages.correction import crosscheck_correction, metrics_beside_r
+from dtwin.reference.crosscheck_result import CrosscheckResult
 from dtwin.wiring import MODULES, RESIDUALS
 
 __all__ = [
@@ -124,13 +124,23 @@ def fig05_correction_timeseries(
     residuals: pd.DataFrame,
     metrics: pd.DataFrame,
     r_metrics: pd.DataFrame,
-    r_pipeline_path: str | os.PathLike,
-    twin: Mapping[str, Any],
+    crosscheck: CrosscheckResult,
     correction: Mapping[str, Any],
 ) -> FigureArtifact:
-    """Paper Fig. 5 with the RMSE/MAE table (smoothed and causal) beside R's and the paper's."""
+    """Paper Fig. 5 with the RMSE/MAE table (smoothed and causal) beside R's and the paper's.
+
+    Parameters
+    ----------
+    residuals, metrics : DataFrame
+        ``results/correction/residuals.csv`` and ``metrics.csv``.
+    r_metrics : DataFrame
+        R's table, :func:`dtwin.reference.loaders.load_r_correction_metrics`.
+    crosscheck : CrosscheckResult
+        ``results/correction/crosscheck.json`` (our correction on R's signals).
+    correction : mapping
+        The ``correction`` config section (reported in the metrics).
+    """
     figure = plot_correction_timeseries(residuals, metrics)
-    crosscheck, _ = crosscheck_correction(r_pipeline_path, r_metrics, twin, correction)
     tables = metrics_beside_r(metrics, r_metrics)
     drmse = {e: tables["ours"]["smoothed"][e]["drmse_pct"] for e in RESIDUALS}
     r_drmse = {e: tables["r"][e]["drmse_pct"] for e in RESIDUALS}
@@ -154,7 +164,7 @@ def fig05_correction_timeseries(
             passed=all(drmse[e] > VISIBLE_PCT for e in PAPER_LOWERED),
             reference={e: r_drmse[e] for e in PAPER_LOWERED},
         ),
-        crosscheck,
+        *crosscheck.checks,
     ]
     metrics_payload = {
         "n_samples": len(residuals),
