@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import importlib.util
 from pathlib import Path
 from typing import Any
 
@@ -116,3 +117,14 @@ def test_broken_config_is_rejected_with_its_path(breaks, path, word):
     errors = list(jsonschema.Draft202012Validator(SCHEMA).iter_errors(config))
     assert [list(e.absolute_path) for e in errors] == [path]
     assert word in errors[0].message
+
+
+def test_config_doc_is_generated():
+    """docs/config.md is what docs/make_config_doc.py writes (rerun it after a schema edit)."""
+    spec = importlib.util.spec_from_file_location(
+        "make_config_doc", ROOT / "docs" / "make_config_doc.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    expected = module.render(SCHEMA, CONFIG)
+    assert (ROOT / "docs" / "config.md").read_text() == expected
