@@ -104,8 +104,10 @@ def validity_finite(check_id: str, what: str, values: Any) -> Check:
 
 
 def validity_probabilities(check_id: str, what: str, posteriors: Any) -> Check:
-    """Return a validity check that every row of ``posteriors`` (T, K) is a probability
-    distribution: entries in [0, 1], rows summing to 1 within 1e-9."""
+    """Return a validity check that every row of ``posteriors`` (T, K) is a distribution.
+
+    Entries must lie in [0, 1] and rows sum to 1 within 1e-9.
+    """
     posteriors = np.asarray(posteriors, dtype=float)
     sums = posteriors.sum(axis=1)
     worst = float(np.max(np.abs(sums - 1.0))) if len(sums) else float("nan")

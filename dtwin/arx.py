@@ -13,7 +13,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter, lfiltic
 
 from dtwin._validation import (
     DtwinValueError,
@@ -180,6 +179,8 @@ def simulate_arx(fit: ArxFit, u: np.ndarray, initial_y: np.ndarray) -> np.ndarra
     denominator = np.concatenate([[1.0], -fit.a])
     past_y = y_hat[p - 1 :: -1] if p > 0 else np.zeros(0)
     past_u = u[p - 1 :: -1]
+    from scipy.signal import lfilter, lfiltic  # here: reading ARX orders stays light
+
     state = lfiltic(numerator, denominator, past_y, past_u)
     y_hat[p:], _ = lfilter(numerator, denominator, u[p:], zi=state)
     return y_hat

@@ -85,8 +85,9 @@ def exponential_moving_average(x: Any, alpha: float) -> np.ndarray:
 
 
 def rate_limit(x: Any, r_max: float) -> np.ndarray:
-    """Return ``x`` with every step clamped to ``±r_max``: ``out[0] = x[0]``,
-    ``out[i] = out[i−1] + clip(x[i] − out[i−1], −r_max, r_max)``.
+    """Return ``x`` with every step clamped to ``±r_max``.
+
+    ``out[0] = x[0]``, ``out[i] = out[i−1] + clip(x[i] − out[i−1], −r_max, r_max)``.
 
     Parameters
     ----------

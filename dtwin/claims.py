@@ -37,7 +37,7 @@ class ClaimsSummary:
     counts: dict[str, dict[str, int]]
 
     def to_json(self) -> dict[str, Any]:
-        """The content of ``claims.json``."""
+        """Return the content of ``claims.json``."""
         return {"counts": self.counts, "checks": self.rows}
 
 

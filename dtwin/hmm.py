@@ -714,7 +714,7 @@ def _forward_filter(
 
 
 def _blocked_forward(start: np.ndarray, emission: np.ndarray, transmat: np.ndarray) -> np.ndarray:
-    """Filtered vectors for steps 1 … n given the filtered vector of step 0 (see above)."""
+    """Return the filtered vectors of steps 1 … n given that of step 0 (see above)."""
     n_steps, n_states = emission.shape
     block = max(1, math.isqrt(n_steps))
     n_blocks = -(-n_steps // block)

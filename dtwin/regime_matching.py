@@ -143,7 +143,7 @@ def hungarian_map(
 
 
 def _plain(label: Any) -> Hashable:
-    """numpy scalars → Python scalars, so mapping keys print and compare plainly."""
+    """Numpy scalars → Python scalars, so mapping keys print and compare plainly."""
     return label.item() if isinstance(label, np.generic) else label
 
 

@@ -5,13 +5,14 @@ Layers of ``dtwin/`` (who may import whom):
 - concept modules (``dtwin/*.py``): one paper concept each; import only other concept modules
   and the helpers (``_validation``, ``artifacts``); never a stage, figure, reference or gap
   module, never ``yaml`` (no config files) and never Snakemake;
-- stages (``dtwin/stages/``): config section → concept calls; may import concepts and the
-  reference package, never figures or gap;
+- stages (``dtwin/stages/``): config section → concept calls; may import concepts and R's
+  column maps and loaders, never figures, gap or the crosschecks;
 - figures (``dtwin/figures/``): draw and judge the paper's claims from tables they are given;
   never a stage, never the model-fitting modules (hmmlearn, ``dtwin.hmm``'s fits,
   ``dtwin.mcda``'s runs, ``dtwin.arx``/``dtwin.surrogate``, scipy.signal) and never a loader of
   R's files;
-- reference (``dtwin/reference/``): everything about the R code; never a stage, figure or gap;
+- reference (``dtwin/reference/``): everything about the R code; its crosschecks run our
+  stages on R's signals, so it sits above the stages; never a figure or gap module;
 - gap (``dtwin/gap/``): the diagnoser; never a stage, figure or reference module (it draws
   its own figure in the shared style, ``dtwin.figures._style``).
 """
@@ -35,19 +36,31 @@ ALLOWED = {"gap": ("dtwin.figures._style",)}
 
 FORBIDDEN = {
     "concept": ("dtwin.stages", "dtwin.figures", "dtwin.reference", "dtwin.gap", "yaml"),
-    "stages": ("dtwin.figures", "dtwin.gap"),
+    "stages": (
+        "dtwin.figures",
+        "dtwin.gap",
+        "dtwin.reference.arx_crosscheck",
+        "dtwin.reference.bic_crosscheck",
+        "dtwin.reference.correction_crosscheck",
+        "dtwin.reference.em_crosscheck",
+        "dtwin.reference.hungarian_crosscheck",
+        "dtwin.reference.mcda_crosscheck",
+        "dtwin.reference.sweep_crosscheck",
+    ),
     "figures": (
         "dtwin.stages",
         "dtwin.gap",
         "dtwin.reference.loaders",
         "dtwin.reference.crosschecks",
-        "dtwin.arx",
+        "dtwin.arx.fit_arx",
+        "dtwin.arx.simulate_arx",
         "dtwin.surrogate",
-        "dtwin.mcda",
+        "dtwin.mcda.run_mcda",
+        "dtwin.mcda.topsis",
         "hmmlearn",
         "scipy.signal",
     ),
-    "reference": ("dtwin.stages", "dtwin.figures", "dtwin.gap"),
+    "reference": ("dtwin.figures", "dtwin.gap"),
     "gap": ("dtwin.stages", "dtwin.figures", "dtwin.reference"),
 }
 

@@ -46,8 +46,9 @@ def fault_claims(
     r_scores: Mapping[str, float],
     origin: str,
 ) -> list[Check]:
-    """Return the three §4.4 claims: scores like R's, confusions mostly Nominal ↔ SensorNoisy,
-    onsets aligned with the schedule.
+    """Return the three §4.4 claims of the fault scenario.
+
+    Scores like R's, confusions mostly Nominal ↔ SensorNoisy, onsets aligned with the schedule.
 
     Parameters
     ----------

@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from dtwin.artifacts import Check, FigureArtifact, validity_finite, validity_probabilities
 from dtwin.figures._style import STATE_COLORS, apply_style
 from dtwin.reference.crosscheck_result import CrosscheckResult
-from dtwin.stages._states import posterior_matrix
+from dtwin.state_tables import posterior_matrix
 
 __all__ = ["fig04_hmm_posteriors", "plot_hmm_posteriors"]
 

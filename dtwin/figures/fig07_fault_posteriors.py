@@ -149,8 +149,10 @@ def _draw_restarts(ax: Any, restart_records: list, r_accuracy: float) -> None:
 def plot_fault_posteriors(
     posteriors: pd.DataFrame, scenario: Mapping[str, Any], r_scores: Mapping[str, float]
 ) -> Figure:
-    """Draw the mapped posteriors, the schedule and Viterbi strips, the confusion matrix and
-    the accuracy of every EM start.
+    """Draw paper Fig. 7 and its extra panels.
+
+    The mapped posteriors, the schedule and Viterbi strips, the confusion matrix and the
+    accuracy of every EM start.
 
     Parameters
     ----------

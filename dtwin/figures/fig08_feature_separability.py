@@ -57,7 +57,7 @@ def _claim(
     present: list[str],
     evaluate,
 ) -> Check:
-    """A claim check; not evaluable (failed, saying why) when a regime it needs is absent."""
+    """Return a claim check; not evaluable (failed, saying why) if a regime it needs is absent."""
     missing = [r for r in needs if r not in present]
     if missing:
         return Check(check_id, "claim", statement, expected, {"absent_regimes": missing}, False)

@@ -1,5 +1,6 @@
-"""Sim-to-real gap diagnosis: where the gap lies, which effect causes it, how far
-it shrinks once added — checked on generated recordings whose effect is withheld.
+"""Sim-to-real gap diagnosis: where the gap lies, which effect causes it, how far it shrinks.
+
+Checked on generated recordings whose effect is withheld.
 
 Specification: docs/gap.md.
 

@@ -1,4 +1,4 @@
-""" "Real" recordings with a withheld effect, for checking the gap diagnoser.
+"""Generate "real" recordings with a withheld effect, for checking the gap diagnoser.
 
 Specification: docs/gap.md §Generator.
 

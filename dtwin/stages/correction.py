@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from dtwin.bias_correction import BiasCorrection, correct_bias
-from dtwin.stages._states import posterior_matrix
+from dtwin.state_tables import posterior_matrix
 from dtwin.wiring import RESIDUALS
 
 __all__ = [

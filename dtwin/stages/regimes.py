@@ -22,8 +22,8 @@ import pandas as pd
 
 from dtwin._validation import DtwinValueError
 from dtwin.hmm import HmmFit, ZScored, bic_by_k, fit_hmm, zscore
-from dtwin.stages._states import posterior_matrix, state_labels
 from dtwin.stages.settings import EmSettings, HmmSettings
+from dtwin.state_tables import posterior_matrix, state_labels
 from dtwin.wiring import RESIDUALS
 
 __all__ = [
