@@ -189,7 +189,8 @@ def test_a_million_sample_recording_is_read_without_running_out_of_memory(tmp_pa
     )
     assert done.returncode == 0, done.stderr
     peak_mb = int(done.stdout.strip().splitlines()[-1]) / 1024
-    assert peak_mb < 4000, f"peak memory {peak_mb:.0f} MB"
+    # measured 493 MB (2026-11-23; 228 MB at 250k samples): the bound leaves about 50 %
+    assert peak_mb < 750, f"peak memory {peak_mb:.0f} MB"
 
 
 SCHEMA = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
