@@ -49,7 +49,8 @@ def r_sweep_physics(
     ----------
     r_physics : DataFrame
         R's nominal seed-11 physics (α 0.6, unit multipliers), columns ``t`` and
-        ``u_cmd, u_act, x, v, y_A, y_B, y_fused, z`` (:func:`dtwin.reference.load_r_physics`).
+        ``u_cmd, u_act, x, v, y_A, y_B, y_fused, z``
+        (:func:`dtwin.reference.loaders.load_r_physics`).
     twin : mapping
         The ``twin`` config section (sensor time constants and biases, ``dt``).
     alpha, m_A, m_B : float

@@ -24,18 +24,6 @@ def _count(section: str, raw: Mapping[str, Any], key: str, minimum: int) -> int:
     return value
 
 
-def _em_values(raw: Mapping[str, Any], section: str, defaults: Mapping[str, Any]) -> dict:
-    values = {}
-    for key, default in defaults.items():
-        if key not in raw:
-            values[key] = default
-        elif key in ("n_states", "n_restarts", "max_iter"):
-            values[key] = _count(section, raw, key, 1)
-        else:
-            values[key] = require_positive(f"{section}.{key}", raw[key])
-    return values
-
-
 @dataclass(frozen=True)
 class EmSettings:
     """The EM options of every HMM fit: the part of section ``hmm`` a K sweep needs.
@@ -64,7 +52,13 @@ class EmSettings:
         1e-06
         """
         raw = require_mapping(section, raw)
-        return cls(**_em_values(raw, section, asdict(cls())))
+        values = asdict(cls())
+        if "max_iter" in raw:
+            values["max_iter"] = _count(section, raw, "max_iter", 1)
+        for key in ("tol", "var_floor"):
+            if key in raw:
+                values[key] = require_positive(f"{section}.{key}", raw[key])
+        return cls(**values)
 
     def options(self) -> dict[str, Any]:
         """Return the keyword arguments ``max_iter``, ``tol``, ``var_floor`` of the fit."""
@@ -81,19 +75,13 @@ class HmmSettings:
         Number of hidden states K (paper: 4).
     n_restarts : int, default 10
         Random EM starts per fit; the best log-likelihood is kept.
-    max_iter : int, default 500
-        EM iteration cap per start (depmixS4 ``maxit``).
-    tol : float, default 1e-8
-        Relative stopping tolerance of EM.
-    var_floor : float, default 1e-3
-        Lower bound on every emission variance, z-units².
+    em : EmSettings
+        The EM options (``max_iter``, ``tol``, ``var_floor``).
     """
 
     n_states: int
     n_restarts: int = 10
-    max_iter: int = 500
-    tol: float = 1e-8
-    var_floor: float = 1e-3
+    em: EmSettings = EmSettings()
 
     @classmethod
     def from_mapping(cls, raw: Any, section: str = "hmm") -> HmmSettings:
@@ -101,7 +89,7 @@ class HmmSettings:
 
         Examples
         --------
-        >>> HmmSettings.from_mapping({"n_states": 4, "var_floor": 0.01}).var_floor
+        >>> HmmSettings.from_mapping({"n_states": 4, "var_floor": 0.01}).em.var_floor
         0.01
         >>> HmmSettings.from_mapping({"n_states": 4, "tol": 0}, "sensitivity.hmm")
         Traceback (most recent call last):
@@ -111,18 +99,13 @@ class HmmSettings:
         raw = require_mapping(section, raw)
         if "n_states" not in raw:
             raise DtwinValueError(f"{section} is missing n_states")
-        values = _em_values(raw, section, asdict(cls(n_states=1)))
-        return cls(**values)
+        n_restarts = _count(section, raw, "n_restarts", 1) if "n_restarts" in raw else 10
+        return cls(
+            n_states=_count(section, raw, "n_states", 1),
+            n_restarts=n_restarts,
+            em=EmSettings.from_mapping(raw, section),
+        )
 
     def fit_options(self) -> dict[str, Any]:
         """Return the keyword arguments of :func:`dtwin.hmm.fit_hmm` but ``seed``."""
-        return {
-            "n_restarts": self.n_restarts,
-            "max_iter": self.max_iter,
-            "tol": self.tol,
-            "var_floor": self.var_floor,
-        }
-
-    def em_options(self) -> dict[str, Any]:
-        """Return the EM options alone (``max_iter``, ``tol``, ``var_floor``)."""
-        return EmSettings(self.max_iter, self.tol, self.var_floor).options()
+        return {"n_restarts": self.n_restarts, **self.em.options()}
