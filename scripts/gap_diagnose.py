@@ -16,18 +16,27 @@ from pathlib import Path
 
 import yaml
 
-from dtwin.gap import GapSettings, diagnose, read_recording, twin_from_mapping, write_report
+from dtwin.gap import (
+    GapSettings,
+    diagnose,
+    read_recording,
+    twin_discretisation,
+    twin_from_mapping,
+    write_report,
+)
 
 settings = dict(snakemake.params.diagnose)
 train_frac = settings.pop("train_frac")
 calibrate = bool(settings.pop("calibrate"))
 recording = read_recording(snakemake.input.recording)
-twin = twin_from_mapping(yaml.safe_load(Path(snakemake.input.twin).read_text()), dt=recording.dt)
+twin_content = yaml.safe_load(Path(snakemake.input.twin).read_text())
+twin = twin_from_mapping(twin_content, dt=recording.dt)
 result = diagnose(
     recording,
     twin,
     calibrate=calibrate,
     train_frac=train_frac,
     settings=GapSettings.from_mapping(settings),
+    discretisation=twin_discretisation(twin_content),
 )
 write_report(result, Path(snakemake.output.diagnosis).parent)

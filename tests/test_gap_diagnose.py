@@ -20,9 +20,11 @@ from dtwin.gap import (
     diagnosis_to_dict,
     generate_case,
     recording_from_frame,
+    twin_discretisation,
     twin_from_mapping,
 )
 from dtwin.gap.effects import EFFECT_NAMES
+from dtwin.modules import exact_plant_response
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = json.loads((ROOT / "workflow/schemas/diagnosis.schema.json").read_text())
@@ -48,7 +50,9 @@ CASES = [
 
 def _diagnose_case(effect, module, seed, **kwargs):
     case = generate_case(effect, seed, magnitude=0.8, module=module, n_samples=1500)
-    result = diagnose(recording_from_frame(case.recording), twin_from_mapping(case.twin), **kwargs)
+    twin = twin_from_mapping(case.twin)
+    kwargs.setdefault("discretisation", twin_discretisation(case.twin))
+    result = diagnose(recording_from_frame(case.recording), twin, **kwargs)
     return case, result
 
 
@@ -75,7 +79,8 @@ def test_none_on_a_clean_case():
 def test_partial_recording_diagnoses_m1_alone():
     case = generate_case("coulomb_friction", 1, magnitude=0.8, n_samples=1500)
     frame = case.recording[["t", "u_act", "x"]]
-    result = diagnose(recording_from_frame(frame), twin_from_mapping(case.twin))
+    twin = twin_from_mapping(case.twin)
+    result = diagnose(recording_from_frame(frame), twin, discretisation="euler")
     assert (result.module, result.effect) == ("M1", "coulomb_friction")
     statuses = {name: m.status for name, m in result.modules.items()}
     assert statuses.pop("M1") == "source"
@@ -94,29 +99,58 @@ def test_calibrate_fits_the_linear_twin_first():
     assert all(c.effect != "parameter_mismatch" for c in result.candidates)
 
 
-def _rig(friction: float, n: int = 12000, dt: float = 0.002, seed: int = 0) -> pd.DataFrame:
-    """A plant in volts at 500 Hz: gain, offsets, an input delay, process and sensor noise."""
+def _rig(
+    friction: float, n: int = 12000, dt: float = 0.002, seed: int = 0, process: float = 0.2
+) -> pd.DataFrame:
+    """A continuous plant in volts at 500 Hz: gain, offsets, an input delay, noise.
+
+    The plant is exact for the input held between samples (a digital controller's output);
+    ``process`` is an acceleration noise per sample. The data noise floor of an exactly
+    discretised plant counts measurement noise only (docs/gap.md §Noise floors), so a large
+    process noise reads as a gap unless the twin file gives ``noise.plant``.
+    """
     rng = np.random.default_rng(seed)
     t = np.arange(n) * dt
     u = 1.5 * np.sin(2 * np.pi * 0.7 * t) + 0.8 * np.sign(np.sin(2 * np.pi * 0.13 * t))
     m, c, k, delay = 0.05, 0.3, 6.0, 3
-    x = np.zeros(n)
-    v = np.zeros(n)
-    for j in range(1, n):
-        force = u[max(j - 1 - delay, 0)] + 0.1 - c * v[j - 1] - k * x[j - 1]
-        force -= friction * math.tanh(v[j - 1] / 0.005)
-        v[j] = v[j - 1] + dt * (force / m + 2.0 * rng.standard_normal())
-        x[j] = x[j - 1] + dt * v[j - 1]
+    drive = np.concatenate([np.full(delay, u[0]), u[:-delay]]) + 0.1
+    drive = drive + m * process * rng.standard_normal(n)
+    x = exact_plant_response(
+        drive,
+        m,
+        c,
+        k,
+        dt,
+        windows=[(0, n)],
+        x_start=np.zeros(n),
+        v_start=np.zeros(n),
+        hold="zoh",
+        force=(lambda x, v: friction * math.tanh(v / 0.005)) if friction else None,
+    )
     volts = 2.5 + 1.8 * x + 0.002 * rng.standard_normal(n)
     return pd.DataFrame({"t": np.round(t, 4), "u_act": u, "x": volts})
 
 
-@pytest.mark.parametrize(("friction", "expected"), [(0.0, "none"), (0.3, "coulomb_friction")])
-def test_rig_in_volts_without_nominal_parameters(friction, expected):
-    result = diagnose(recording_from_frame(_rig(friction)), twin_from_mapping({"dt": 0.002}))
-    assert result.effect == expected
-    if friction:
-        assert result.params["Fc"] == pytest.approx(friction, rel=0.2)
+def test_rig_in_volts_with_coulomb_friction_is_named():
+    result = diagnose(recording_from_frame(_rig(0.3)), twin_from_mapping({"dt": 0.002}))
+    assert (result.module, result.effect) == ("M1", "coulomb_friction")
+    assert result.params["Fc"] == pytest.approx(0.3, rel=0.2)
+    assert result.shrink_pct >= 80
+
+
+def test_clean_rig_is_calibrated_to_its_physics_and_names_no_effect():
+    """m, c, k (volt units), the input offset and the delay of a clean rig, to 2 %."""
+    result = diagnose(recording_from_frame(_rig(0.0)), twin_from_mapping({"dt": 0.002}))
+    assert result.effect in ("none", "unexplained")
+    plant = result.modules["M1"]
+    used = plant.lin_used
+    volts = 1.8  # x in volts = 2.5 + 1.8·x: parameters per volt
+    expected = {"m": 0.05 / volts, "c": 0.3 / volts, "k": 6.0 / volts}
+    for name, value in expected.items():
+        assert used[name] == pytest.approx(value, rel=0.02), name
+    assert used["u_offset"] == pytest.approx(-0.1 - 2.5 * 6.0 / volts, rel=0.02)
+    assert used["delay_samples"] == 3
+    assert plant.gap_before < 1.25 * plant.noise_floor  # the linear twin is exact up to noise
 
 
 def test_cli_writes_a_valid_report(tmp_path, capsys):

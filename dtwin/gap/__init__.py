@@ -14,7 +14,13 @@ recordings) and :mod:`~dtwin.gap.benchmark` (scoring diagnoses against the truth
 Arrays are time-first: every signal has shape ``(n_samples,)``.
 """
 
-from dtwin.gap.diagnose import Diagnosis, GapSettings, diagnose, twin_from_mapping
+from dtwin.gap.diagnose import (
+    Diagnosis,
+    GapSettings,
+    diagnose,
+    twin_discretisation,
+    twin_from_mapping,
+)
 from dtwin.gap.effects import EFFECT_NAMES, EFFECTS, Effect
 from dtwin.gap.generator import GeneratedCase, generate_case
 from dtwin.gap.recording import Recording, read_recording, recording_from_frame
@@ -25,6 +31,7 @@ __all__ = [
     "GapSettings",
     "diagnose",
     "twin_from_mapping",
+    "twin_discretisation",
     "EFFECT_NAMES",
     "EFFECTS",
     "Effect",

@@ -51,15 +51,24 @@ from dtwin.gap.localise import (
     run_chain,
     upstream_modules,
 )
-from dtwin.gap.models import LINEAR_PARAMS, ModuleData, simulate_module, velocity_from_position
+from dtwin.gap.models import (
+    LINEAR_PARAMS,
+    ModuleData,
+    plant_bandwidth_hz,
+    plant_horizon,
+    simulate_module,
+    velocity_from_position,
+)
 from dtwin.gap.noise import (
     NoiseFloor,
     data_noise_floor,
     effective_samples,
     gap_threshold,
+    spectral_noise_floor,
     twin_noise_floor,
 )
 from dtwin.gap.recording import Recording, diagnosable_modules
+from dtwin.modules import DISCRETISATIONS, EULER, EXACT_HOLDS
 from dtwin.params import TwinParams, twin_params_from_mapping
 from dtwin.wiring import MODULES
 
@@ -70,6 +79,8 @@ __all__ = [
     "Diagnosis",
     "DT_TOLERANCE",
     "twin_from_mapping",
+    "twin_discretisation",
+    "join_heldout",
     "diagnose",
 ]
 
@@ -143,6 +154,8 @@ class ModuleReport:
     n_eff: float | None = None
     lin_nominal: dict[str, float] | None = None
     lin_used: dict[str, float] | None = None
+    discretisation: str | None = None
+    horizon_samples: int | None = None
 
 
 @dataclass(frozen=True)
@@ -209,9 +222,26 @@ def twin_from_mapping(mapping: Any, dt: float | None = None) -> TwinParams:
         if not isinstance(mapping, Mapping):
             raise DtwinTypeError(f"twin must be a mapping (got {type(mapping).__name__})")
     mapping = dict(mapping)
+    mapping.pop("discretisation", None)
     if "dt" not in mapping and dt is not None:
         mapping["dt"] = dt
     return twin_params_from_mapping(mapping, require_all=False)
+
+
+def twin_discretisation(mapping: Any) -> str | None:
+    """Return the twin file's ``discretisation`` (docs/gap.md §Twin file), or None.
+
+    ``euler`` (the paper's twin), ``zoh`` or ``foh``; None (absent) lets the diagnoser choose
+    the exact hold that fits the training part best.
+    """
+    if isinstance(mapping, Mapping) and isinstance(mapping.get("twin"), Mapping):
+        mapping = mapping["twin"]
+    value = mapping.get("discretisation") if isinstance(mapping, Mapping) else None
+    if value is not None and value not in DISCRETISATIONS:
+        raise DtwinValueError(
+            f"twin file: discretisation must be one of {', '.join(DISCRETISATIONS)} (got {value!r})"
+        )
+    return value
 
 
 # --- helpers ----------------------------------------------------------------------------
@@ -224,12 +254,17 @@ def _nominal_lin(name: str, twin: TwinParams) -> dict[str, float] | None:
     return {key: float(getattr(section, key)) for key in LINEAR_PARAMS[name]}
 
 
-def _module_data(name: str, rec: Recording, t: np.ndarray) -> ModuleData:
+def _module_data(name: str, rec: Recording, t: np.ndarray, layout: _Layout) -> ModuleData:
     inputs = module_inputs(name, rec.signals, rec.dt)
     module = next(m for m in MODULES if m.name == name)
     output = rec.signals[module.output]
-    velocity = velocity_from_position(output, rec.dt) if name == "M1" else inputs.get("v")
-    return ModuleData(name, inputs, output, rec.dt, t, velocity, None)
+    scheme = layout.scheme if name == "M1" else EULER
+    velocity = inputs.get("v")
+    if name == "M1":
+        velocity = velocity_from_position(output, rec.dt, scheme, layout.restarts)
+    return ModuleData(
+        name, inputs, output, rec.dt, t, velocity, None, scheme, restarts=layout.restarts
+    )
 
 
 def _scales(data: ModuleData, n_train: int, noise_std: float, lin: Mapping[str, float]) -> Scales:
@@ -309,6 +344,47 @@ def _effect_params(effect: Effect | None, fit: CandidateFit, nominal, tol) -> di
 # --- the per-module analysis ----------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class _Layout:
+    """How the plant is discretised and where experiments restart.
+
+    ``holds``: the discretisations to choose from on the training part (one: fixed by the twin
+    file); ``restarts``: first samples of a separate held-out recording.
+    """
+
+    holds: tuple[str, ...]
+    restarts: tuple[int, ...] = ()
+
+    @property
+    def scheme(self) -> str:
+        """The plant's family: ``"euler"`` or an exact hold (its velocity estimate differs)."""
+        return self.holds[0]
+
+
+def _prepare_exact_plant(data, nominal, n_train, n_held, holds) -> tuple[ModuleData, dict]:
+    """Choose the hold and the window of the exact plant; calibrate it when ``nominal`` is None.
+
+    The first hold's twin, fitted in free run, sets the window of the gap
+    (:func:`~dtwin.gap.models.plant_horizon`; None: free run is meaningful). Each hold is then
+    fitted over those windows (a nominal twin: evaluated) and the one with the smaller training
+    simulation error is kept (docs/gap.md §Modules).
+    """
+    horizon, best = None, None
+    for index, hold in enumerate(holds):
+        trial = replace(data, discretisation=hold, horizon=None)
+        start = calibrate_linear(trial, n_train) if nominal is None else dict(nominal)
+        if index == 0:
+            horizon = plant_horizon(start, data.dt, n_held)
+        if horizon is not None:
+            trial = replace(trial, horizon=horizon)
+            start = calibrate_linear(trial, n_train) if nominal is None else start
+        fitted = fit_candidate(trial, None, start, n_train=n_train, free=[])
+        logger.debug("M1 %s: training RMS %.4g, window %s", hold, fitted.train_rms, horizon)
+        if best is None or fitted.train_rms < best[0]:
+            best = (fitted.train_rms, trial, fitted.lin)
+    return best[1], best[2]
+
+
 @dataclass
 class _ModuleWork:
     name: str
@@ -328,17 +404,27 @@ class _ModuleWork:
     candidates: list[tuple[Effect, CandidateFit, np.ndarray, float]] = field(default_factory=list)
 
 
-def _analyse_module(name, rec, twin, t, n_train, calibrate, settings) -> _ModuleWork:
-    data = _module_data(name, rec, t)
+def _analyse_module(name, rec, twin, t, n_train, calibrate, settings, layout) -> _ModuleWork:
+    data = _module_data(name, rec, t, layout)
     held = slice(n_train, rec.n_samples)
     norm = float(np.std(data.output)) or 1.0
     nominal = _nominal_lin(name, twin)
     calibrated = calibrate or nominal is None
     provisional = _scales(data, n_train, 0.0, nominal or {})
     data = replace(data, scales=provisional)
-    lin_base = calibrate_linear(data, n_train) if calibrated else dict(nominal)
+    if name == "M1" and layout.scheme != EULER:
+        start = None if calibrated else nominal
+        data, lin_base = _prepare_exact_plant(
+            data, start, n_train, rec.n_samples - n_train, layout.holds
+        )
+    else:
+        lin_base = calibrate_linear(data, n_train) if calibrated else dict(nominal)
     sim_before = simulate_module(data, lin_base)
-    floor_data = data_noise_floor(name, data.inputs, data.output, sim_before, lin_base, rec.dt)
+    if name == "M1" and layout.scheme != EULER:
+        residual = (data.output - sim_before)[:n_train]
+        floor_data = spectral_noise_floor(residual, rec.dt, plant_bandwidth_hz(lin_base))
+    else:
+        floor_data = data_noise_floor(name, data.inputs, data.output, sim_before, lin_base, rec.dt)
     floor_twin = (
         twin_noise_floor(name, twin.noise, lin_base, rec.dt) if twin.noise is not None else None
     )
@@ -441,30 +527,83 @@ def _score_candidates(work: _ModuleWork, n_train: int, settings: GapSettings):
 # --- the steps of the entry point ------------------------------------------------------
 
 
-def _check_arguments(recording: Recording, twin: TwinParams, train_frac: float) -> tuple:
+def _check_arguments(
+    recording: Recording, twin: TwinParams, train_frac: float, heldout: Recording | None
+) -> tuple:
     """Validate the arguments of :func:`diagnose`; return ``(train_frac, n_train)``.
 
     ``n_train`` is the number of samples, from the start, in the training part
-    (docs/gap.md §Interface).
+    (docs/gap.md §Interface). With a separate held-out recording ``train_frac`` may be 1.
     """
     if not isinstance(recording, Recording):
         raise DtwinTypeError(f"recording must be a Recording (got {type(recording).__name__})")
     if not isinstance(twin, TwinParams):
         raise DtwinTypeError(f"twin must be TwinParams (got {type(twin).__name__})")
-    train_frac = require_in_range("train_frac", train_frac, 0.05, 0.95)
-    if abs(recording.dt - twin.dt) > DT_TOLERANCE * twin.dt:
-        raise DtwinValueError(
-            f"recording dt ({recording.dt:.6g} s, from column 't') disagrees with twin.dt "
-            f"({twin.dt:.6g} s) by more than {DT_TOLERANCE:.0%}"
-        )
+    if heldout is not None and not isinstance(heldout, Recording):
+        raise DtwinTypeError(f"heldout must be a Recording (got {type(heldout).__name__})")
+    top = 0.95 if heldout is None else 1.0
+    train_frac = require_in_range("train_frac", train_frac, 0.05, top)
+    for label, rec in (("recording", recording), ("held-out recording", heldout)):
+        if rec is not None and abs(rec.dt - twin.dt) > DT_TOLERANCE * twin.dt:
+            raise DtwinValueError(
+                f"{label} dt ({rec.dt:.6g} s, from column 't') disagrees with twin.dt "
+                f"({twin.dt:.6g} s) by more than {DT_TOLERANCE:.0%}"
+            )
     n = recording.n_samples
     n_train = int(round(train_frac * n))
-    if min(n_train, n - n_train) < 100:
+    n_held = heldout.n_samples if heldout is not None else n - n_train
+    if min(n_train, n_held) < 100:
         raise DtwinValueError(
             f"train_frac must leave at least 100 samples for training and for the held-out "
-            f"part (got {n_train} and {n - n_train} of {n})"
+            f"part (got {n_train} and {n_held})"
         )
     return train_frac, n_train
+
+
+def join_heldout(
+    recording: Recording, n_train: int, heldout: Recording, names: list[str]
+) -> Recording:
+    """Return the training part of ``recording`` followed by the held-out recording.
+
+    Parameters
+    ----------
+    recording : Recording
+        The training experiment; its first ``n_train`` samples are kept.
+    n_train : int
+        Number of training samples.
+    heldout : Recording
+        The validation experiment; it must record every signal of the diagnosed ``names``.
+    names : list of str
+        The modules diagnosed on ``recording``.
+
+    Returns
+    -------
+    Recording
+        Shape ``(n_train + heldout.n_samples,)`` per signal; the held-out time continues the
+        training time by one ``dt``. Every model restarts from the recorded state at sample
+        ``n_train`` (a new experiment).
+    """
+    needed = sorted(
+        {s for m in MODULES if m.name in names for s in (*m.inputs, m.output)}
+        & set(recording.signals)
+    )
+    missing = [s for s in needed if s not in heldout.signals]
+    if missing:
+        raise DtwinValueError(
+            f"held-out recording is missing column(s) {', '.join(missing)} "
+            f"(the training recording has: {', '.join(needed)})"
+        )
+    t_held = recording.t[n_train - 1] + recording.dt + (heldout.t - heldout.t[0])
+    signals = {
+        s: np.concatenate([recording.signals[s][:n_train], heldout.signals[s]]) for s in needed
+    }
+    return Recording(
+        t=np.concatenate([recording.t[:n_train], t_held]),
+        dt=recording.dt,
+        signals=signals,
+        ignored=recording.ignored,
+        time_resolution=recording.time_resolution,
+    )
 
 
 def _module_notes(works: Mapping[str, _ModuleWork], calibrate: bool) -> list[str]:
@@ -507,6 +646,7 @@ def _chain_before_after(rec, twin, works, t, source, chosen) -> tuple[dict, dict
     chosen). Each signal has shape ``(n_samples,)`` (docs/gap.md §How far).
     """
     scales = {name: w.data.scales for name, w in works.items()}
+    layouts = {name: w.data for name, w in works.items()}
     models = {}
     for module in MODULES:
         if module.name in works:
@@ -515,14 +655,14 @@ def _chain_before_after(rec, twin, works, t, source, chosen) -> tuple[dict, dict
             nominal = _nominal_lin(module.name, twin)
             if nominal is not None:
                 models[module.name] = ModuleModel(nominal)
-    chain_before = run_chain(rec.signals, models, rec.dt, t, scales)
+    chain_before = run_chain(rec.signals, models, rec.dt, t, scales, layouts)
     chain_after = chain_before
     if chosen is not None:
         effect = next(e for e, *_ in source.candidates if e.name == chosen.effect)
         fitted = next(f for e, f, *_ in source.candidates if e.name == chosen.effect)
         models_after = dict(models)
         models_after[source.name] = ModuleModel(fitted.lin, effect, fitted.theta)
-        chain_after = run_chain(rec.signals, models_after, rec.dt, t, scales)
+        chain_after = run_chain(rec.signals, models_after, rec.dt, t, scales, layouts)
     return chain_before, chain_after
 
 
@@ -617,6 +757,8 @@ def _module_reports(rec, works, flagged, source, chosen, chains, held) -> dict[s
             work.n_eff,
             work.lin_nominal,
             work.lin_base,
+            work.data.discretisation if name == "M1" else None,
+            work.data.horizon,
         )
     return modules
 
@@ -671,6 +813,8 @@ def diagnose(
     calibrate: bool = False,
     train_frac: float = 0.5,
     settings: GapSettings | None = None,
+    discretisation: str | None = None,
+    heldout: Recording | None = None,
 ) -> Diagnosis:
     """Diagnose the sim-to-real gap of a recording against a twin.
 
@@ -686,6 +830,12 @@ def diagnose(
         Fraction of samples, from the start, used for fitting; the rest is held out.
     settings : GapSettings, optional
         Decision constants.
+    discretisation : {"euler", "zoh", "foh"}, optional
+        The plant's discretisation (the twin file's ``discretisation``); None: the exact hold
+        (zero- or first-order) that fits the training part best.
+    heldout : Recording, optional
+        A separate validation experiment: every gap is measured on it, and the first
+        ``round(train_frac·n)`` samples of ``recording`` are the training part.
 
     Returns
     -------
@@ -703,10 +853,15 @@ def diagnose(
     §How far.
     """
     settings = settings or GapSettings()
-    train_frac, n_train = _check_arguments(recording, twin, train_frac)
-    n = recording.n_samples
+    train_frac, n_train = _check_arguments(recording, twin, train_frac, heldout)
+    holds = EXACT_HOLDS if discretisation is None else (discretisation,)
+    layout = _Layout(holds)
     names = diagnosable_modules(recording.signals)
     _check_inputs_vary(recording, names, n_train)
+    if heldout is not None:
+        recording = join_heldout(recording, n_train, heldout, names)
+        layout = _Layout(holds, (n_train,))
+    n = recording.n_samples
     t = recording.t - recording.t[0]
     held = slice(n_train, n)
     notes: list[str] = []
@@ -714,7 +869,7 @@ def diagnose(
         notes.append(f"ignored columns that are not module signals: {', '.join(recording.ignored)}")
 
     works = {
-        name: _analyse_module(name, recording, twin, t, n_train, calibrate, settings)
+        name: _analyse_module(name, recording, twin, t, n_train, calibrate, settings, layout)
         for name in names
     }
     notes.extend(_module_notes(works, calibrate))

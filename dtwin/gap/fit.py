@@ -31,7 +31,14 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from dtwin.gap.effects import MAX_DELAY_SAMPLES, Effect, Scales, find_lattice
-from dtwin.gap.models import LINEAR_PARAMS, ModuleData, first_order_lag, simulate_module
+from dtwin.gap.models import (
+    LINEAR_PARAMS,
+    ModuleData,
+    first_order_lag,
+    plant_windows,
+    simulate_module,
+)
+from dtwin.modules import EULER, FOH, hold_matrices
 
 __all__ = [
     "CandidateFit",
@@ -73,14 +80,31 @@ class CandidateFit:
 MAX_FIT_SAMPLES = 16000
 
 
-def train_segments(name: str, n_train: int) -> list[tuple[int, int]] | None:
+def train_segments(data: ModuleData, n_train: int) -> list[tuple[int, int]] | None:
     """Return the plant's multiple-shooting segments over the training part (None elsewhere).
 
-    Up to four equal segments of at least 200 samples each; on long recordings each segment
-    keeps only its first ``MAX_FIT_SAMPLES / 4`` samples, spread over the whole training part.
+    Free run (no ``data.horizon``) of the Euler twin: up to four equal segments of at least 200
+    samples each; on long recordings each segment keeps only its first ``MAX_FIT_SAMPLES / 4``
+    samples, spread over the whole training part. Free run of an exact plant: one run over the
+    first ``MAX_FIT_SAMPLES`` training samples (restarts from a velocity estimated on noisy
+    samples would bias the fit). With a horizon: the windows of the gap
+    (:func:`~dtwin.gap.models.plant_windows`), evenly thinned to at most ``MAX_FIT_SAMPLES``
+    samples.
     """
-    if name != "M1":
+    if data.name != "M1":
         return None
+    if data.horizon is not None:
+        windows = plant_windows(n_train, data.horizon, data.restarts)
+        keep = max(1, MAX_FIT_SAMPLES // max(int(data.horizon), 1))
+        if len(windows) > keep:
+            chosen = np.linspace(0, len(windows) - 1, keep).round().astype(int)
+            windows = [windows[i] for i in sorted(set(chosen.tolist()))]
+        return windows
+    if data.discretisation != EULER:
+        # a stable plant forgets its start: one free run, no restart from a noisy velocity
+        return [(0, min(n_train, MAX_FIT_SAMPLES))]
+    if data.restarts:
+        return plant_windows(n_train, None, data.restarts)
     n_segments = max(1, min(4, n_train // 200))
     edges = np.linspace(0, n_train, n_segments + 1).astype(int)
     longest = MAX_FIT_SAMPLES // n_segments
@@ -192,7 +216,7 @@ def fit_candidate(
     high = np.array([bounds_all[k][1] for k in free] + [b[1] for b in eff_bounds], dtype=float)
     x_scale = np.array([typical[k] for k in free] + [abs(v) for v in eff_typical], dtype=float)
     x_scale = np.where(x_scale > 0, x_scale, 1.0)
-    segments = train_segments(data.name, n_train)
+    segments = train_segments(data, n_train)
     residual, scale = _residual_fn(data, effect, lin_start, free, n_train, segments)
 
     width = np.where(np.isfinite(high - low), high - low, 0.0)
@@ -267,7 +291,41 @@ def _arx_first_order(y: np.ndarray, u: np.ndarray) -> tuple[float, float, float]
     return float(coef[0]), float(coef[1]), float(coef[2])
 
 
-def _plant_from_arx(x, u, dt, factor, delay):
+def _exact_plant_from_arx(x, u, dt, factor, hold):
+    """``m, c, k, u_offset`` of the exact plant from a second-order ARX on decimated samples.
+
+    The ARX poles are mapped to continuous ones (``s = ln(z)/step``), which give ``c/m`` and
+    ``k/m``; ``m`` matches the static gain of the numerator (its coefficient sum), which is
+    finite for an integrating plant too. The first-order hold adds the same-sample input.
+    """
+    xs, us = x[::factor], u[::factor]
+    step = dt * factor
+    n = len(xs)
+    if n < 20:
+        return None
+    rows = np.arange(2, n)
+    lags = [us[rows], us[rows - 1], us[rows - 2]] if hold == FOH else [us[rows - 1], us[rows - 2]]
+    phi = np.column_stack([xs[rows - 1], xs[rows - 2], *lags, np.ones(len(rows))])
+    coef, *_ = np.linalg.lstsq(phi, xs[rows], rcond=None)
+    poles = np.roots([1.0, -coef[0], -coef[1]]).astype(complex)
+    if np.any((np.abs(poles.imag) < 1e-12) & (poles.real <= 0)) or np.any(np.abs(poles) == 0):
+        return None
+    continuous = np.log(poles) / step
+    c_per_m = max(float(-continuous.sum().real), 0.0)
+    k_per_m = max(float((continuous[0] * continuous[1]).real), 0.0)
+    gain_arx = float(np.sum(coef[2:-1]))
+    a, b_prev, b_next = hold_matrices(c_per_m, k_per_m, step, hold)
+    num = [b_next[0], b_prev[0] + a[0, 1] * b_next[1] - a[1, 1] * b_next[0]]
+    num.append(a[0, 1] * b_prev[1] - a[1, 1] * b_prev[0])
+    gain_unit = float(np.sum(num))
+    if not gain_arx > 0 or not gain_unit > 0:
+        return None
+    m = gain_unit / gain_arx
+    offset = -float(coef[-1]) / gain_arx
+    return {"m": m, "c": c_per_m * m, "k": k_per_m * m, "u_offset": offset, "delay_samples": 0}
+
+
+def _plant_from_arx(x, u, dt, factor, hold=EULER, delay=0):
     xs, us = x[::factor], u[::factor]
     step = dt * factor
     d = delay // factor
@@ -289,9 +347,54 @@ def _plant_from_arx(x, u, dt, factor, delay):
     return {"m": m, "c": c, "k": k, "u_offset": -gamma / beta, "delay_samples": delay}
 
 
+def _exact_arx_by_delay(x, u, dt, hold, cost) -> dict[int, dict]:
+    """Return the best ARX start of the exact plant per whole-sample delay (over decimations).
+
+    Each candidate is scored by ``cost`` (training simulation error).
+    """
+    by_delay = {}
+    for delay in range(0, MAX_DELAY_SAMPLES + 1):
+        shifted = np.concatenate([np.full(delay, u[0]), u[: len(u) - delay]])
+        factor, scored = 1, []
+        while len(x) // factor >= 100:
+            lin = _exact_plant_from_arx(x, shifted, dt, factor, hold)
+            if lin is not None:
+                lin["delay_samples"] = delay
+                scored.append((cost(lin), factor, lin))
+            factor *= 2
+        if scored:
+            by_delay[delay] = min(scored, key=lambda item: item[0])[2]
+    return by_delay
+
+
+#: Delays (samples) at which the output-error fit is tried first; the best one's neighbours next.
+DELAY_GRID = (0, 1, 2, 4, 6, 9, 13, 18, 25)
+
+
+def _fit_delay(data: ModuleData, starts: dict[int, dict], n_train: int) -> dict[str, float]:
+    """Output-error fits over a grid of delays, then around the best one; the best fit wins.
+
+    ARX estimates of a delay are biased by output noise; the training simulation error of the
+    refined fits is not.
+    """
+    fits = {}
+
+    def fit_at(delay: int) -> None:
+        if delay in starts and delay not in fits:
+            fits[delay] = fit_candidate(data, None, starts[delay], n_train=n_train)
+
+    for delay in DELAY_GRID:
+        fit_at(delay)
+    best = min(fits, key=lambda d: fits[d].train_rms)
+    for delay in range(best - 2, best + 3):
+        fit_at(delay)
+    best = min(fits, key=lambda d: fits[d].train_rms)
+    return fits[best].lin
+
+
 def _calibrate_plant(data: ModuleData, n_train: int) -> dict[str, float]:
     x, u = data.output[:n_train], data.inputs["u_act"][:n_train]
-    segments = train_segments("M1", n_train)
+    segments = train_segments(data, n_train)
     mask = np.zeros(n_train, dtype=bool)
     for start, stop in segments:
         mask[start + 1 : stop] = True
@@ -301,10 +404,14 @@ def _calibrate_plant(data: ModuleData, n_train: int) -> dict[str, float]:
         error = (sim - x)[mask]
         return float(np.mean(error**2)) if np.all(np.isfinite(error)) else np.inf
 
+    if data.discretisation != EULER:
+        starts = _exact_arx_by_delay(x, u, data.dt, data.discretisation, cost)
+        if starts:
+            return _fit_delay(data, starts, n_train)
     candidates = []
     factor = 1
     while n_train // factor >= 100:
-        lin = _plant_from_arx(x, u, data.dt, factor, 0)
+        lin = _plant_from_arx(x, u, data.dt, factor)
         if lin is not None:
             candidates.append((cost(lin), lin))
         factor *= 2

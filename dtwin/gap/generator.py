@@ -610,7 +610,9 @@ def _twin_file(nominal, noise_true, rng: np.random.Generator, noise_error: float
     twin_noise = {
         k: float(v * (1 + rng.uniform(-noise_error, noise_error))) for k, v in noise_true.items()
     }
-    return {"twin": {**{k: v for k, v in nominal.items() if k != "noise"}, "noise": twin_noise}}
+    sections = {k: v for k, v in nominal.items() if k != "noise"}
+    # the asset is the paper's explicit-Euler simulator, and its twin says so
+    return {"twin": {**sections, "noise": twin_noise, "discretisation": "euler"}}
 
 
 def _effect_contribution(asset, nominal, u_cmd, noises, specs, signals, module, t):

@@ -85,6 +85,7 @@ def run_chain(
     dt: float,
     t: np.ndarray,
     scales: Mapping[str, Scales],
+    layouts: Mapping[str, ModuleData] | None = None,
 ) -> dict[str, np.ndarray]:
     """Run the twin chain and return every signal it simulates, each shape ``(n_samples,)``.
 
@@ -100,6 +101,9 @@ def run_chain(
         Time from the first sample, s.
     scales : mapping of module name to Scales
         Data scales of each module (for effects that need them).
+    layouts : mapping of module name to ModuleData, optional
+        The diagnosed modules' data, whose discretisation, window and restarts the chain keeps
+        (the plant's velocity estimate follows its discretisation).
 
     Returns
     -------
@@ -120,10 +124,23 @@ def run_chain(
             continue
         output = recorded.get(module.output, np.zeros(n))
         velocity = inputs.get("v")
+        layout = (layouts or {}).get(module.name)
+        options = {}
+        if layout is not None:
+            options = {
+                "discretisation": layout.discretisation,
+                "horizon": layout.horizon,
+                "restarts": layout.restarts,
+            }
         if module.name == "M1":
             source = recorded["x"] if "x" in recorded else np.zeros(n)
-            velocity = velocity_from_position(source, dt)
-        data = ModuleData(module.name, inputs, output, dt, t, velocity, scales.get(module.name))
+            if layout is not None and layout.velocity is not None:
+                velocity = layout.velocity
+            else:
+                velocity = velocity_from_position(source, dt)
+        data = ModuleData(
+            module.name, inputs, output, dt, t, velocity, scales.get(module.name), **options
+        )
         model = models[module.name]
         out = simulate_module(data, model.lin, model.effect, model.theta)
         simulated[module.output] = out

@@ -43,6 +43,7 @@ __all__ = [
     "plant_noise_gain",
     "twin_noise_floor",
     "data_noise_floor",
+    "spectral_noise_floor",
     "effective_samples",
     "gap_threshold",
 ]
@@ -175,6 +176,46 @@ def data_noise_floor(
         return _plant_data_floor(inputs["u_act"], output, lin, dt)
     residual = output - simulated
     sigma = robust_std(np.diff(residual)) / math.sqrt(2.0)
+    return NoiseFloor(sigma, "data", _white_acf())
+
+
+def spectral_noise_floor(residual: np.ndarray, dt: float, bandwidth_hz: float) -> NoiseFloor:
+    """Return the noise floor read from a residual's spectrum above the plant's bandwidth.
+
+    Parameters
+    ----------
+    residual : array, shape (n,)
+        The linear twin's simulation error (output units).
+    dt : float
+        Sample period, s.
+    bandwidth_hz : float
+        The plant's bandwidth (its natural frequency or velocity corner, the larger), Hz.
+
+    Returns
+    -------
+    NoiseFloor
+        White noise with the residual's median power spectral density over the band from
+        ``3·bandwidth_hz`` (at most 0.6 of the Nyquist frequency) to 0.95 of it, spread over the
+        whole band: ``σ² = median PSD · f_Nyquist`` (one-sided Welch PSD).
+
+    Notes
+    -----
+    docs/gap.md §Noise floors. Above its bandwidth a plant passes little of its input, so what
+    the twin misses there is noise, whatever the sampling rate; structured effects of a plant
+    (friction, a stiffness) act at the frequencies of the motion. The median ignores the few
+    harmonics an effect may leave in the band. No oversampling is assumed.
+    """
+    from scipy.signal import welch
+
+    values = np.asarray(residual, dtype=float)
+    nyquist = 0.5 / dt
+    segment = int(min(1024, max(16, 2 ** math.floor(math.log2(max(len(values) // 8, 16))))))
+    freqs, density = welch(values - values.mean(), fs=1.0 / dt, nperseg=segment)
+    low = min(3.0 * bandwidth_hz, 0.6 * nyquist)
+    band = (freqs >= low) & (freqs <= 0.95 * nyquist)
+    if np.count_nonzero(band) < 3:
+        band = freqs >= 0.6 * nyquist
+    sigma = math.sqrt(max(float(np.median(density[band])), 0.0) * nyquist)
     return NoiseFloor(sigma, "data", _white_acf())
 
 
