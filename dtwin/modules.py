@@ -59,6 +59,7 @@ __all__ = [
     "HoldMatrices",
     "hold_matrices",
     "exact_plant_response",
+    "free_response_basis",
     "fuse",
     "kpi",
 ]
@@ -480,8 +481,22 @@ def _force_loop(w, x0, v0, step: HoldMatrices, force_per_m: Force, out: np.ndarr
         x, v = xp, vp
         out[j] = x
         if not -1e300 < x < 1e300:
-            out[j:] = np.nan
+            out[j:] = np.inf
             return
+
+
+def free_response_basis(step: HoldMatrices, length: int) -> np.ndarray:
+    """Return the position's free response to unit initial states, shape ``(length, 2)``.
+
+    Column 0 starts from ``(x, v) = (1, 0)``, column 1 from ``(0, 1)``: row ``j`` is the first
+    row of ``A^j`` (:class:`HoldMatrices`).
+    """
+    basis = np.zeros((length, 2))
+    power = np.eye(2)
+    for j in range(length):
+        basis[j] = power[0]
+        power = step.a @ power
+    return basis
 
 
 def exact_plant_response(
@@ -523,7 +538,7 @@ def exact_plant_response(
     Returns
     -------
     numpy.ndarray, shape (n_samples,)
-        Position; NaN from the sample where a window diverges.
+        Position; ``inf`` from the sample where a window diverges.
 
     Notes
     -----

@@ -1,6 +1,7 @@
 """gap_case: generate one recording with a withheld effect.
 
-Inputs: none (the case name ``{case}`` = ``<effect>_<NN>`` picks the effect and the seed).
+Inputs: none (the case name ``{case}`` = ``<effect>_<NN>`` picks the effect and the seed;
+``rig_<effect>`` cases come from the rig family, docs/gap.md §Rig family).
 Outputs: ``recording.csv`` (t in s, signals in the twin's units), ``twin.yaml`` (the nominal twin,
 noise levels right to ±10 %), ``key.json`` (the truth; the diagnoser never reads it).
 Config: ``gap.benchmark`` (``effects``, ``first_seed``, ``miscalibration``, ``noise_error``).
@@ -16,11 +17,12 @@ from pathlib import Path
 import yaml
 
 from dtwin.artifacts import atomic_write, write_csv, write_json
-from dtwin.gap.generator import case_spec, generate_case
+from dtwin.gap.generator import case_spec
+from dtwin.gap.rigs import generate_any_case
 
 settings = snakemake.params.benchmark
 spec = case_spec(snakemake.wildcards.case, settings["effects"], settings["first_seed"])
-case = generate_case(
+case = generate_any_case(
     spec["effect"],
     spec["seed"],
     miscalibration=settings["miscalibration"],

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from dtwin._validation import DtwinTypeError, DtwinValueError, require_in_range
 from dtwin.gap.effects import (
@@ -58,6 +59,7 @@ from dtwin.gap.models import (
     plant_horizon,
     simulate_module,
     velocity_from_position,
+    window_noise_gain,
 )
 from dtwin.gap.noise import (
     NoiseFloor,
@@ -361,24 +363,53 @@ class _Layout:
         return self.holds[0]
 
 
+def _exact_plant_floor(data: ModuleData, simulated, lin: dict, n_train: int) -> NoiseFloor:
+    """Return the exact plant's data floor: spectral noise times the window's noise gain.
+
+    docs/gap.md §Noise floors: over windows the initial state estimated from the warm-up samples
+    carries part of the measurement noise forward (:func:`~dtwin.gap.models.window_noise_gain`).
+    """
+    residual = np.nan_to_num((data.output - simulated)[:n_train])
+    floor = spectral_noise_floor(residual, data.dt, plant_bandwidth_hz(lin))
+    if data.horizon is None:
+        return floor
+    gain = window_noise_gain(lin, data.dt, data.discretisation, data.horizon)
+    return replace(floor, rms=floor.rms * math.sqrt(gain))
+
+
+def _exact_plant_window(data, nominal, n_train, n_held) -> tuple[int, dict | None]:
+    """Return the exact plant's window and its twin calibrated over it (None: nominal twin).
+
+    The first hold's twin fitted in free run gives a first window; calibrated over it, the twin
+    gives the window used (docs/gap.md §Gaps).
+    """
+    if nominal is not None:
+        return plant_horizon(nominal, data.dt, n_held), None
+    first = calibrate_linear(replace(data, horizon=None), n_train)
+    horizon = plant_horizon(first, data.dt, n_held)
+    windowed = calibrate_linear(replace(data, horizon=horizon), n_train)
+    return plant_horizon(windowed, data.dt, n_held), windowed
+
+
 def _prepare_exact_plant(data, nominal, n_train, n_held, holds) -> tuple[ModuleData, dict]:
     """Choose the hold and the window of the exact plant; calibrate it when ``nominal`` is None.
 
-    The first hold's twin, fitted in free run, sets the window of the gap
-    (:func:`~dtwin.gap.models.plant_horizon`; None: free run is meaningful). Each hold is then
-    fitted over those windows (a nominal twin: evaluated) and the one with the smaller training
-    simulation error is kept (docs/gap.md §Modules).
+    The window comes from the first hold (:func:`_exact_plant_window`); each hold is fitted over
+    it (a nominal twin: evaluated), the later ones starting from the first hold's delay, and the
+    one with the smaller training simulation error is kept (docs/gap.md §Modules).
     """
-    horizon, best = None, None
-    for index, hold in enumerate(holds):
-        trial = replace(data, discretisation=hold, horizon=None)
-        start = calibrate_linear(trial, n_train) if nominal is None else dict(nominal)
-        if index == 0:
-            horizon = plant_horizon(start, data.dt, n_held)
-        if horizon is not None:
-            trial = replace(trial, horizon=horizon)
-            start = calibrate_linear(trial, n_train) if nominal is None else start
-        fitted = fit_candidate(trial, None, start, n_train=n_train, free=[])
+    first = replace(data, discretisation=holds[0])
+    horizon, start = _exact_plant_window(first, nominal, n_train, n_held)
+    best = None
+    for hold in holds:
+        trial = replace(data, discretisation=hold, horizon=horizon)
+        if nominal is not None:
+            lin = dict(nominal)
+        else:
+            near = None if start is None else int(start["delay_samples"])
+            lin = calibrate_linear(trial, n_train, delay_near=near)
+            start = lin
+        fitted = fit_candidate(trial, None, lin, n_train=n_train, free=[])
         logger.debug("M1 %s: training RMS %.4g, window %s", hold, fitted.train_rms, horizon)
         if best is None or fitted.train_rms < best[0]:
             best = (fitted.train_rms, trial, fitted.lin)
@@ -421,8 +452,7 @@ def _analyse_module(name, rec, twin, t, n_train, calibrate, settings, layout) ->
         lin_base = calibrate_linear(data, n_train) if calibrated else dict(nominal)
     sim_before = simulate_module(data, lin_base)
     if name == "M1" and layout.scheme != EULER:
-        residual = (data.output - sim_before)[:n_train]
-        floor_data = spectral_noise_floor(residual, rec.dt, plant_bandwidth_hz(lin_base))
+        floor_data = _exact_plant_floor(data, sim_before, lin_base, n_train)
     else:
         floor_data = data_noise_floor(name, data.inputs, data.output, sim_before, lin_base, rec.dt)
     floor_twin = (
@@ -850,8 +880,15 @@ def diagnose(
     Notes
     -----
     The three steps (where, which, how far) are specified in docs/gap.md §Where, §Which and
-    §How far.
+    §How far. BLAS runs single-threaded here: the diagnoser's matrices are 2×2 to 4×4, for
+    which threads cost more than 100× the arithmetic on a loaded machine.
     """
+    with threadpool_limits(limits=1):
+        return _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, heldout)
+
+
+def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, heldout):
+    """Run :func:`diagnose` (same arguments) with the thread limit set."""
     settings = settings or GapSettings()
     train_frac, n_train = _check_arguments(recording, twin, train_frac, heldout)
     holds = EXACT_HOLDS if discretisation is None else (discretisation,)

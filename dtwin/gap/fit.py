@@ -162,6 +162,7 @@ def _residual_fn(data, effect, fixed, free_names, n_train, segments):
             data, lin, effect, vector[n_lin:], stop=n_train, segments=segments
         )
         error = (predicted - target)[mask] / scale
+        error = np.where(np.isnan(predicted[mask]), 0.0, error)  # unscored warm-up samples
         return np.nan_to_num(error, nan=1e6, posinf=1e6, neginf=-1e6)
 
     return residual, scale
@@ -371,11 +372,13 @@ def _exact_arx_by_delay(x, u, dt, hold, cost) -> dict[int, dict]:
 DELAY_GRID = (0, 1, 2, 4, 6, 9, 13, 18, 25)
 
 
-def _fit_delay(data: ModuleData, starts: dict[int, dict], n_train: int) -> dict[str, float]:
+def _fit_delay(
+    data: ModuleData, starts: dict[int, dict], n_train: int, near: int | None = None
+) -> dict[str, float]:
     """Output-error fits over a grid of delays, then around the best one; the best fit wins.
 
     ARX estimates of a delay are biased by output noise; the training simulation error of the
-    refined fits is not.
+    refined fits is not. With ``near`` (a delay already found) only its neighbours are tried.
     """
     fits = {}
 
@@ -383,7 +386,7 @@ def _fit_delay(data: ModuleData, starts: dict[int, dict], n_train: int) -> dict[
         if delay in starts and delay not in fits:
             fits[delay] = fit_candidate(data, None, starts[delay], n_train=n_train)
 
-    for delay in DELAY_GRID:
+    for delay in DELAY_GRID if near is None else (near,):
         fit_at(delay)
     best = min(fits, key=lambda d: fits[d].train_rms)
     for delay in range(best - 2, best + 3):
@@ -392,7 +395,7 @@ def _fit_delay(data: ModuleData, starts: dict[int, dict], n_train: int) -> dict[
     return fits[best].lin
 
 
-def _calibrate_plant(data: ModuleData, n_train: int) -> dict[str, float]:
+def _calibrate_plant(data: ModuleData, n_train: int, near: int | None) -> dict[str, float]:
     x, u = data.output[:n_train], data.inputs["u_act"][:n_train]
     segments = train_segments(data, n_train)
     mask = np.zeros(n_train, dtype=bool)
@@ -402,12 +405,13 @@ def _calibrate_plant(data: ModuleData, n_train: int) -> dict[str, float]:
     def cost(lin):
         sim = simulate_module(data, lin, stop=n_train, segments=segments)
         error = (sim - x)[mask]
-        return float(np.mean(error**2)) if np.all(np.isfinite(error)) else np.inf
+        error = error[~np.isnan(error)]  # unscored warm-up samples
+        return float(np.mean(error**2)) if len(error) and np.all(np.isfinite(error)) else np.inf
 
     if data.discretisation != EULER:
         starts = _exact_arx_by_delay(x, u, data.dt, data.discretisation, cost)
         if starts:
-            return _fit_delay(data, starts, n_train)
+            return _fit_delay(data, starts, n_train, near)
     candidates = []
     factor = 1
     while n_train // factor >= 100:
@@ -428,7 +432,9 @@ def _calibrate_plant(data: ModuleData, n_train: int) -> dict[str, float]:
     return fitted.lin
 
 
-def calibrate_linear(data: ModuleData, n_train: int) -> dict[str, float]:
+def calibrate_linear(
+    data: ModuleData, n_train: int, delay_near: int | None = None
+) -> dict[str, float]:
     """Return a module's linear twin parameters fitted from the training part alone.
 
     Parameters
@@ -437,6 +443,8 @@ def calibrate_linear(data: ModuleData, n_train: int) -> dict[str, float]:
         The module's recorded signals (recording units).
     n_train : int
         Number of training samples.
+    delay_near : int, optional
+        The exact plant: search the input delay next to this one only.
 
     Returns
     -------
@@ -450,7 +458,7 @@ def calibrate_linear(data: ModuleData, n_train: int) -> dict[str, float]:
         a, _, _ = _arx_first_order(y, data.inputs["u_cmd"][:n_train])
         start = {"tau": _lag_coefficient_to_tau(a, data.dt)}
     elif name == "M1":
-        return _calibrate_plant(data, n_train)
+        return _calibrate_plant(data, n_train, delay_near)
     elif name in ("M2a", "M2b"):
         x = data.inputs["x"][:n_train]
         a, _, _ = _arx_first_order(y, x)

@@ -14,6 +14,7 @@ deployed twin runs; a chain gap well above the local gap is inherited from upstr
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -33,9 +34,19 @@ __all__ = [
 
 
 def normalised_rms(recorded: np.ndarray, predicted: np.ndarray, rows: slice, norm: float) -> float:
-    """Return ``RMS(recorded − predicted)`` over ``rows`` divided by ``norm``."""
+    """Return ``RMS(recorded − predicted)`` over ``rows`` divided by ``norm``.
+
+    Samples predicted as NaN are not scored (a window's warm-up, docs/gap.md §Gaps); ``inf``
+    (a diverged simulation) gives ``inf``.
+    """
     error = np.asarray(recorded[rows], dtype=float) - np.asarray(predicted[rows], dtype=float)
-    return float(np.sqrt(np.mean(error**2)) / norm)
+    error = error[~np.isnan(error)]
+    if not len(error):
+        return math.nan
+    if not np.all(np.isfinite(error)):
+        return math.inf
+    with np.errstate(over="ignore"):
+        return float(np.sqrt(np.mean(error**2)) / norm)
 
 
 @dataclass(frozen=True)
@@ -143,6 +154,8 @@ def run_chain(
         )
         model = models[module.name]
         out = simulate_module(data, model.lin, model.effect, model.theta)
+        if module.name == "M1" and "x" in recorded:
+            out = np.where(np.isnan(out), recorded["x"], out)  # unscored warm-up samples
         simulated[module.output] = out
         if module.name == "M1":
             v = np.empty(n)

@@ -41,7 +41,9 @@ from dtwin.modules import (
     EULER,
     LINEAR_PARAMS,
     exact_plant_response,
+    free_response_basis,
     fuse,
+    hold_matrices,
     kpi,
     lag_coefficient,
     lag_response,
@@ -54,6 +56,8 @@ __all__ = [
     "velocity_from_position",
     "plant_windows",
     "plant_horizon",
+    "warmup_samples",
+    "window_noise_gain",
     "plant_bandwidth_hz",
     "simulate_module",
     "first_order_lag",
@@ -249,16 +253,17 @@ def plant_bandwidth_hz(lin: Mapping[str, float]) -> float:
     return float(np.max(np.abs(_plant_poles(lin)))) / (2 * math.pi)
 
 
-#: Free run needs the slowest plant mode to decay within this fraction of the held-out part.
-FREE_RUN_DECAYS = 10.0
-#: A window spans this many of the plant's fastest time constant.
+#: A plant whose slowest mode decays this many times within the held-out part is stable enough
+#: for long windows (a quarter of the held-out part).
+STABLE_DECAYS = 10.0
+#: Otherwise a window spans this many of the plant's fastest time constant.
 HORIZON_TIME_CONSTANTS = 2.0
 #: Shortest window, samples.
 MIN_HORIZON = 20
 
 
-def plant_horizon(lin: Mapping[str, float], dt: float, n_held: int) -> int | None:
-    """Return the plant's simulation window in samples, or None where free run is meaningful.
+def plant_horizon(lin: Mapping[str, float], dt: float, n_held: int) -> int:
+    """Return the exact plant's simulation window in samples.
 
     Parameters
     ----------
@@ -271,45 +276,115 @@ def plant_horizon(lin: Mapping[str, float], dt: float, n_held: int) -> int | Non
 
     Returns
     -------
-    int or None
-        None when the plant is stable and its slowest mode decays ``FREE_RUN_DECAYS`` times
-        within the held-out part (a free run then forgets its start). Otherwise (an integrating
-        plant, ``k = 0``, or one too slow for the recording, as in closed-loop rigs)
-        ``HORIZON_TIME_CONSTANTS`` of its fastest time constant, at least ``MIN_HORIZON``
-        and at most a quarter of the held-out part.
+    int
+        A quarter of the held-out part when the plant is stable, its slowest mode decaying
+        ``STABLE_DECAYS`` times within the held-out part; otherwise (an integrating plant, or
+        one too slow for the recording) ``HORIZON_TIME_CONSTANTS`` of its fastest time
+        constant (the velocity's, for an integrating plant), at least ``MIN_HORIZON`` and at
+        most a quarter of the held-out part.
 
     Notes
     -----
     docs/gap.md §Gaps. A free-run position error of an integrating plant grows without bound
-    with any force error, so its gap is measured over windows restarted from the recorded
-    state.
+    with any force error, and a closed-loop rig's free run is no prediction of anything, so the
+    exact plant's gap is measured over windows restarted from the recording; a window of a few
+    time constants is as long as a stable plant remembers its start, so for a stable plant the
+    windows lose nothing a free run would show.
     """
     decay = -_plant_poles(lin).real
-    if decay.min() * n_held * dt >= FREE_RUN_DECAYS:
-        return None
-    fastest = float(decay.max())
     longest = max(n_held // 4, MIN_HORIZON)
+    if decay.min() * n_held * dt >= STABLE_DECAYS:
+        return longest
+    fastest = float(decay.max())
     if fastest <= 0:
         return longest
     return int(min(max(round(HORIZON_TIME_CONSTANTS / fastest / dt), MIN_HORIZON), longest))
 
 
-def _exact_plant(data, lin, u, force, stop, segments):
-    windows = segments or plant_windows(stop, data.horizon, data.restarts)
-    windows = [(a, min(b, stop)) for a, b in windows if a < stop]
-    m, c, k = float(lin["m"]), float(lin["c"]), float(lin["k"])
-    return exact_plant_response(
+def warmup_samples(horizon: int) -> int:
+    """Return the samples at the start of a window that estimate its initial state.
+
+    ``max(3, horizon // 5)``; they are not scored (docs/gap.md §Gaps). An initial velocity fitted
+    to ``L`` noisy samples errs by ``∝ σ/(L^1.5·dt)``, carried for a time constant ``τ``: with
+    ``L ∝ τ`` that error falls like ``1/√τ`` instead of growing like ``τ``.
+    """
+    return max(3, int(horizon) // 5)
+
+
+def _window_states(data, u, m, c, k, windows, warmup) -> tuple[np.ndarray, np.ndarray]:
+    """Return the windows' initial states: least squares on each one's first ``warmup`` samples.
+
+    The linear plant's forced response from rest is removed from the recorded position; the
+    rest is the free response ``Φ·s₀`` (:func:`~dtwin.modules.free_response_basis`).
+    """
+    n = len(u)
+    zeros = np.zeros(n)
+    forced = exact_plant_response(
         u,
         m,
         c,
         k,
         data.dt,
         windows=windows,
-        x_start=data.output,
-        v_start=data.velocity,
+        x_start=zeros,
+        v_start=zeros,
+        hold=data.discretisation,
+    )
+    step = hold_matrices(c / m, k / m, data.dt, data.discretisation)
+    solve = np.linalg.pinv(free_response_basis(step, warmup))
+    x0, v0 = zeros.copy(), zeros.copy()
+    starts = np.array([a for a, _ in windows])
+    rows = starts[:, None] + np.arange(warmup)
+    states = (data.output[rows] - forced[rows]) @ solve.T
+    x0[starts], v0[starts] = states[:, 0], states[:, 1]
+    return x0, v0
+
+
+def window_noise_gain(lin: Mapping[str, float], dt: float, hold: str, horizon: int) -> float:
+    """Return the variance factor of a window's error from white measurement noise alone.
+
+    ``1 + mean_k φ_kᵀ(ΦᵀΦ)⁻¹φ_k`` over the scored samples ``k`` of a window, with ``Φ`` the free
+    response over the warm-up samples and ``φ_k`` at sample ``k``: the measurement noise plus
+    the error its least-squares initial state carries forward (a prediction variance).
+    """
+    m, c, k = float(lin["m"]), float(lin["c"]), float(lin["k"])
+    step = hold_matrices(c / m, k / m, dt, hold)
+    warmup = warmup_samples(horizon)
+    basis = free_response_basis(step, int(horizon))
+    inverse = np.linalg.pinv(basis[:warmup].T @ basis[:warmup])
+    scored = basis[warmup:]
+    return float(1.0 + np.mean(np.einsum("ij,jk,ik->i", scored, inverse, scored)))
+
+
+def _exact_plant(data, lin, u, force, stop, segments):
+    windows = segments or plant_windows(stop, data.horizon, data.restarts)
+    windows = [(a, min(b, stop)) for a, b in windows if a < stop]
+    m, c, k = float(lin["m"]), float(lin["c"]), float(lin["k"])
+    x_start, v_start = data.output, data.velocity
+    warmup = None
+    if data.horizon is not None:
+        warmup = warmup_samples(data.horizon)
+        windows = [(a, b) for a, b in windows if b - a > warmup]
+        x_start, v_start = _window_states(data, u, m, c, k, windows, warmup)
+    out = exact_plant_response(
+        u,
+        m,
+        c,
+        k,
+        data.dt,
+        windows=windows,
+        x_start=x_start,
+        v_start=v_start,
         hold=data.discretisation,
         force=force,
     )
+    if warmup is not None:
+        covered = np.zeros(len(out), dtype=bool)
+        for a, b in windows:
+            out[a : a + warmup] = np.nan
+            covered[a:b] = True
+        out[~covered] = np.nan
+    return out
 
 
 def _simulate_plant(data, lin, effect, theta, stop, segments):

@@ -1,0 +1,288 @@
+"""A family of rig-like recordings for the gap benchmark: continuous plants, any time scale.
+
+Specification: docs/gap.md §Rig family.
+
+The paper's asset (:mod:`dtwin.gap.generator`) is the twin's own Euler recursion at ~150
+samples per period, with every signal recorded and the twin's parameters known. Measured rigs
+are none of that: a continuous plant sampled anywhere from 3 to 1000 samples per period, in
+volts or micrometres, with offsets, often integrating (``k = 0``) and run in a closed loop,
+recorded as ``t, u_act, x`` with no nominal parameters. :func:`generate_rig_case` draws such a
+rig and integrates it finely (classical Runge-Kutta, 10 sub-steps per sample) with one withheld
+plant effect:
+
+- open loop: a band-limited multisine force, evaluated continuously (so neither a zero- nor a
+  first-order hold is exact);
+- closed loop: a digital PD position controller (its force held over each sample) tracking a
+  multisine reference, with a dither; always so for an integrating plant;
+- white measurement noise on the position (0.5–2 % of its spread), fed back in a closed loop;
+- the effect (``coulomb_friction``, ``cubic_stiffness``, ``quadratic_damping``, or ``none``)
+  with a strength from barely visible (``magnitude`` 0) to strong (1), in the catalogue's form
+  but a different smoothing.
+
+Arrays are time-first, shape ``(n_samples,)``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+import pandas as pd
+
+from dtwin._validation import DtwinValueError
+from dtwin.gap.generator import GeneratedCase, generate_case
+
+__all__ = ["RIG_EFFECTS", "RIG_PREFIX", "RIG_SAMPLES", "generate_rig_case", "generate_any_case"]
+
+#: The withheld effects of the rig family (all in the plant, M1).
+RIG_EFFECTS: tuple[str, ...] = ("none", "coulomb_friction", "cubic_stiffness", "quadratic_damping")
+#: Case-type prefix of the rig family in ``gap.benchmark.effects`` (``rig_coulomb_friction``).
+RIG_PREFIX = "rig_"
+#: Samples per rig recording.
+RIG_SAMPLES = 6000
+_SUBSTEPS = 10
+#: Strength range (relative to the linear force it competes with) at magnitude 0 and 1.
+_STRENGTH = {
+    "coulomb_friction": (0.04, 0.3),  # Fc over std(u)
+    "cubic_stiffness": (0.08, 0.6),  # k3·x_rms² over k
+    "quadratic_damping": (0.2, 1.5),  # c2·v_rms over c
+}
+
+
+def _log_uniform(rng: np.random.Generator, low: float, high: float) -> float:
+    return float(math.exp(rng.uniform(math.log(low), math.log(high))))
+
+
+def _draw_rig(rng: np.random.Generator, effect: str) -> dict:
+    """Physical parameters (SI-like units, m = 1) and the experiment of one rig."""
+    samples_per_period = _log_uniform(rng, 3.0, 1000.0)
+    rate = _log_uniform(rng, 20.0, 20000.0)  # Hz
+    dt = 1.0 / rate
+    omega = 2 * math.pi / (samples_per_period * dt)
+    integrating = effect != "cubic_stiffness" and rng.uniform() < 0.3
+    closed = integrating or (samples_per_period >= 15 and rng.uniform() < 0.35)
+    if closed and samples_per_period < 15:  # a digital PD loop needs ≥ 15 samples per period
+        samples_per_period = _log_uniform(rng, 15.0, 1000.0)
+        omega = 2 * math.pi / (samples_per_period * dt)
+    zeta = _log_uniform(rng, 0.005, 1.0)
+    plant = {"m": 1.0, "c": 2 * zeta * omega, "k": 0.0 if integrating else omega**2}
+    if integrating:  # no period: a velocity time constant of 30–3000 samples
+        plant["c"] = 1.0 / (_log_uniform(rng, 30.0, 3000.0) * dt)
+    return {
+        "dt": dt,
+        "omega": omega,
+        "samples_per_period": samples_per_period,
+        "zeta": zeta,
+        "integrating": integrating,
+        "closed_loop": closed,
+        "plant": plant,
+        "u_scale": 10 ** rng.uniform(-3, 3),
+        "x_scale": 10 ** rng.uniform(-6, 3),
+    }
+
+
+def _multisine(rng: np.random.Generator, low: float, high: float, n_lines: int = 16):
+    """Return a band-limited multisine, unit RMS: ``f(t)`` for scalar or array ``t`` (s)."""
+    freqs = np.exp(rng.uniform(math.log(low), math.log(high), n_lines))
+    phases = rng.uniform(0, 2 * math.pi, n_lines)
+    scale = math.sqrt(2.0 / n_lines)
+
+    def signal(t):
+        return scale * np.sum(np.sin(2 * math.pi * np.multiply.outer(t, freqs) + phases), axis=-1)
+
+    return signal
+
+
+def _force_law(effect: str, strength: float, rig: dict, u_std: float, x_rms: float, v_rms: float):
+    """Return the withheld force ``F(x, v)`` (N) and its parameters in physical units."""
+    plant = rig["plant"]
+    if effect == "coulomb_friction":
+        fc = strength * u_std
+        smooth = 0.002 * v_rms
+        return (lambda x, v: fc * math.tanh(v / smooth)), {"Fc": fc}
+    if effect == "cubic_stiffness":
+        k3 = strength * plant["k"] / x_rms**2
+        return (lambda x, v: k3 * x * x * x), {"k3": k3}
+    if effect == "quadratic_damping":
+        c2 = strength * plant["c"] / v_rms
+        return (lambda x, v: c2 * v * abs(v)), {"c2": c2}
+    return None, {}
+
+
+def _integrate(rig: dict, drive: Callable, force, n: int, noise: np.ndarray) -> np.ndarray:
+    """Runge-Kutta integration; ``drive(j, t, x_meas)`` gives the force over sample ``j``."""
+    m, c, k = rig["plant"]["m"], rig["plant"]["c"], rig["plant"]["k"]
+    dt = rig["dt"]
+    h = dt / _SUBSTEPS
+    extra = force or (lambda x, v: 0.0)
+
+    def accel(t, x, v, j):
+        return (drive(j, t) - c * v - k * x - extra(x, v)) / m
+
+    x, v = 0.0, 0.0
+    states = np.zeros((n, 2))
+    for j in range(n):
+        states[j] = x, v
+        drive.measure(j, x + noise[j])
+        t0 = j * dt
+        for s in range(_SUBSTEPS):
+            t = t0 + s * h
+            a1 = accel(t, x, v, j)
+            a2 = accel(t + h / 2, x + h / 2 * v, v + h / 2 * a1, j)
+            a3 = accel(t + h / 2, x + h / 2 * (v + h / 2 * a1), v + h / 2 * a2, j)
+            a4 = accel(t + h, x + h * (v + h / 2 * a2), v + h * a3, j)
+            x += h * (v + h / 6 * (a1 + a2 + a3))
+            v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+    return states
+
+
+class _Drive:
+    """The force on the plant: an open-loop multisine, or a digital PD loop (held per sample)."""
+
+    def __init__(self, rig: dict, rng: np.random.Generator, n: int):
+        omega, dt = rig["omega"], rig["dt"]
+        nyquist = 0.5 / dt
+        self.closed = rig["closed_loop"]
+        self.dt = dt
+        self.held = np.zeros(n)
+        band_high = min(3.0 * omega / (2 * math.pi), 0.4 * nyquist)
+        if not self.closed:
+            self.excite = _multisine(rng, 0.1 * omega / (2 * math.pi), band_high)
+            return
+        m, c = rig["plant"]["m"], rig["plant"]["c"]
+        loop = omega * _log_uniform(rng, 0.5, 1.5)
+        self.kp = m * loop**2
+        self.kd = max(2 * 0.7 * m * loop - c, 0.0)
+        self.reference = _multisine(rng, 0.05 * loop / (2 * math.pi), 0.7 * loop / (2 * math.pi))
+        self.dither = rng.standard_normal(n) * 0.1
+        self.previous = 0.0
+
+    def measure(self, j: int, x_measured: float) -> None:
+        """Compute the force held over sample ``j`` from the measured position (closed loop)."""
+        if not self.closed:
+            return
+        velocity = (x_measured - self.previous) / self.dt if j else 0.0
+        self.previous = x_measured
+        error = float(self.reference(j * self.dt)) - x_measured
+        self.held[j] = self.kp * (error + self.dither[j]) - self.kd * velocity
+
+    def __call__(self, j: int, t: float) -> float:
+        if self.closed:
+            return self.held[j]
+        return float(self.excite(t))
+
+    def recorded(self, n: int) -> np.ndarray:
+        """Return the force at the sample instants, shape ``(n,)``."""
+        if self.closed:
+            return self.held[:n].copy()
+        return self.excite(np.arange(n) * self.dt)
+
+
+def _run(rig, rng_seed: int, effect: str, strength: float, n: int):
+    """Simulate the linear rig (for the scales), then the rig with its effect (same draws)."""
+    rng = np.random.default_rng(rng_seed)
+    pilot = _Drive(rig, np.random.default_rng(rng_seed), n)
+    linear = _integrate(rig, pilot, None, n, np.zeros(n))
+    x_rms = float(np.std(linear[:, 0])) or 1.0
+    v_rms = float(np.std(linear[:, 1])) or 1.0
+    u_std = float(np.std(pilot.recorded(n))) or 1.0
+    noise = x_rms * rng.uniform(0.005, 0.02) * rng.standard_normal(n)
+    force, params = _force_law(effect, strength, rig, u_std, x_rms, v_rms)
+    drive = _Drive(rig, np.random.default_rng(rng_seed), n)
+    states = _integrate(rig, drive, force, n, noise)
+    return states, drive.recorded(n), noise, params, linear
+
+
+def generate_rig_case(
+    effect: str, seed: int, *, magnitude: float | None = None, n_samples: int | None = None
+) -> GeneratedCase:
+    """Generate one rig recording (``t, u_act, x``) with a withheld plant effect, or none.
+
+    Parameters
+    ----------
+    effect : str
+        One of :data:`RIG_EFFECTS`.
+    seed : int
+        Seed of every draw.
+    magnitude : float, optional
+        0 (faint) to 1 (strong); drawn uniformly when None.
+    n_samples : int, optional
+        Default :data:`RIG_SAMPLES`.
+
+    Returns
+    -------
+    GeneratedCase
+        ``recording`` (``t`` s, ``u_act`` and ``x`` in the rig's units), ``twin`` (``dt``
+        only: the plant must be calibrated) and ``key`` (the truth, parameters in recording
+        units).
+    """
+    if effect not in RIG_EFFECTS:
+        raise DtwinValueError(
+            f"rig effect must be one of {', '.join(RIG_EFFECTS)} (got {effect!r})"
+        )
+    rng = np.random.default_rng(seed)
+    n = int(n_samples or RIG_SAMPLES)
+    rig = _draw_rig(rng, effect)
+    magnitude = float(rng.uniform()) if magnitude is None else float(magnitude)
+    low, high = _STRENGTH.get(effect, (0.0, 0.0))
+    strength = low * (high / low) ** magnitude if high else 0.0
+    states, force, noise, params, linear = _run(rig, seed + 1, effect, strength, n)
+    u_rec, x_rec = _to_recording_units(rig, rng, force, states[:, 0] + noise)
+    t = np.arange(n) * rig["dt"]
+    recording = pd.DataFrame({"t": t, "u_act": u_rec, "x": x_rec})
+    contribution = float(np.std(states[:, 0] - linear[:, 0]))
+    key = _rig_key(effect, seed, magnitude, rig, params, n)
+    key["snr"] = contribution / float(np.std(noise)) if effect != "none" else 0.0
+    return GeneratedCase(recording=recording, twin={"twin": {"dt": rig["dt"]}}, key=key)
+
+
+def _to_recording_units(rig, rng, force, x) -> tuple[np.ndarray, np.ndarray]:
+    u_off = rng.uniform(-0.5, 0.5) * float(np.std(force))
+    x_off = rng.uniform(-2.0, 2.0) * float(np.std(x))
+    rig["u_offset_phys"], rig["x_offset_phys"] = u_off, x_off
+    return rig["u_scale"] * (force + u_off), rig["x_scale"] * (x + x_off)
+
+
+def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
+    """Return the truth of a rig case, parameters converted to recording units."""
+    us, xs = rig["u_scale"], rig["x_scale"]
+    per_unit = {
+        "m": us / xs,
+        "c": us / xs,
+        "k": us / xs,
+        "Fc": us,
+        "k3": us / xs**3,
+        "c2": us / xs**2,
+    }
+    plant = {name: value * per_unit[name] for name, value in rig["plant"].items()}
+    return {
+        "family": "rig",
+        "effect": effect,
+        "module": "M1",
+        "expected_effect": effect,
+        "in_list": effect != "none",
+        "magnitude": magnitude,
+        "seed": seed,
+        "n_samples": n,
+        "params": {name: value * per_unit[name] for name, value in params.items()},
+        "plant": plant,
+        "samples_per_period": rig["samples_per_period"],
+        "zeta": rig["zeta"],
+        "integrating": rig["integrating"],
+        "closed_loop": rig["closed_loop"],
+        "dt": rig["dt"],
+        "u_scale": us,
+        "x_scale": xs,
+    }
+
+
+def generate_any_case(case_type: str, seed: int, **paper_options) -> GeneratedCase:
+    """Generate a benchmark case: ``rig_<effect>`` from the rig family, else the paper asset.
+
+    ``paper_options`` go to :func:`dtwin.gap.generator.generate_case` (``miscalibration``,
+    ``noise_error``); the rig family has none.
+    """
+    if case_type.startswith(RIG_PREFIX):
+        return generate_rig_case(case_type[len(RIG_PREFIX) :], seed)
+    return generate_case(case_type, seed, **paper_options)
