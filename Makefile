@@ -10,7 +10,7 @@ STAMP := $(VENV)/.dtwin-installed
 PIP_VERSION := 26.3
 PIP_TOOLS_VERSION := 7.6.2
 
-.PHONY: figures test test-fast fuzz lint report bench clean-results venv lock
+.PHONY: figures test test-fast fuzz lint report bench clean-results venv lock emps
 
 venv: $(STAMP)
 
@@ -52,6 +52,13 @@ lock:
 	test -x .lock-tools/bin/pip-compile || { $(PYTHON) -m venv .lock-tools && .lock-tools/bin/python -m pip install --quiet "pip-tools==$(PIP_TOOLS_VERSION)"; }
 	.lock-tools/bin/pip-compile --quiet --no-header --allow-unsafe --strip-extras --no-emit-index-url --no-emit-find-links --no-annotate $(PIP_COMPILE_ARGS) requirements.in -o requirements.lock
 	.lock-tools/bin/pip-compile --quiet --no-header --allow-unsafe --strip-extras --no-emit-index-url --no-emit-find-links --no-annotate $(PIP_COMPILE_ARGS) requirements-dev.in -o requirements-dev.lock
+
+# The measured EMPS axis (README §Example: EMPS): fit on the estimation experiment, score on the
+# validation experiment with pulses. The data are not in the repository (see the README).
+EMPS_DIR ?= ../shared/realdata/emps
+emps: $(STAMP)
+	@test -f $(EMPS_DIR)/recording_train.csv || { echo "EMPS data not found in $(EMPS_DIR): download it from https://www.nonlinearbenchmark.org (see README, Example: EMPS) or pass EMPS_DIR=..."; exit 1; }
+	$(BIN)/dtwin diagnose $(EMPS_DIR)/recording_train.csv --twin $(EMPS_DIR)/twin.yaml --heldout $(EMPS_DIR)/recording_pulses.csv --out results/emps
 
 clean-results:
 	rm -rf results logs benchmarks/rules paper_figures/*.png paper_figures/*.pdf paper_figures/*.json

@@ -96,15 +96,21 @@ def _generate(args: argparse.Namespace) -> int:
     import yaml
 
     from dtwin.artifacts import atomic_write_folder, write_csv, write_json
-    from dtwin.gap.generator import generate_case
+    from dtwin.gap.rigs import RIG_PREFIX, generate_any_case, generate_rig_case
 
-    case = generate_case(
-        args.effect,
-        args.seed,
-        magnitude=args.magnitude,
-        module=args.module,
-        n_samples=args.n_samples,
-    )
+    if args.effect.startswith(RIG_PREFIX):
+        effect = args.effect[len(RIG_PREFIX) :]
+        case = generate_rig_case(
+            effect, args.seed, magnitude=args.magnitude, n_samples=args.n_samples
+        )
+    else:
+        case = generate_any_case(
+            args.effect,
+            args.seed,
+            magnitude=args.magnitude,
+            module=args.module,
+            n_samples=args.n_samples,
+        )
 
     def write(folder: Path) -> None:
         write_csv(case.recording, folder / "recording.csv")
@@ -129,6 +135,7 @@ def _fraction(text: str) -> float:
 def build_parser() -> argparse.ArgumentParser:
     """Return the ``dtwin`` argument parser (one subparser per subcommand)."""
     from dtwin.gap.generator import ALL_CASE_EFFECTS
+    from dtwin.gap.rigs import RIG_EFFECTS, RIG_PREFIX
 
     parser = argparse.ArgumentParser(
         prog="dtwin", description="Find, explain and mitigate error in modular digital twins."
@@ -165,7 +172,8 @@ def build_parser() -> argparse.ArgumentParser:
         "generate",
         help="generate a recording with a withheld effect (recording.csv, twin.yaml, key.json)",
     )
-    gen.add_argument("effect", choices=ALL_CASE_EFFECTS)
+    rig_types = [RIG_PREFIX + effect for effect in RIG_EFFECTS]
+    gen.add_argument("effect", choices=[*ALL_CASE_EFFECTS, *rig_types])
     gen.add_argument("--seed", type=int, required=True)
     gen.add_argument("--out", required=True)
     gen.add_argument("--magnitude", type=float, default=None, help="0 (faint) to 1 (strong)")

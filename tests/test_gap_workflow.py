@@ -14,5 +14,6 @@ def test_full_gap_benchmark_override_plans_ten_cases_per_effect(tmp_path):
         workdir, "-n", "--cores", "2", "gap_benchmark", "--configfile", "config/gap_full.yaml"
     )
     counts = job_counts(done.stdout)
-    assert counts["gap_case"] == counts["gap_diagnose"] == 140  # 14 case types x 10 cases
+    # 14 case types of the paper asset and 4 of the rig family, 10 cases each
+    assert counts["gap_case"] == counts["gap_diagnose"] == 180
     assert counts["gap_benchmark"] == 1

@@ -1,0 +1,42 @@
+"""The measured EMPS axis (README §Example: EMPS), where its data are present.
+
+The data are not in the repository: set DTWIN_EMPS_DIR or put the converted files in
+``../shared/realdata/emps`` beside the repository (README). Without them the test is skipped,
+saying where to put them.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from dtwin.gap import diagnose, read_recording, twin_discretisation, twin_from_mapping
+
+ROOT = Path(__file__).resolve().parents[1]
+EMPS = Path(os.environ.get("DTWIN_EMPS_DIR", ROOT.parent / "shared" / "realdata" / "emps"))
+PUBLISHED_FC = 20.39  # N, Janot et al. 2019
+
+
+@pytest.mark.slow
+def test_emps_names_coulomb_friction_in_the_plant():
+    if not (EMPS / "recording_train.csv").is_file():
+        pytest.skip(
+            f"EMPS data not found in {EMPS}: set DTWIN_EMPS_DIR or see the README "
+            "(Example: EMPS) for where to download it"
+        )
+    import yaml
+
+    content = yaml.safe_load((EMPS / "twin.yaml").read_text())
+    train = read_recording(EMPS / "recording_train.csv")
+    result = diagnose(
+        train,
+        twin_from_mapping(content, dt=train.dt),
+        train_frac=1.0,
+        discretisation=twin_discretisation(content),
+        heldout=read_recording(EMPS / "recording_pulses.csv"),
+    )
+    assert (result.module, result.effect) == ("M1", "coulomb_friction")
+    assert abs(result.params["Fc"] / PUBLISHED_FC - 1) <= 0.30
+    assert result.shrink_pct >= 50
