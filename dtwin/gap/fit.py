@@ -111,8 +111,17 @@ def train_segments(data: ModuleData, n_train: int) -> list[tuple[int, int]] | No
     return [(int(a), int(min(b, a + longest))) for a, b in itertools.pairwise(edges)]
 
 
-def linear_typical(name: str, lin: Mapping[str, float], scales: Scales) -> dict[str, float]:
-    """Return a typical magnitude of each linear parameter (its nominal size, or a data scale)."""
+def linear_typical(
+    name: str, lin: Mapping[str, float], scales: Scales, *, scale_free: bool = False
+) -> dict[str, float]:
+    """Return a typical magnitude of each linear parameter (its nominal size, or a data scale).
+
+    ``scale_free`` (the exact plant, any units): ``m, c, k`` are typically their own size, with
+    no absolute floor of 1 (a mass of 1e-6 in volt units is as ordinary as one of 1e6); a zero
+    ``k`` or ``c`` is typically that of a mode of 1000 samples.
+    """
+    if scale_free and name == "M1":
+        return _plant_typical(lin, scales)
     typical = {}
     for key, value in lin.items():
         if key == "bias":
@@ -126,6 +135,21 @@ def linear_typical(name: str, lin: Mapping[str, float], scales: Scales) -> dict[
         else:
             fallback = 1.0
         typical[key] = max(abs(float(value)), fallback, 1e-12)
+    return typical
+
+
+def _plant_typical(lin: Mapping[str, float], scales: Scales) -> dict[str, float]:
+    mass = abs(float(lin.get("m", 0.0))) or 1.0
+    rate = 2 * math.pi / (1000 * scales.dt)
+    typical = {
+        "m": mass,
+        "k": abs(float(lin.get("k", 0.0))) or mass * rate**2,
+        "c": abs(float(lin.get("c", 0.0))) or mass * rate,
+    }
+    for key, value in lin.items():
+        if key not in typical:
+            fallback = scales.input_std if key == "u_offset" else 1.0
+            typical[key] = max(abs(float(value)), fallback, 1e-300)
     return typical
 
 
@@ -206,7 +230,8 @@ def fit_candidate(
     if free is None:
         free = [k for k in (*LINEAR_PARAMS[data.name], "u_offset") if k in lin_start]
     free = list(free)
-    typical = linear_typical(data.name, lin_start, scales)
+    exact = data.discretisation != EULER
+    typical = linear_typical(data.name, lin_start, scales, scale_free=exact)
     bounds_all = dict(_bounds_free(data.name, lin_start, scales, typical))
     bounds_all.update(lin_bounds or {})
     effect_params = effect.n_params if effect is not None else 0
