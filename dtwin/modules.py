@@ -460,7 +460,7 @@ def _linear_windows(
     return lfilter([1.0], den, drive, axis=1)
 
 
-def _force_loop(w, x0, v0, step: HoldMatrices, force_per_m: Force, out: np.ndarray) -> None:
+def _force_loop(w, x0, v0, step: HoldMatrices, force: Force, inv_m: float, out) -> None:
     """Exact steps with a state-dependent force, one predictor-corrector pass per step."""
     (a11, a12), (a21, a22) = step.a.tolist()
     p1, p2 = step.b_prev.tolist()
@@ -469,13 +469,13 @@ def _force_loop(w, x0, v0, step: HoldMatrices, force_per_m: Force, out: np.ndarr
     out[0] = x
     w = w.tolist()
     for j in range(1, len(w)):
-        f_prev = force_per_m(x, v)
+        f_prev = force(x, v) * inv_m
         drive_prev = w[j - 1] - f_prev
         xp = a11 * x + a12 * v + p1 * drive_prev
         vp = a21 * x + a22 * v + p2 * drive_prev
         if n1 or n2:
             predicted = w[j] - f_prev
-            f_next = force_per_m(xp + n1 * predicted, vp + n2 * predicted)
+            f_next = force(xp + n1 * predicted, vp + n2 * predicted) * inv_m
             xp += n1 * (w[j] - f_next)
             vp += n2 * (w[j] - f_next)
         x, v = xp, vp
@@ -491,12 +491,12 @@ def free_response_basis(step: HoldMatrices, length: int) -> np.ndarray:
     Column 0 starts from ``(x, v) = (1, 0)``, column 1 from ``(0, 1)``: row ``j`` is the first
     row of ``A^j`` (:class:`HoldMatrices`).
     """
-    basis = np.zeros((length, 2))
-    power = np.eye(2)
-    for j in range(length):
-        basis[j] = power[0]
-        power = step.a @ power
-    return basis
+    a = step.a
+    den = [1.0, -(a[0, 0] + a[1, 1]), a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]]
+    seeds = np.zeros((2, max(length, 2)))
+    seeds[0, 0], seeds[0, 1] = 1.0, a[0, 0] - (a[0, 0] + a[1, 1])  # x₀ = 1, x₁ = a₁₁
+    seeds[1, 1] = a[0, 1]  # x₀ = 0, x₁ = a₁₂
+    return lfilter([1.0], den, seeds, axis=1)[:, :length].T
 
 
 def exact_plant_response(
@@ -551,10 +551,9 @@ def exact_plant_response(
     w = np.asarray(u, dtype=float) / m
     out = np.zeros(len(w))
     if force is not None:
-        per_m = lambda x, v: force(x, v) / m  # noqa: E731
         for start, stop in windows:
             block = np.zeros(stop - start)
-            _force_loop(w[start:stop], x_start[start], v_start[start], step, per_m, block)
+            _force_loop(w[start:stop], x_start[start], v_start[start], step, force, 1 / m, block)
             out[start:stop] = block
         return out
     by_length: dict[int, list[int]] = {}

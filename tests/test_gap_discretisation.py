@@ -10,7 +10,14 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from dtwin.modules import EXACT_HOLDS, FOH, ZOH, exact_plant_response
+from dtwin.modules import (
+    EXACT_HOLDS,
+    FOH,
+    ZOH,
+    exact_plant_response,
+    free_response_basis,
+    hold_matrices,
+)
 
 
 def _continuous(u, m, c, k, dt, hold, x0=0.3, v0=-0.2):
@@ -99,3 +106,12 @@ def test_first_order_hold_uses_the_same_sample_input():
     kwargs = dict(windows=[(0, 5)], x_start=np.zeros(5), v_start=np.zeros(5))
     assert exact_plant_response(u, 1.0, 1.0, 1.0, 0.1, hold=FOH, **kwargs)[2] > 0
     assert exact_plant_response(u, 1.0, 1.0, 1.0, 0.1, hold=ZOH, **kwargs)[2] == 0
+
+
+def test_free_response_basis_is_the_first_row_of_the_matrix_powers():
+    step = hold_matrices(0.3, 40.0, 0.05, FOH)
+    power, rows = np.eye(2), []
+    for _ in range(7):
+        rows.append(power[0])
+        power = step.a @ power
+    np.testing.assert_allclose(free_response_basis(step, 7), np.array(rows), atol=1e-14)
