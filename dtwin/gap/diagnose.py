@@ -69,6 +69,7 @@ from dtwin.gap.noise import (
     spectral_noise_floor,
     twin_noise_floor,
 )
+from dtwin.gap.oe_reference import output_error_reference
 from dtwin.gap.recording import Recording, diagnosable_modules
 from dtwin.modules import DISCRETISATIONS, EULER, EXACT_HOLDS
 from dtwin.params import TwinParams, twin_params_from_mapping
@@ -158,6 +159,7 @@ class ModuleReport:
     lin_used: dict[str, float] | None = None
     discretisation: str | None = None
     horizon_samples: int | None = None
+    reference_gap: float | None = None
 
 
 @dataclass(frozen=True)
@@ -433,6 +435,7 @@ class _ModuleWork:
     threshold: float
     n_eff: float
     candidates: list[tuple[Effect, CandidateFit, np.ndarray, float]] = field(default_factory=list)
+    reference_gap: float | None = None
 
 
 def _analyse_module(name, rec, twin, t, n_train, calibrate, settings, layout) -> _ModuleWork:
@@ -643,6 +646,13 @@ def _module_notes(works: Mapping[str, _ModuleWork], calibrate: bool) -> list[str
         if work.calibrated:
             why = "--calibrate" if calibrate else "no nominal parameters in the twin file"
             notes.append(f"{work.name}: linear twin fitted on the training part ({why})")
+        if work.reference_gap is not None:
+            notes.append(
+                f"{work.name}: held-out gap of the calibrated linear twin "
+                f"{work.gap_before:.4g} ({work.data.discretisation}, windows of "
+                f"{work.data.horizon} samples); a plain output-error fit OE(nb=3, nf=2) on the "
+                f"same split and windows: {work.reference_gap:.4g}"
+            )
         if work.floor_twin is not None and work.floor_twin > 0:
             ratio = work.floor_data / work.floor_twin
             if not 0.67 <= ratio <= 1.5:
@@ -789,6 +799,7 @@ def _module_reports(rec, works, flagged, source, chosen, chains, held) -> dict[s
             work.lin_base,
             work.data.discretisation if name == "M1" else None,
             work.data.horizon,
+            work.reference_gap,
         )
     return modules
 
@@ -909,6 +920,12 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
         name: _analyse_module(name, recording, twin, t, n_train, calibrate, settings, layout)
         for name in names
     }
+    for work in works.values():
+        if work.name == "M1" and work.calibrated and work.data.discretisation != EULER:
+            reference = output_error_reference(
+                work.data, int(work.lin_base.get("delay_samples", 0)), n_train
+            )
+            work.reference_gap = normalised_rms(work.data.output, reference, held, work.norm)
     notes.extend(_module_notes(works, calibrate))
     flagged = [w for w in works.values() if w.gap_cal > w.threshold]
     for work in flagged:

@@ -1,0 +1,95 @@
+"""A plain output-error fit of the plant: the reference a calibrated twin must not lose to.
+
+Specification: docs/gap.md §Calibration from data.
+
+A system-identification engineer's first model of a plant rig is a discrete output-error model
+``OE(nb = 3, nf = 2)`` with the input delay known: ``x[k] = B(q)/F(q)·u[k − d] + const`` with
+``B(q) = b₀ + b₁q⁻¹ + b₂q⁻²`` (the same-sample term included) and ``F(q) = 1 + f₁q⁻¹ + f₂q⁻²``,
+fitted by least squares on the simulation error. :func:`output_error_reference` fits it on the
+training part and predicts the whole recording **over the same windows, with the same warm-up
+initial states** as the exact plant (:func:`dtwin.gap.models.plant_windows`), so its held-out
+gap is measured exactly like the twin's. The twin's physical parameters are fewer (``m, c, k``,
+an offset and a hold); if the reference does much better, the twin's structure, not the data,
+is what limits it, and the report says so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.signal import lfilter
+
+from dtwin.gap.models import ModuleData, plant_windows, warmup_samples
+
+__all__ = ["output_error_reference"]
+
+
+def _delayed(u: np.ndarray, delay: int) -> np.ndarray:
+    return np.concatenate([np.full(delay, u[0]), u[: len(u) - delay]]) if delay else u
+
+
+def _simulate(theta, u, y, windows, warmup) -> np.ndarray:
+    """Windows of the OE model, each from a least-squares initial state on its warm-up."""
+    b, f, const = theta[:3], np.r_[1.0, theta[3:5]], theta[5]
+    seeds = np.zeros((2, 2))
+    seeds[0] = 1.0, f[1]  # y₀ = 1, y₁ = 0
+    seeds[1, 1] = 1.0  # y₀ = 0, y₁ = 1
+    out = np.full(len(u), np.nan)
+    by_length: dict[int, list[int]] = {}
+    for start, stop in windows:
+        by_length.setdefault(stop - start, []).append(start)
+    for length, starts in by_length.items():
+        rows = np.asarray(starts)[:, None] + np.arange(length)
+        forced = lfilter(b, f, u[rows], axis=1) + lfilter([const], f, np.ones(length))
+        pad = np.zeros((2, length))
+        pad[:, :2] = seeds
+        basis = lfilter([1.0], f, pad, axis=1).T  # (length, 2)
+        solve = np.linalg.pinv(basis[:warmup])
+        states = (y[rows[:, :warmup]] - forced[:, :warmup]) @ solve.T
+        prediction = forced + states @ basis.T
+        prediction[:, :warmup] = np.nan
+        out[rows] = prediction
+    return out
+
+
+def _arx_start(u: np.ndarray, y: np.ndarray) -> np.ndarray:
+    rows = np.arange(2, len(y))
+    phi = np.column_stack([u[rows], u[rows - 1], u[rows - 2], -y[rows - 1], -y[rows - 2]])
+    phi = np.column_stack([phi, np.ones(len(rows))])
+    coef, *_ = np.linalg.lstsq(phi, y[rows], rcond=None)
+    return coef
+
+
+def output_error_reference(data: ModuleData, delay: int, n_train: int) -> np.ndarray:
+    """Return the plain OE(3, 2) fit's prediction of the plant output, shape ``(n_samples,)``.
+
+    Parameters
+    ----------
+    data : ModuleData
+        The plant's recorded signals, with the exact plant's ``horizon`` and ``restarts``.
+    delay : int
+        Whole-sample input delay (the calibrated twin's).
+    n_train : int
+        Training samples; the fit sees only them.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_samples,)
+        NaN on the warm-up samples of each window (not scored), like the twin's prediction.
+    """
+    u = _delayed(np.asarray(data.inputs["u_act"], dtype=float), int(delay))
+    y = np.asarray(data.output, dtype=float)
+    horizon = data.horizon or len(y)
+    warmup = warmup_samples(horizon)
+    windows = [w for w in plant_windows(len(y), horizon, data.restarts) if w[1] - w[0] > warmup]
+    train = [w for w in windows if w[1] <= n_train]
+    scale = float(np.std(y[:n_train])) or 1.0
+
+    def residual(theta):
+        predicted = _simulate(theta, u, y, train, warmup)
+        error = (predicted - y)[~np.isnan(predicted)] / scale
+        return np.nan_to_num(error, nan=1e6, posinf=1e6, neginf=-1e6)
+
+    start = _arx_start(u[:n_train], y[:n_train])
+    fitted = least_squares(residual, start, method="trf", max_nfev=200, x_scale="jac")
+    return _simulate(fitted.x, u, y, windows, warmup)
