@@ -267,6 +267,17 @@ def _round_numbers(text: str) -> str:
     return re.sub(r"-?\d+\.\d{4,}(e-?\d+)?", lambda m: _number(float(m.group(0))), text)
 
 
+def _draw_cause(row: Mapping[str, Any]) -> str:
+    """One clause on what the draws say about a failed claim ('' without draws)."""
+    entry = row.get("draws")
+    if not entry:
+        return ""
+    k, n = entry["k"], entry["n"]
+    if k == 0:
+        return f" (fails in all {n} random draws: not the draw)"
+    return f" (holds in {k} of {n} random draws: depends on the draw)"
+
+
 def _reason(row: Mapping[str, Any]) -> str:
     if row["passed"]:
         return "yes" if not row["note"] else f"yes — {row['note']}"
@@ -274,7 +285,7 @@ def _reason(row: Mapping[str, Any]) -> str:
         row["note"]
         or f"observed {_cell(row['observed'], 60)}; expected {_cell(row['expected'], 60)}"
     )
-    return f"**no** — {reason}"
+    return f"**no** — {reason}{_draw_cause(row)}"
 
 
 def _draws_cell(row: Mapping[str, Any]) -> str:

@@ -73,3 +73,33 @@ def test_draw_zero_reproduces_the_stage_tables(config):
     assert 0.5 < summary["accuracy"] <= 1.0
     assert tables.seeds.simulation == config["simulation"]["seed"]
     assert len(tables.mcda_timeline) == len(tables.physics)
+
+
+def test_fig12_artifact_is_valid_and_orders_claims_by_figure():
+    from dtwin.figures.fig12_claims_across_draws import fig12_claims_across_draws
+
+    def record(draw):
+        numbers = {
+            "accuracy": 0.8,
+            "macro_f1": 0.8,
+            "kappa": 0.7,
+            "nominal_sensor_share": 0.9,
+            "lag1_e1": 0.99,
+            "lag1_e4": 0.99,
+            "min_self_transition": 0.97,
+            "rmse_ratio_e1": 1.0,
+            "drmse_pct": {e: float(draw) for e in ("e0", "e1", "e2a", "e2b", "e3", "e4")},
+            "dynamics_off": {"mean_x": 0.1 * draw, "mean_e1": 0.0, "e1_mean_share": 0.1},
+            "action_shares": {"DynamicsOff:ReidentifyPlant": 0.7, "Drift:BiasCorrect": 1.0},
+        }
+        claims = {"fig10_x:b": True, "fig02_x:a": draw % 2 == 0}
+        return {"draw": draw, "seeds": {"simulation": draw}, "claims": claims, "numbers": numbers}
+
+    artifact, table = fig12_claims_across_draws(
+        [{"draws": [record(d) for d in range(4)]}], 4, 0.95, {"dynamics_off_mean_x": 0.2}
+    )
+    assert [c.passed for c in artifact.checks] == [True]
+    assert list(artifact.metrics["claims"]) == ["fig02_x:a", "fig10_x:b"]
+    assert artifact.metrics["claims"]["fig02_x:a"]["k"] == 2
+    assert artifact.metrics["e1_explanation"]["spearman_abs_mean_x_vs_drmse_e1"] == 1.0
+    assert len(table) == 4

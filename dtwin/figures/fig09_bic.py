@@ -161,7 +161,35 @@ def bracket_checks(table: pd.DataFrame) -> list[Check]:
             },
             passed=all(bracketed.values()),
         ),
+        _stability_check(table),
     ]
+
+
+#: The best log-likelihood is "stable" when doubling the EM starts gains less than this.
+STABLE_LOGLIK = 1.0
+
+
+def _stability_check(table: pd.DataFrame) -> Check:
+    """Project target: the second half of the starts finds nothing better up to K* + 2."""
+    worst = {}
+    for name, group in table.groupby("dataset", sort=False):
+        k_star = int(group.loc[group["bic"].idxmin(), "K"])
+        near = group[group["K"] <= k_star + 2]
+        gain = near["log_likelihood"] - near["log_likelihood_half"]
+        worst[name] = {
+            "max_gain": round(float(gain.max()), 3),
+            "at_k": int(near.loc[gain.idxmax(), "K"]),
+        }
+    n_starts = int(table["n_starts"].max())
+    return Check(
+        id="best_loglik_stable_in_starts",
+        kind="claim",
+        statement=f"project target: the best log-likelihood is stable in the EM starts (best of "
+        f"{n_starts // 2} vs best of {n_starts}, every K up to K* + 2, both data sets)",
+        expected=f"gain < {STABLE_LOGLIK:g} log-likelihood units",
+        observed=worst,
+        passed=all(w["max_gain"] < STABLE_LOGLIK for w in worst.values()),
+    )
 
 
 def fig09_bic(

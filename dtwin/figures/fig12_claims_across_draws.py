@@ -388,7 +388,7 @@ def fig12_claims_across_draws(
             expected=f"{n_draws} draws x {len(claims)} claims",
             observed=sum(len(record["claims"]) for record in records),
             passed=verdicts_are_bool
-            and all(list(r["claims"]) == list(claims["claim"]) for r in records),
+            and all(sorted(r["claims"]) == sorted(claims["claim"]) for r in records),
         )
     ]
     return FigureArtifact("fig12_claims_across_draws", figure, metrics, checks), table
