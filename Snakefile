@@ -18,6 +18,7 @@ include: "workflow/rules/correction.smk"
 include: "workflow/rules/decisions.smk"
 include: "workflow/rules/sensitivity.smk"
 include: "workflow/rules/gap.smk"
+include: "workflow/rules/draws.smk"
 include: "workflow/rules/report.smk"
 
 

@@ -1,23 +1,79 @@
 """One page of truth: every artifact's checks gathered into ``CLAIMS.md`` and ``claims.json``.
 
 Reads the artifact JSONs (``{"artifact", "files", "metrics", "checks"}``, see
-:mod:`dtwin.artifacts`) and lays their checks out as three tables: the paper's claims (the
-paper's statement, R's number, ours, reproduced or not and why), the crosschecks against the
-authors' R code, and the validity checks. A claim that does not reproduce is reported, never
-hidden; only a failed validity check is an error.
+:mod:`dtwin.artifacts`) and lays their checks out as four tables: the paper's claims (the
+paper's statement, R's number, ours, reproduced or not and why, and in how many random draws
+the claim holds), the project's own targets, the crosschecks against the authors' R code,
+and the validity checks. A claim that does not reproduce is reported, never hidden; only a
+failed validity check is an error.
+
+A ``claim`` check is the *paper's* when its artifact is a paper artifact and its statement
+quotes the paper (starts with ``paper``); every other claim is one of the project's own
+targets (the gap benchmark's, the sweep's optimiser expectations, ...).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from scipy.stats import norm
+
 from dtwin._validation import DtwinValueError
 
-__all__ = ["ClaimsSummary", "summarise_claims", "claims_markdown"]
+__all__ = ["wilson_interval", "ClaimsSummary", "summarise_claims", "claims_markdown"]
+
+
+def wilson_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Return the Wilson score interval of a proportion ``k / n``.
+
+    Parameters
+    ----------
+    k : int
+        Successes, ``0 <= k <= n``.
+    n : int
+        Trials, ``n >= 1``.
+    level : float, default 0.95
+        Coverage of the interval, in (0, 1).
+
+    Returns
+    -------
+    (low, high) : tuple of float
+        ``(p̂ + z²/2n ∓ z·sqrt(p̂(1−p̂)/n + z²/4n²)) / (1 + z²/n)`` with ``z`` the
+        ``(1 + level)/2`` normal quantile (Wilson 1927); inside [0, 1] even at k = 0 or n.
+
+    Raises
+    ------
+    DtwinValueError
+        If ``n < 1``, ``k`` is outside ``[0, n]`` or ``level`` outside (0, 1).
+
+    Examples
+    --------
+    >>> [round(v, 4) for v in wilson_interval(8, 10)]
+    [0.4902, 0.9433]
+    """
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise DtwinValueError(f"n must be an integer >= 1 (got {n!r})")
+    if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k <= n:
+        raise DtwinValueError(f"k must be an integer in [0, n={n}] (got {k!r})")
+    if not 0 < level < 1:
+        raise DtwinValueError(f"level must be in (0, 1) (got {level!r})")
+    z = float(norm.ppf(0.5 + level / 2))
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+#: The artifact whose metrics give every paper claim's verdicts across random draws.
+DRAWS_ARTIFACT = "fig12_claims_across_draws"
+
+#: The gap benchmark's targets are defined for at least this many cases per effect.
+GAP_FULL_CASES_PER_EFFECT = 10
 
 
 @dataclass(frozen=True)
@@ -27,8 +83,10 @@ class ClaimsSummary:
     Attributes
     ----------
     rows : list of dict
-        One per check: ``artifact``, ``id``, ``kind``, ``statement``, ``expected``, ``observed``,
-        ``reference``, ``passed``, ``note``.
+        One per check: ``artifact``, ``id``, ``kind`` (``claim`` for the paper's claims,
+        ``target`` for the project's own, ``crosscheck``, ``validity``), ``statement``,
+        ``expected``, ``observed``, ``reference``, ``passed``, ``note`` and ``draws``
+        (``{k, n, low, high, draw0}`` across random draws, or None).
     counts : dict
         ``{kind: {"passed": n, "failed": n}}``.
     """
@@ -41,26 +99,136 @@ class ClaimsSummary:
         return {"counts": self.counts, "checks": self.rows}
 
 
-def summarise_claims(payloads: Sequence[Mapping[str, Any]]) -> ClaimsSummary:
-    """Gather the checks of artifact payloads (parsed JSON) into a :class:`ClaimsSummary`."""
+def _row(payload: Mapping[str, Any], check: Mapping[str, Any], project: Sequence[str]) -> dict:
+    kind = check["kind"]
+    is_paper = payload["artifact"] not in project and str(check["statement"]).startswith("paper")
+    if kind == "claim" and not is_paper:
+        kind = "target"
+    return {
+        "artifact": payload["artifact"],
+        "id": check["id"],
+        "kind": kind,
+        "statement": check["statement"],
+        "expected": check.get("expected"),
+        "observed": check.get("observed"),
+        "reference": check.get("reference"),
+        "passed": bool(check["passed"]),
+        "note": check.get("note"),
+        "draws": None,
+    }
+
+
+def _attach_draws(rows: list[dict[str, Any]], draws: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """Give each paper claim its verdicts across draws; return validity rows for mismatches.
+
+    Draw 0 is the main run, so its verdict must equal the figure's own.
+    """
+    mismatched = []
+    for row in rows:
+        entry = draws.get(f"{row['artifact']}:{row['id']}")
+        if row["kind"] == "claim" and entry is not None:
+            row["draws"] = dict(entry)
+            if bool(entry["draw0"]) != row["passed"]:
+                mismatched.append(f"{row['artifact']}:{row['id']}")
+    return [
+        {
+            "artifact": DRAWS_ARTIFACT,
+            "id": "draw0_verdicts_equal_the_figures",
+            "kind": "validity",
+            "statement": "draw 0 (the configured seeds) gives every claim the figure's verdict",
+            "expected": "0 claims that differ",
+            "observed": mismatched or 0,
+            "reference": None,
+            "passed": not mismatched,
+            "note": None,
+            "draws": None,
+        }
+    ]
+
+
+def _gap_denominators(table: Any) -> dict[str, tuple[int, int]]:
+    """(k, n) of each gap accuracy target, from ``results/gap/benchmark.csv``.
+
+    The denominators of :func:`dtwin.gap.benchmark.benchmark_metrics`: cases with an effect
+    (module), in-list cases (effect), ``none`` cases, out-of-list cases (``unexplained``).
+    """
+    expected = table["expected_effect"].astype(str)
+    subsets = {
+        "module_accuracy": (expected != "none", "module_ok"),
+        "effect_accuracy": (table["in_list"].astype(bool), "effect_ok"),
+        "none_accuracy": (expected == "none", "effect_ok"),
+        "unexplained_accuracy": (expected == "unexplained", "effect_ok"),
+    }
+    return {
+        name: (int(table.loc[mask, column].astype(bool).sum()), int(mask.sum()))
+        for name, (mask, column) in subsets.items()
+    }
+
+
+def _attach_gap_cases(
+    rows: list[dict[str, Any]], metrics: Mapping[str, Any], table: Any, level: float
+) -> None:
+    """Give the gap targets the number of cases per effect, an interval and 'indicative'."""
+    per_effect = metrics.get("cases_per_effect") or {}
+    fewest = min(per_effect.values()) if per_effect else 0
+    denominators = _gap_denominators(table) if table is not None else {}
+    for row in rows:
+        if row["artifact"] != "gap_benchmark" or row["kind"] != "target":
+            continue
+        name = row["id"].removeprefix("target_")
+        cases = {"cases_per_effect": fewest}
+        k, n = denominators.get(name, (0, 0))
+        if n and row["observed"] is not None and abs(k / n - row["observed"]) < 1e-9:
+            cases.update(k=k, n=n)
+            cases["low"], cases["high"] = wilson_interval(k, n, level)
+        row["cases"] = cases
+        if fewest < GAP_FULL_CASES_PER_EFFECT:
+            row["note"] = (
+                f"indicative: {fewest} cases per effect (the target is defined for >= "
+                f"{GAP_FULL_CASES_PER_EFFECT}; config/gap_full.yaml)"
+            )
+
+
+def summarise_claims(
+    payloads: Sequence[Mapping[str, Any]],
+    project: Sequence[str] = (),
+    gap_table: Any = None,
+    level: float = 0.95,
+) -> ClaimsSummary:
+    """Gather the checks of artifact payloads (parsed JSON) into a :class:`ClaimsSummary`.
+
+    Parameters
+    ----------
+    payloads : sequence of mapping
+        Parsed artifact JSONs.
+    project : sequence of str, default ()
+        The project's own artifacts (``workflow/artifacts.yaml``: ``project``); their claims
+        are targets. The :data:`DRAWS_ARTIFACT` payload, if given, adds the draws column.
+    gap_table : DataFrame, optional
+        ``results/gap/benchmark.csv``, for the (k, n) and interval of each gap target.
+    level : float, default 0.95
+        Level of the gap targets' Wilson intervals.
+
+    Raises
+    ------
+    DtwinValueError
+        If a payload lacks ``artifact`` or ``checks``.
+    """
     rows: list[dict[str, Any]] = []
+    draws: Mapping[str, Any] | None = None
+    gap_metrics: Mapping[str, Any] = {}
     for payload in payloads:
         if "artifact" not in payload or "checks" not in payload:
             raise DtwinValueError("an artifact JSON must have 'artifact' and 'checks' keys")
-        for check in payload["checks"]:
-            rows.append(
-                {
-                    "artifact": payload["artifact"],
-                    "id": check["id"],
-                    "kind": check["kind"],
-                    "statement": check["statement"],
-                    "expected": check.get("expected"),
-                    "observed": check.get("observed"),
-                    "reference": check.get("reference"),
-                    "passed": bool(check["passed"]),
-                    "note": check.get("note"),
-                }
-            )
+        rows += [_row(payload, check, project) for check in payload["checks"]]
+        if payload["artifact"] == DRAWS_ARTIFACT:
+            draws = payload.get("metrics", {}).get("claims", {})
+        if payload["artifact"] == "gap_benchmark":
+            gap_metrics = payload.get("metrics", {})
+    if draws is not None:
+        rows += _attach_draws(rows, draws)
+    if gap_metrics:
+        _attach_gap_cases(rows, gap_metrics, gap_table, level)
     counts: dict[str, dict[str, int]] = {}
     for row in rows:
         tally = counts.setdefault(row["kind"], {"passed": 0, "failed": 0})
@@ -68,11 +236,24 @@ def summarise_claims(payloads: Sequence[Mapping[str, Any]]) -> ClaimsSummary:
     return ClaimsSummary(rows=rows, counts=counts)
 
 
+def _number(value: float) -> str:
+    """Return a float as the checks read it: 4 significant digits, 3 decimals in [1, 1e7).
+
+    A log-likelihood of -2115.8521 against a threshold of -2115.852 - 0.01 must not print as
+    -2116 (which reads like a failure).
+    """
+    if value != value or value in (float("inf"), float("-inf")):
+        return str(value)
+    if 1 <= abs(value) < 1e7:
+        return f"{value:.3f}".rstrip("0").rstrip(".")
+    return f"{value:.4g}"
+
+
 def _cell(value: Any, width: int = 90) -> str:
     if value is None:
         return "–"
     if isinstance(value, float):
-        text = f"{value:.4g}"
+        text = _number(value)
     elif isinstance(value, (dict, list)):
         text = json.dumps(value, separators=(", ", ": "), default=str)
         text = _round_numbers(text)
@@ -83,50 +264,131 @@ def _cell(value: Any, width: int = 90) -> str:
 
 
 def _round_numbers(text: str) -> str:
-    return re.sub(r"-?\d+\.\d{5,}(e-?\d+)?", lambda m: f"{float(m.group(0)):.4g}", text)
+    return re.sub(r"-?\d+\.\d{4,}(e-?\d+)?", lambda m: _number(float(m.group(0))), text)
+
+
+def _draw_cause(row: Mapping[str, Any]) -> str:
+    """One clause on what the draws say about a failed claim ('' without draws)."""
+    entry = row.get("draws")
+    if not entry:
+        return ""
+    k, n = entry["k"], entry["n"]
+    if k == 0:
+        return f" (fails in all {n} random draws: not the draw)"
+    return f" (holds in {k} of {n} random draws: depends on the draw)"
 
 
 def _reason(row: Mapping[str, Any]) -> str:
     if row["passed"]:
-        return "yes"
+        return "yes" if not row["note"] else f"yes — {row['note']}"
     reason = (
         row["note"]
         or f"observed {_cell(row['observed'], 60)}; expected {_cell(row['expected'], 60)}"
     )
-    return f"**no** — {reason}"
+    return f"**no** — {reason}{_draw_cause(row)}"
+
+
+def _draws_cell(row: Mapping[str, Any]) -> str:
+    entry = row.get("draws")
+    if not entry:
+        return "– (not rerun across draws)"
+    return f"{entry['k']} of {entry['n']} [{entry['low']:.2f}, {entry['high']:.2f}]"
+
+
+def _cases_cell(row: Mapping[str, Any]) -> str:
+    cases = row.get("cases")
+    if not cases:
+        return "–"
+    text = f"{cases['cases_per_effect']} per effect"
+    if "n" in cases:
+        text += f"; {cases['k']} of {cases['n']} [{cases['low']:.2f}, {cases['high']:.2f}]"
+    return text
+
+
+_SECTIONS = (
+    (
+        "claim",
+        "Claims of the paper",
+        (
+            "artifact",
+            "claim",
+            "expected",
+            "R's code",
+            "ours",
+            "reproduced",
+            "holds in k of N draws [95 % interval]",
+        ),
+    ),
+    (
+        "target",
+        "The project's own targets",
+        ("artifact", "target", "expected", "ours", "cases [95 % interval]", "met"),
+    ),
+    (
+        "crosscheck",
+        "Crosschecks against the authors' R code",
+        ("artifact", "check", "expected", "observed", "agrees"),
+    ),
+    ("validity", "Validity checks", ("artifact", "check", "observed", "passed")),
+)
+
+
+def _cells(kind: str, row: Mapping[str, Any]) -> list[str]:
+    if kind == "claim":
+        return [
+            row["artifact"],
+            _cell(row["statement"], 140),
+            _cell(row["expected"]),
+            _cell(row["reference"]),
+            _cell(row["observed"]),
+            _reason(row),
+            _draws_cell(row),
+        ]
+    if kind == "target":
+        return [
+            row["artifact"],
+            _cell(row["statement"], 140),
+            _cell(row["expected"]),
+            _cell(row["observed"]),
+            _cases_cell(row),
+            _reason(row),
+        ]
+    if kind == "crosscheck":
+        return [
+            row["artifact"],
+            _cell(row["statement"], 140),
+            _cell(row["expected"]),
+            _cell(row["observed"]),
+            _reason(row),
+        ]
+    return [row["artifact"], row["id"], _cell(row["observed"], 60), _reason(row)]
 
 
 def claims_markdown(summary: ClaimsSummary) -> str:
-    """Render ``CLAIMS.md``: claims, then crosschecks, then validity checks."""
+    """Render ``CLAIMS.md``: the paper's claims, the project's targets, crosschecks, validity."""
+    claims = summary.counts.get("claim", {"passed": 0, "failed": 0})
     lines = [
         "# Paper claims vs this reproduction",
         "",
+        f"**The paper's claims: {claims['passed']} of {claims['passed'] + claims['failed']} "
+        "reproduced on our main run.** The project's own targets, the crosschecks and the "
+        "validity checks are counted apart below.",
+        "",
         "Generated by the `claims` rule from every artifact's JSON in `paper_figures/`. "
         "A claim is a statement of the paper, checked on our own run (numpy's random stream "
-        "differs from R's, so numbers agree in kind, not digit by digit); a crosscheck runs our "
-        "code on the R code's own signals, where agreement can be exact; validity checks say "
-        "an artifact is sound.",
+        "differs from R's, so numbers agree in kind, not digit by digit) and on N random "
+        "draws of the single-draw pipeline (Fig. 12; draw 0 is the main run); a crosscheck "
+        "runs our code on the R code's own signals, where agreement can be exact; validity "
+        "checks say an artifact is sound.",
         "",
         "| kind | passed | failed |",
         "|---|---|---|",
     ]
-    for kind in ("claim", "crosscheck", "validity"):
+    names = {"claim": "paper's claims", "target": "project's own targets"}
+    for kind, _, _ in _SECTIONS:
         tally = summary.counts.get(kind, {"passed": 0, "failed": 0})
-        lines.append(f"| {kind} | {tally['passed']} | {tally['failed']} |")
-    sections = (
-        (
-            "claim",
-            "Claims of the paper",
-            ("artifact", "claim", "expected", "R's code", "ours", "reproduced"),
-        ),
-        (
-            "crosscheck",
-            "Crosschecks against the authors' R code",
-            ("artifact", "check", "expected", "observed", "agrees"),
-        ),
-        ("validity", "Validity checks", ("artifact", "check", "observed", "passed")),
-    )
-    for kind, title, header in sections:
+        lines.append(f"| {names.get(kind, kind)} | {tally['passed']} | {tally['failed']} |")
+    for kind, title, header in _SECTIONS:
         lines += [
             "",
             f"## {title}",
@@ -135,24 +397,5 @@ def claims_markdown(summary: ClaimsSummary) -> str:
             "|" + "---|" * len(header),
         ]
         for row in (r for r in summary.rows if r["kind"] == kind):
-            if kind == "claim":
-                cells = [
-                    row["artifact"],
-                    _cell(row["statement"], 140),
-                    _cell(row["expected"]),
-                    _cell(row["reference"]),
-                    _cell(row["observed"]),
-                    _reason(row),
-                ]
-            elif kind == "crosscheck":
-                cells = [
-                    row["artifact"],
-                    _cell(row["statement"], 140),
-                    _cell(row["expected"]),
-                    _cell(row["observed"]),
-                    _reason(row),
-                ]
-            else:
-                cells = [row["artifact"], row["id"], _cell(row["observed"], 60), _reason(row)]
-            lines.append("| " + " | ".join(cells) + " |")
+            lines.append("| " + " | ".join(_cells(kind, row)) + " |")
     return "\n".join(lines) + "\n"

@@ -26,9 +26,10 @@ own density by the tests). dtwin adds what depmixS4 did and hmmlearn does not:
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -55,6 +56,8 @@ __all__ = [
     "filtered_posteriors",
     "to_hmmlearn",
     "bic_by_k",
+    "bic_row",
+    "bic_minimum_bracketed",
 ]
 
 logger = logging.getLogger(__name__)
@@ -812,12 +815,80 @@ def filtered_posteriors(fit: HmmFit, X: Any) -> np.ndarray:
 # --- model order ----------------------------------------------------------------------------
 
 
+def bic_minimum_bracketed(bics: Sequence[float], rises: int = 2) -> bool:
+    """Return True when the last ``rises`` BIC values each rose over the one before.
+
+    The minimum over consecutive K is then bracketed: past it the BIC went up ``rises``
+    times in a row.
+
+    Examples
+    --------
+    >>> bic_minimum_bracketed([10, 8, 7, 9, 11])
+    True
+    >>> bic_minimum_bracketed([10, 8, 7, 9, 8])
+    False
+    """
+    rises = _require_count("rises", rises, 1)
+    values = [float(v) for v in bics]
+    if len(values) <= rises:
+        return False
+    tail = values[-(rises + 1) :]
+    return all(b > a for a, b in itertools.pairwise(tail))
+
+
+def bic_row(
+    n_states: int,
+    restarts: pd.DataFrame,
+    n_params: int,
+    bic: float,
+    converged: bool,
+    source: str = "sweep",
+) -> dict[str, Any]:
+    """Return one row of :func:`bic_by_k`'s table from a fit's table of starts.
+
+    Parameters
+    ----------
+    n_states : int
+        K.
+    restarts : DataFrame
+        The fit's starts (:attr:`HmmFit.restarts`: ``log_likelihood``, ``status``), in order.
+    n_params, bic, converged
+        Of the best start (:attr:`HmmFit.n_params`, ``bic``, ``converged``).
+    source : str, default "sweep"
+        ``sweep`` (fitted by the sweep) or ``given`` (a dedicated fit reused).
+
+    Returns
+    -------
+    dict
+        ``log_likelihood`` is the best over all starts, ``log_likelihood_half`` the best over
+        the first half (at least one), so their difference shows whether doubling the starts
+        still helped.
+    """
+    usable = ~restarts["status"].isin(["failed", "degenerate"])
+    values = restarts["log_likelihood"].where(usable)
+    half = max(1, len(restarts) // 2)
+    return {
+        "K": int(n_states),
+        "log_likelihood": float(values.max()),
+        "n_params": int(n_params),
+        "bic": float(bic),
+        "converged": bool(converged),
+        "n_usable": int(usable.sum()),
+        "log_likelihood_half": float(values.iloc[:half].max()),
+        "n_starts": len(restarts),
+        "source": source,
+    }
+
+
 def bic_by_k(
     X: Any,
     ks: Sequence[int],
     *,
     n_restarts: int = 5,
     seed: int | Sequence[int] = 0,
+    k_max: int | None = None,
+    stop_after_rises: int = 2,
+    given: Mapping[int, Mapping[str, Any]] | None = None,
     **fit_options: Any,
 ) -> pd.DataFrame:
     """Fit one HMM per number of states and tabulate the BIC (paper §5, Eq. (26)).
@@ -827,47 +898,54 @@ def bic_by_k(
     X : array-like, shape (T, D)
         z-scored features.
     ks : sequence of int
-        Numbers of states to try (paper: 2 … 9).
+        Numbers of states always fitted (paper: 2 … 9).
     n_restarts : int, default 5
         Random starts per K (CovarianceAnalysis.Rmd: 5).
     seed : int or sequence of int, default 0
         K's starts derive from ``SeedSequence([*seed, K])``, so a K's result does not depend
         on which other K are swept.
+    k_max : int, optional
+        Extend K one by one past ``max(ks)`` until :func:`bic_minimum_bracketed` (the BIC rose
+        ``stop_after_rises`` times in a row) or ``K = k_max``. None: ``ks`` only.
+    stop_after_rises : int, default 2
+        Consecutive rises that bracket the minimum.
+    given : mapping of int to dict, optional
+        Rows (:func:`bic_row`) to use as they are for their K: the dedicated K = 4 fit of
+        Figs. 4/7, so that the sweep and the figures share one fit.
     **fit_options
         Passed to :func:`fit_hmm` (``max_iter``, ``tol``, ``var_floor``).
 
     Returns
     -------
     DataFrame
-        One row per K: ``K``, ``log_likelihood``, ``n_params``, ``bic``
-        (``−2·logL + n_params·log T``), ``converged`` and ``n_usable`` (starts that were
-        neither failed nor degenerate).
+        One row per K (:func:`bic_row`): ``K``, ``log_likelihood``, ``n_params``, ``bic``
+        (``−2·logL + n_params·log T``), ``converged``, ``n_usable``, ``log_likelihood_half``,
+        ``n_starts``, ``source``.
     """
     X = require_finite_array("X", X, ndim=2)
-    ks = [_require_count("ks[]", k, 1) for k in ks]
+    ks = sorted(_require_count("ks[]", k, 1) for k in ks)
     entropy = [int(seed)] if isinstance(seed, (int, np.integer)) else [int(s) for s in seed]
     if not ks:
         raise DtwinValueError("ks must list at least one number of states (got none)")
-    rows = []
-    for k in ks:
-        fit = fit_hmm(X, k, n_restarts=n_restarts, seed=[*entropy, k], **fit_options)
-        usable = int((~fit.restarts["status"].isin(["failed", "degenerate"])).sum())
-        rows.append(
-            {
-                "K": k,
-                "log_likelihood": fit.log_likelihood,
-                "n_params": fit.n_params,
-                "bic": fit.bic,
-                "converged": fit.converged,
-                "n_usable": usable,
-            }
-        )
+    given = dict(given or {})
+    k_last = max(ks) if k_max is None else max(max(ks), _require_count("k_max", k_max, 1))
+    rows: list[dict[str, Any]] = []
+    for k in [*ks, *range(max(ks) + 1, k_last + 1)]:
+        if k > max(ks) and bic_minimum_bracketed([r["bic"] for r in rows], stop_after_rises):
+            break
+        if k in given:
+            row = dict(given[k])
+        else:
+            fit = fit_hmm(X, k, n_restarts=n_restarts, seed=[*entropy, k], **fit_options)
+            row = bic_row(k, fit.restarts, fit.n_params, fit.bic, fit.converged)
+        rows.append(row)
         logger.info(
-            "bic_by_k K=%d: logL=%.3f BIC=%.3f (%d/%d usable starts)",
+            "bic_by_k K=%d: logL=%.3f (first half of the starts %.3f) BIC=%.3f (%d/%d usable)",
             k,
-            fit.log_likelihood,
-            fit.bic,
-            usable,
-            n_restarts,
+            row["log_likelihood"],
+            row["log_likelihood_half"],
+            row["bic"],
+            row["n_usable"],
+            row["n_starts"],
         )
     return pd.DataFrame(rows)

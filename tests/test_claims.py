@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from dtwin._validation import DtwinValueError
-from dtwin.claims import claims_markdown, summarise_claims
+from dtwin.claims import claims_markdown, summarise_claims, wilson_interval
 
 PAYLOADS = [
     {
@@ -14,7 +14,7 @@ PAYLOADS = [
             {
                 "id": "c1",
                 "kind": "claim",
-                "statement": "x is big",
+                "statement": "paper §1: x is big",
                 "expected": "> 1",
                 "observed": 0.5,
                 "passed": False,
@@ -67,3 +67,111 @@ def test_markdown_reports_a_failed_claim_with_its_reason_and_r_number():
 def test_malformed_payload_is_rejected():
     with pytest.raises(DtwinValueError, match="artifact"):
         summarise_claims([{"checks": []}])
+
+
+def test_wilson_interval_matches_a_hand_computation():
+    # 8 of 10, z = 1.959964: centre (0.8 + 0.19207) / 1.38415 = 0.71674, half-width
+    # 1.959964 * sqrt(0.016 + 0.0096036) / 1.38415 = 0.22658 (Wilson 1927)
+    low, high = wilson_interval(8, 10)
+    assert low == pytest.approx(0.49016, abs=1e-5) and high == pytest.approx(0.94332, abs=1e-5)
+    assert wilson_interval(0, 20)[0] == 0.0 and wilson_interval(20, 20)[1] == 1.0
+    with pytest.raises(DtwinValueError, match="k must be"):
+        wilson_interval(11, 10)
+
+
+def _claim(artifact, check_id, statement, passed, **extra):
+    return {
+        "artifact": artifact,
+        "checks": [
+            {
+                "id": check_id,
+                "kind": "claim",
+                "statement": statement,
+                "expected": 1,
+                "observed": 1,
+                "passed": passed,
+            }
+        ],
+        **extra,
+    }
+
+
+def test_headline_counts_the_papers_claims_only_and_lists_targets_apart():
+    payloads = [
+        _claim("figA", "p", "paper §2: a claim of the paper", True),
+        _claim("figA", "own", "r_notes.md: our expectation of the optimiser", False),
+        _claim("gap_benchmark", "target_x", "docs/gap.md target: x >= 1", True),
+    ]
+    summary = summarise_claims(payloads, project=["gap_benchmark"])
+    assert summary.counts["claim"] == {"passed": 1, "failed": 0}
+    assert summary.counts["target"] == {"passed": 1, "failed": 1}
+    text = claims_markdown(summary)
+    assert "The paper's claims: 1 of 1 reproduced" in text
+    assert text.index("## Claims of the paper") < text.index("## The project's own targets")
+
+
+def test_draws_column_and_a_draw0_that_disagrees_with_the_figure():
+    draws = {
+        "artifact": "fig12_claims_across_draws",
+        "checks": [],
+        "metrics": {
+            "claims": {
+                "figA:p": {
+                    "k": 7,
+                    "n": 20,
+                    "share": 0.35,
+                    "low": 0.18,
+                    "high": 0.57,
+                    "draw0": False,
+                }
+            }
+        },
+    }
+    summary = summarise_claims([_claim("figA", "p", "paper: c", True), draws])
+    failed = summarise_claims([_claim("figA", "p", "paper: c", False), draws])
+    assert "holds in 7 of 20 random draws: depends on the draw" in claims_markdown(failed)
+    text = claims_markdown(summary)
+    assert "| 7 of 20 [0.18, 0.57] |" in text
+    check = next(r for r in summary.rows if r["id"] == "draw0_verdicts_equal_the_figures")
+    assert check["passed"] is False and check["observed"] == ["figA:p"]
+
+
+def test_gap_targets_below_ten_cases_per_effect_are_marked_indicative():
+    pd = pytest.importorskip("pandas")
+    table = pd.DataFrame(
+        {
+            "expected_effect": ["none", "none", "friction", "friction"],
+            "in_list": [False, False, True, True],
+            "module_ok": [True, True, True, False],
+            "effect_ok": [True, False, True, False],
+        }
+    )
+    payload = _claim(
+        "gap_benchmark",
+        "target_none_accuracy",
+        "docs/gap.md target: none_accuracy >= 0.9",
+        False,
+        metrics={"cases_per_effect": {"none": 2, "friction": 2}},
+    )
+    payload["checks"][0]["observed"] = 0.5
+    summary = summarise_claims([payload], project=["gap_benchmark"], gap_table=table)
+    row = summary.rows[0]
+    assert row["cases"]["k"] == 1 and row["cases"]["n"] == 2
+    assert "indicative: 2 cases per effect" in row["note"]
+
+
+def test_a_log_likelihood_prints_with_the_decimals_its_threshold_uses():
+    payload = {
+        "artifact": "figC",
+        "checks": [
+            {
+                "id": "ll",
+                "kind": "crosscheck",
+                "statement": "reaches R",
+                "expected": ">= -2115.852 - 0.01",
+                "observed": -2115.8521234,
+                "passed": True,
+            }
+        ],
+    }
+    assert "| -2115.852 |" in claims_markdown(summarise_claims([payload]))

@@ -17,6 +17,7 @@ from dtwin.fault_injection import regime_features
 from dtwin.hmm import (
     HmmFitError,
     bic_by_k,
+    bic_minimum_bracketed,
     filtered_posteriors,
     fit_hmm,
     n_hmm_params,
@@ -241,6 +242,30 @@ def test_bic_sweep_selects_the_true_number_of_states(caplog):
     assert list(table.columns[:4]) == ["K", "log_likelihood", "n_params", "bic"]
     assert table.loc[table["bic"].idxmin(), "K"] == 3
     assert sum("bic_by_k K=" in message for message in caplog.messages) == 4
+
+
+@pytest.mark.parametrize(
+    ("curve", "stop"),
+    [
+        ([10, 8, 7, 9, 11], True),  # two rises in a row after the minimum at index 2
+        ([10, 8, 7, 9, 8], False),  # a rise then a fall: not yet bracketed
+        ([10, 8, 7, 9], False),  # one rise only
+        ([10, 12, 14], True),  # rising from the start
+        ([5, 4, 3, 2, 1], False),  # still falling
+    ],
+)
+def test_bic_bracket_stops_where_it_should_on_a_hand_made_curve(curve, stop):
+    assert bic_minimum_bracketed(curve, rises=2) is stop
+
+
+def test_bic_sweep_extends_k_until_the_minimum_is_bracketed():
+    X = three_state_data(n_per=80)
+    table = bic_by_k(X, [1, 2], n_restarts=4, seed=0, k_max=8, stop_after_rises=2)
+    # K = 3 is the minimum; K = 4 and 5 rise, so K = 6 is never fitted
+    assert table["K"].tolist() == [1, 2, 3, 4, 5]
+    assert table.loc[table["bic"].idxmin(), "K"] == 3
+    assert (table["log_likelihood"] >= table["log_likelihood_half"]).all()
+    assert (table["n_starts"] == 4).all() and set(table["source"]) == {"sweep"}
 
 
 # --- crosscheck against depmixS4 ------------------------------------------------------------

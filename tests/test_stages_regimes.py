@@ -234,8 +234,27 @@ def test_bic_sweep_per_dataset_does_not_depend_on_the_other(scenario, twin_run, 
         "bic",
         "converged",
         "n_usable",
+        "log_likelihood_half",
+        "n_starts",
+        "source",
     ]
     assert list(both["n_features"]) == [6, 6, 10, 10]
     pd.testing.assert_frame_equal(both.iloc[:2], alone)
     with pytest.raises(DtwinValueError, match="datasets keys"):
         bic_sweep({"other": nominal}, bic, config["hmm"])
+
+
+def test_bic_sweep_uses_the_dedicated_fit_at_its_k(twin_run, config):
+    _, _, residuals = twin_run
+    nominal = residuals[list(RESIDUALS)].iloc[:300]
+    hmm = {**config["hmm"], "n_states": 3, "n_restarts": 2}
+    _, model = fit_nominal_regimes(residuals.iloc[:300], hmm)
+    table = bic_sweep(
+        {"nominal_residuals": nominal},
+        {"ks": [2, 3], "n_restarts": 2},
+        config["hmm"],
+        {"nominal_residuals": model},
+    )
+    row = table.set_index("K").loc[3]
+    assert row["source"] == "given" and row["log_likelihood"] == model["log_likelihood"]
+    assert row["bic"] == model["bic"] and table.set_index("K").loc[2, "source"] == "sweep"

@@ -66,6 +66,8 @@ AFTER_RESIDUALS = AFTER_FAULTS | {
     "fig04_hmm_posteriors",
 }
 SWEEP = {"sweep_point", "fig11_sensitivity"}
+#: The claims across random draws (they rerun the whole single-draw pipeline).
+DRAWS = {"claims_draws", "fig12_claims_across_draws"}
 
 
 def small_sweep(config: dict) -> None:
@@ -123,6 +125,8 @@ def shorten(config: dict) -> None:
     config["simulation"]["T"] = 8.0
     small_sweep(config)
     config["gap"]["benchmark"].update(effects=["none", "coulomb_friction"], cases_per_effect=1)
+    config["draws"].update(n_draws=2, chunk_size=2)
+    config["bic"].update(n_restarts=4, k_max=10)
 
 
 @pytest.fixture(scope="module")
@@ -196,10 +200,16 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     assert planned_rules(workflow_copy) == {"fig03_residual_acf", "claims"}
     edit_config(workflow_copy, lambda c: c["acf"].update(nlags=30))
     edit_config(workflow_copy, lambda c: c["arx"].update(rollout_init="zeros"))
-    assert planned_rules(workflow_copy) == AFTER_RESIDUALS | SWEEP
+    assert planned_rules(workflow_copy) == AFTER_RESIDUALS | SWEEP | DRAWS
     edit_config(workflow_copy, lambda c: c["arx"].update(rollout_init="physics"))
     edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.5))
-    assert planned_rules(workflow_copy) == {"simulate", "fit_surrogates", *AFTER_RESIDUALS, *SWEEP}
+    assert planned_rules(workflow_copy) == {
+        "simulate",
+        "fit_surrogates",
+        *AFTER_RESIDUALS,
+        *SWEEP,
+        *DRAWS,
+    }
     edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.0))
     edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.5))
     assert planned_rules(workflow_copy) == {
@@ -207,13 +217,14 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
         "fig05_correction_timeseries",
         "fig06_correction_distributions",
         "claims",
+        *DRAWS,
     }
     edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.8))
     edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=3))
     assert planned_rules(workflow_copy) == {"bic_sweep", "fig09_bic", "claims"}
-    edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=5))
+    edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=4))
     edit_config(workflow_copy, lambda c: c["faults"].update(drift_origin="regime_start"))
-    assert planned_rules(workflow_copy) == AFTER_FAULTS
+    assert planned_rules(workflow_copy) == AFTER_FAULTS | DRAWS
     edit_config(workflow_copy, lambda c: c["faults"].update(drift_origin="global"))
     assert planned_rules(workflow_copy) == set()
 
@@ -244,9 +255,14 @@ def test_a_library_edit_reruns_the_rules_that_import_it(workflow_copy):
     residual_stats, pipeline, correction = edited
     try:
         residual_stats.write_text(edited[residual_stats] + "\n# edited\n")
-        assert planned_rules(workflow_copy) == {"fig03_residual_acf", "claims"}
+        assert planned_rules(workflow_copy) == {"fig03_residual_acf", "claims", *DRAWS}
         pipeline.write_text(edited[pipeline] + "\n# edited\n")
-        assert planned_rules(workflow_copy) == {"fig01_pipeline", "fig03_residual_acf", "claims"}
+        assert planned_rules(workflow_copy) == {
+            "fig01_pipeline",
+            "fig03_residual_acf",
+            "claims",
+            *DRAWS,
+        }
         correction.write_text(edited[correction] + "\n# edited\n")
         assert planned_rules(workflow_copy) == {
             "fig01_pipeline",
@@ -256,6 +272,7 @@ def test_a_library_edit_reruns_the_rules_that_import_it(workflow_copy):
             "fig06_correction_distributions",
             "claims",
             *SWEEP,
+            *DRAWS,
         }
     finally:
         # the edits were comments: restore the sources and mark the outputs current

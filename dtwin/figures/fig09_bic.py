@@ -15,7 +15,7 @@ from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.figures._style import PHYSICS_COLOR, R_COLOR, apply_style
 from dtwin.reference.crosscheck_result import CrosscheckResult
 
-__all__ = ["fig09_bic", "plot_bic"]
+__all__ = ["fig09_bic", "plot_bic", "bracket_checks", "start_stability"]
 
 #: K at which the paper (and both R experiments) find the BIC minimum (§5, Fig. 9).
 PAPER_K_MIN = 8
@@ -111,6 +111,87 @@ def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restar
     return figure
 
 
+def start_stability(table: pd.DataFrame) -> dict[str, Any]:
+    """Per data set: log-likelihood gained by the second half of the starts, per K and at most.
+
+    A gain near 0 means doubling the EM starts no longer finds a better optimum.
+    """
+    if "log_likelihood_half" not in table:
+        return {}
+    out = {}
+    for name, group in table.groupby("dataset", sort=False):
+        gain = group["log_likelihood"] - group["log_likelihood_half"]
+        out[name] = {
+            "n_starts": int(group["n_starts"].max()),
+            "gain_by_k": dict(zip(group["K"].astype(int), gain.round(6), strict=True)),
+            "max_gain": float(gain.max()),
+        }
+    return out
+
+
+def bracket_checks(table: pd.DataFrame) -> list[Check]:
+    """Return the checks: K = 4 is the dedicated fit (validity), the minimum is bracketed."""
+    if "source" not in table:
+        return []
+    given = table[table["source"] == "given"]
+    minima = table.loc[table.groupby("dataset", sort=False)["bic"].idxmin(), ["dataset", "K"]]
+    last = table.groupby("dataset", sort=False)["K"].max()
+    bracketed = {
+        row.dataset: int(row.K) < int(last[row.dataset]) - 1 for row in minima.itertuples()
+    }
+    return [
+        Check(
+            id="k4_point_is_the_dedicated_fit",
+            kind="validity",
+            statement="at K = hmm.n_states the BIC curve uses the dedicated fit of Figs. 4 and 7 "
+            "(one fit per data set: the figures and the curve agree exactly)",
+            expected="one given row per data set",
+            observed=dict(zip(given["dataset"], given["K"].astype(int), strict=True)),
+            passed=sorted(given["dataset"]) == sorted(table["dataset"].unique()),
+        ),
+        Check(
+            id="bic_minimum_bracketed",
+            kind="claim",
+            statement="project target: the sweep brackets the BIC minimum on both data sets "
+            "(K extended until the BIC rose twice in a row, at most to bic.k_max)",
+            expected="minimum below the last two K fitted",
+            observed={
+                name: {"k_min": int(k), "k_last": int(last[name])}
+                for name, k in zip(minima["dataset"], minima["K"], strict=True)
+            },
+            passed=all(bracketed.values()),
+        ),
+        _stability_check(table),
+    ]
+
+
+#: The best log-likelihood is "stable" when doubling the EM starts gains less than this.
+STABLE_LOGLIK = 1.0
+
+
+def _stability_check(table: pd.DataFrame) -> Check:
+    """Project target: the second half of the starts finds nothing better up to K* + 2."""
+    worst = {}
+    for name, group in table.groupby("dataset", sort=False):
+        k_star = int(group.loc[group["bic"].idxmin(), "K"])
+        near = group[group["K"] <= k_star + 2]
+        gain = near["log_likelihood"] - near["log_likelihood_half"]
+        worst[name] = {
+            "max_gain": round(float(gain.max()), 3),
+            "at_k": int(near.loc[gain.idxmax(), "K"]),
+        }
+    n_starts = int(table["n_starts"].max())
+    return Check(
+        id="best_loglik_stable_in_starts",
+        kind="claim",
+        statement=f"project target: the best log-likelihood is stable in the EM starts (best of "
+        f"{n_starts // 2} vs best of {n_starts}, every K up to K* + 2, both data sets)",
+        expected=f"gain < {STABLE_LOGLIK:g} log-likelihood units",
+        observed=worst,
+        passed=all(w["max_gain"] < STABLE_LOGLIK for w in worst.values()),
+    )
+
+
 def fig09_bic(
     table: pd.DataFrame,
     r_tables: Mapping[str, pd.DataFrame],
@@ -154,6 +235,7 @@ def fig09_bic(
             passed=bool((table["n_usable"] >= 1).all()),
         ),
         *crosscheck.checks,
+        *bracket_checks(table),
     ]
     for name, k_min in minima.items():
         checks.append(
@@ -183,6 +265,7 @@ def fig09_bic(
         "sweep": table.to_dict(orient="records"),
         "r_sweep": {name: r.to_dict(orient="records") for name, r in r_tables.items()},
         "formula_max_abs_deviation": crosscheck.metrics,
+        "best_of_half_vs_all_starts": start_stability(table),
         "still_decreasing_at_max_k": {
             name: bool(np.diff(group.sort_values("K")["bic"].to_numpy())[-1] < 0)
             for name, group in table.groupby("dataset", sort=False)

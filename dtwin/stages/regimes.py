@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from dtwin._validation import DtwinValueError
-from dtwin.hmm import HmmFit, ZScored, bic_by_k, fit_hmm, zscore
+from dtwin.hmm import HmmFit, ZScored, bic_by_k, bic_row, fit_hmm, zscore
 from dtwin.stages.settings import EmSettings, HmmSettings
 from dtwin.state_tables import posterior_matrix, state_labels
 from dtwin.wiring import RESIDUALS
@@ -36,6 +36,7 @@ __all__ = [
     "hmm_summary",
     "fit_nominal_regimes",
     "BIC_DATASETS",
+    "given_bic_row",
     "bic_sweep",
 ]
 
@@ -176,39 +177,67 @@ def fit_nominal_regimes(
     return states_table(residuals["t"], fit), hmm_summary(fit, scaled)
 
 
+def given_bic_row(model: Mapping[str, Any]) -> dict[str, Any]:
+    """Return the BIC-table row of a dedicated fit from its summary (:func:`hmm_summary`).
+
+    The nominal fit of Fig. 4 and the fault fit of Fig. 7 are the sweep's points at their K,
+    so that the figures and the BIC curve share one fit (``source = "given"``).
+    """
+    return bic_row(
+        model["n_states"],
+        pd.DataFrame(model["restarts"]),
+        model["n_params"],
+        model["bic"],
+        model["converged"],
+        "given",
+    )
+
+
 def bic_sweep(
     datasets: Mapping[str, pd.DataFrame],
     bic: Mapping[str, Any],
     hmm: Mapping[str, Any],
+    models: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> pd.DataFrame:
-    """BIC for every K of ``bic.ks`` on each data set (paper §5, Eq. (26); Fig. 9).
+    """BIC over K on each data set, extended until its minimum is bracketed (§5, Eq. (26)).
 
     Parameters
     ----------
     datasets : mapping of str to DataFrame
         Raw features per data set, keys from :data:`BIC_DATASETS` (each is z-scored here).
     bic : mapping
-        The ``bic`` section: ``ks`` and ``n_restarts`` (starts per K).
+        The ``bic`` section: ``ks`` (always fitted), ``n_restarts`` (starts per K; the best
+        of the first half is reported beside the best of all), optional ``k_max`` and
+        ``stop_after_rises`` (extend K past ``max(ks)`` until the BIC rose that many times in
+        a row, at most to ``k_max``).
     hmm : mapping
         The ``hmm`` section (``seed`` and the EM options).
+    models : mapping of str to dict, optional
+        Per data set, the summary (:func:`hmm_summary`) of its dedicated fit, used as the
+        sweep's point at that K (:func:`given_bic_row`).
 
     Returns
     -------
     DataFrame
-        Columns ``dataset``, ``n_features``, ``K``, ``log_likelihood``, ``n_params``,
-        ``bic``, ``converged``, ``n_usable``; one row per data set and K.
+        Columns ``dataset``, ``n_features`` and those of :func:`dtwin.hmm.bic_by_k`
+        (``K``, ``log_likelihood``, ``n_params``, ``bic``, ``converged``, ``n_usable``,
+        ``log_likelihood_half``, ``n_starts``, ``source``); one row per data set and K.
     """
     em_options = EmSettings.from_mapping(hmm).options()
     tables = []
     for name, features in datasets.items():
         if name not in BIC_DATASETS:
             raise DtwinValueError(f"datasets keys must be in {BIC_DATASETS} (got {name!r})")
+        model = (models or {}).get(name)
         start = time.perf_counter()
         table = bic_by_k(
             zscore(features).values,
             list(bic["ks"]),
             n_restarts=bic["n_restarts"],
             seed=hmm_seed(hmm, f"bic_{name}"),
+            k_max=bic.get("k_max"),
+            stop_after_rises=bic.get("stop_after_rises", 2),
+            given=None if model is None else {model["n_states"]: given_bic_row(model)},
             **em_options,
         )
         logger.info(

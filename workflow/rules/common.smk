@@ -109,6 +109,7 @@ wildcard_constraints:
     ma=r"[0-9.eE+-]+",
     mb=r"[0-9.eE+-]+",
     rep=r"[0-9]+",
+    chunk=r"[0-9]+",
 
 
 def sweep_value(value):
@@ -145,3 +146,32 @@ SENSITIVITY_JOB_PARAMS = {
     "correction": {m: config["sensitivity"]["correction"][m] for m in ("code", "paper")},
     "r_signals": config["sensitivity"]["r_signals"],
 }
+
+
+# --- claims across random draws (issue 12, Fig. 12): one job per chunk of draws ----------------
+
+
+def draw_chunks(draws):
+    """The chunk numbers of the configured draws (chunk c holds draws c*size … (c+1)*size − 1)."""
+    return range(-(-draws["n_draws"] // draws["chunk_size"]))
+
+
+def draw_chunk_files(draws):
+    """The result file of every chunk of draws."""
+    return expand("results/draws/chunk{chunk}.json", chunk=draw_chunks(draws))
+
+
+def draws_of_chunk(wildcards):
+    """The draw numbers of one chunk (params of claims_draws: a chunk reruns only if they change)."""
+    size, n_draws = config["draws"]["chunk_size"], config["draws"]["n_draws"]
+    first = int(wildcards.chunk) * size
+    return list(range(first, min(first + size, n_draws)))
+
+
+# What a draw depends on: every section of the single-draw run (not n_draws: adding draws must
+# not rerun the chunks that exist).
+DRAW_SECTIONS = {
+    key: config[key]
+    for key in ("simulation", "command", "twin", "arx", "faults", "hmm", "correction", "mcda")
+}
+DRAW_ACF = {k: config["acf"][k] for k in ("ljungbox_lags", "significance", "strong_lag1")}

@@ -66,12 +66,15 @@ rule fig04_hmm_posteriors:
 
 rule bic_sweep:
     message:
-        "Sweeping K = {params.bic[ks]} ({params.bic[n_restarts]} EM starts each) on the nominal "
-        "residuals and the fault features"
+        "Sweeping K = {params.bic[ks]} and on until the BIC rose {params.bic[stop_after_rises]} "
+        "times in a row (K <= {params.bic[k_max]}; {params.bic[n_restarts]} EM starts each) on "
+        "the nominal residuals and the fault features"
     input:
         lib=dtwin_sources("scripts/bic_sweep.py"),
         residuals=rules.residuals.output.residuals,
         fault_residuals=rules.fault_regimes.output.residuals,
+        nominal_model=rules.nominal_regimes.output.model,
+        fault_summary=rules.fault_regimes.output.summary,
     output:
         table="results/bic_sweep.csv",
     params:

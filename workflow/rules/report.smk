@@ -6,10 +6,14 @@ rule claims:
         "Gathering every artifact's claims, crosschecks and validity checks into CLAIMS.md"
     input:
         lib=dtwin_sources("scripts/claims.py"),
-        artifacts=[f"paper_figures/{a}.json" for a in (*PAPER_ARTIFACTS, "gap_benchmark")],
+        artifacts=[f"paper_figures/{a}.json" for a in (*PAPER_ARTIFACTS, *ARTIFACTS["project"])],
+        gap_table="results/gap/benchmark.csv",
     output:
         markdown="paper_figures/CLAIMS.md",
         json="paper_figures/claims.json",
+    params:
+        project=ARTIFACTS["project"],
+        interval=config["draws"]["interval"],
     log:
         "logs/claims.log",
     benchmark:

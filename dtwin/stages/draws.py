@@ -1,0 +1,171 @@
+"""Stage "draws" (issue 12): the single-draw part of the paper rerun for one random draw.
+
+The paper judges every claim on one random draw (R: seed 11). A *draw* here reruns that part
+with every random seed of the run derived from the draw number: simulate the asset (command
+steps and noise), fit the ARX surrogates, roll the chain out (§3, §4.1), fit the nominal
+K-state HMM (§4.2), inject the faults (SensorNoisy draws), fit and score the fault HMM
+(§4.4), correct the twin (§4.3) and select the MCDA actions (§5). Draw 0 uses the configured
+seeds themselves, so it *is* the main run; draw ``d > 0`` uses
+:func:`dtwin.sensitivity_sweep.replicate_seed` of each configured seed.
+
+The tables of one draw are returned in memory (:class:`DrawTables`); the claims are judged
+on them by :mod:`dtwin.figures._draw_claims`, with the criteria of the figures.
+Config sections: ``simulation``, ``command``, ``twin``, ``arx``, ``faults``, ``hmm``,
+``correction``, ``mcda``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import pandas as pd
+
+from dtwin._validation import DtwinValueError
+from dtwin.sensitivity_sweep import replicate_seed
+from dtwin.stages.correction import targeted_intervention
+from dtwin.stages.decisions import select_mcda_actions
+from dtwin.stages.faults import run_fault_scenario
+from dtwin.stages.regimes import fit_nominal_regimes
+from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
+
+__all__ = ["DrawSeeds", "draw_seeds", "DrawTables", "run_draw"]
+
+
+@dataclass(frozen=True)
+class DrawSeeds:
+    """The three seeds of one draw.
+
+    Attributes
+    ----------
+    draw : int
+        Draw number (0 = the configured seeds).
+    simulation : int
+        Seed of the asset simulation (command steps, process and sensor noise).
+    faults : int
+        Seed of the SensorNoisy noise draws.
+    hmm : int
+        Base seed of every EM start (``hmm.seed``; streams as in
+        :data:`dtwin.stages.regimes.SEED_STREAMS`).
+    """
+
+    draw: int
+    simulation: int
+    faults: int
+    hmm: int
+
+
+def draw_seeds(draw: int, simulation_seed: int, faults_seed: int, hmm_seed: int) -> DrawSeeds:
+    """Return the seeds of draw ``draw``: the configured ones for 0, derived ones otherwise.
+
+    Examples
+    --------
+    >>> draw_seeds(0, 11, 11, 123)
+    DrawSeeds(draw=0, simulation=11, faults=11, hmm=123)
+    >>> draw_seeds(1, 11, 11, 123).simulation != 11
+    True
+    """
+    if isinstance(draw, bool) or not isinstance(draw, int) or draw < 0:
+        raise DtwinValueError(f"draw must be an integer >= 0 (got {draw!r})")
+    return DrawSeeds(
+        draw=draw,
+        simulation=replicate_seed(int(simulation_seed), draw),
+        faults=replicate_seed(int(faults_seed), draw),
+        hmm=replicate_seed(int(hmm_seed), draw),
+    )
+
+
+@dataclass(frozen=True)
+class DrawTables:
+    """The tables of one draw (the same columns as the main run's ``results/`` files).
+
+    Attributes
+    ----------
+    seeds : DrawSeeds
+    physics, surrogate, residuals : DataFrame
+        ``results/physics.csv``, ``surrogate.csv``, ``residuals.csv`` of the draw.
+    theta : DataFrame
+        ``results/arx_theta.csv`` (``n_train``: the training window, samples).
+    nominal_model : dict
+        The nominal fit's summary (``results/regimes/nominal_model.json``).
+    fault_residuals, fault_surrogate, fault_posteriors : DataFrame
+        ``results/faults/residuals.csv``, ``surrogate.csv``, ``posteriors.csv``.
+    fault_summary : dict
+        ``results/faults/summary.json`` (the configured drift origin only).
+    correction_residuals, correction_metrics : DataFrame
+        ``results/correction/residuals.csv`` and ``metrics.csv``.
+    mcda_timeline : DataFrame
+        ``results/mcda/actions.csv``.
+    """
+
+    seeds: DrawSeeds
+    physics: pd.DataFrame
+    surrogate: pd.DataFrame
+    residuals: pd.DataFrame
+    theta: pd.DataFrame
+    nominal_model: dict[str, Any]
+    fault_residuals: pd.DataFrame
+    fault_surrogate: pd.DataFrame
+    fault_posteriors: pd.DataFrame
+    fault_summary: dict[str, Any]
+    correction_residuals: pd.DataFrame
+    correction_metrics: pd.DataFrame
+    mcda_timeline: pd.DataFrame
+
+
+def run_draw(draw: int, sections: Mapping[str, Mapping[str, Any]]) -> DrawTables:
+    """Rerun the single-draw part of the paper for draw ``draw``.
+
+    Parameters
+    ----------
+    draw : int
+        Draw number; 0 reproduces the main run exactly.
+    sections : mapping
+        The config sections ``simulation``, ``command``, ``twin``, ``arx``, ``faults``,
+        ``hmm``, ``correction``, ``mcda`` (each as in ``config/config.yaml``).
+
+    Returns
+    -------
+    DrawTables
+
+    Raises
+    ------
+    DtwinValueError
+        If a section is missing.
+    """
+    needed = ("simulation", "command", "twin", "arx", "faults", "hmm", "correction", "mcda")
+    missing = [name for name in needed if name not in sections]
+    if missing:
+        raise DtwinValueError(f"draws need the config section(s) {', '.join(missing)}")
+    s = sections
+    seeds = draw_seeds(draw, s["simulation"]["seed"], s["faults"]["seed"], s["hmm"]["seed"])
+    physics = simulate_asset({**s["simulation"], "seed": seeds.simulation}, s["command"], s["twin"])
+    theta = fit_twin_surrogates(physics, s["arx"])
+    surrogate, residuals = roll_out_twin(physics, theta, s["twin"], s["arx"]["rollout_init"])
+    hmm = {**s["hmm"], "seed": seeds.hmm}
+    _, nominal_model = fit_nominal_regimes(residuals, hmm)
+    faults = {**s["faults"], "seed": seeds.faults}
+    twin_keys = {k: s["twin"][k] for k in ("dt", "fusion", "kpi")}
+    scenario = run_fault_scenario(physics, surrogate, faults, hmm, twin_keys, both_origins=False)
+    corrected, metrics = targeted_intervention(
+        physics, scenario.surrogate, scenario.states, twin_keys, s["correction"]
+    )
+    mcda = select_mcda_actions(
+        scenario.residuals, scenario.posteriors, s["mcda"], s["twin"]["dt"]
+    ).timeline
+    return DrawTables(
+        seeds=seeds,
+        physics=physics,
+        surrogate=surrogate,
+        residuals=residuals,
+        theta=theta,
+        nominal_model=nominal_model,
+        fault_residuals=scenario.residuals,
+        fault_surrogate=scenario.surrogate,
+        fault_posteriors=scenario.posteriors,
+        fault_summary=scenario.summary,
+        correction_residuals=corrected,
+        correction_metrics=metrics,
+        mcda_timeline=mcda,
+    )
