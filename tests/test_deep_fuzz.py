@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
-from hypothesis import HealthCheck, example, given, settings
+from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
 from dtwin.cli import main
@@ -172,6 +172,7 @@ def test_hostile_recordings_exit_cleanly_without_warnings(case):
         out = folder / "out"
         args = ["diagnose", str(folder / "rec.csv"), "--twin", str(folder / "twin.yaml")]
         code, message, raised = run_quietly([*args, "--out", str(out), *options])
+        event(f"exit {code}")  # counts shown by `make fuzz` (--hypothesis-show-statistics)
         known = code == 3 and any(bug in message for bug in KNOWN_INTERNAL_ERRORS)
         assert code in (0, 2) or known, (label, message)
         assert "Traceback" not in message, label
@@ -188,6 +189,8 @@ def test_hostile_recordings_exit_cleanly_without_warnings(case):
             assert {"report.md", "gap.png"} <= {p.name for p in out.iterdir()}
             noted = [n for n in result["notes"] if n.startswith("warning while diagnosing")]
             assert all(n in (out / "report.md").read_text() for n in noted), label
+            for note in noted:
+                event(note.partition("): ")[2])
     assert peak_mb() < PEAK_MB, label
 
 
