@@ -14,6 +14,7 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 
@@ -99,23 +100,64 @@ def edit_config(workdir: Path, edit) -> None:
     path.write_text(yaml.safe_dump(config, sort_keys=False))
 
 
+#: What Snakemake 9 prints when a (dry) run has no job to execute (snakemake.common).
+NOTHING_TO_DO = "Nothing to be done (all requested files are present and up to date)."
+
+
 def job_counts(output: str) -> dict[str, int]:
-    """Jobs per rule from the job-stats table a (dry) run prints."""
+    """Jobs per rule from the job-stats table a (dry) run prints.
+
+    Returns ``{}`` only when Snakemake says there is nothing to be done; output that has
+    neither that line nor a job-stats table whose rows add up to its total fails the test, so a
+    changed or broken output can never read as "nothing to do".
+    """
     if "Job stats:" not in output:
-        return {}
-    table = output.split("Job stats:")[1].split("total")[0]
-    return {name: int(n) for name, n in re.findall(r"^(\w+)\s+(\d+)\s*$", table, flags=re.M)}
+        if NOTHING_TO_DO in output:
+            return {}
+        raise AssertionError(f"dry-run output has no job stats and no {NOTHING_TO_DO!r}:\n{output}")
+    table = output.split("Job stats:")[1]
+    counts = {
+        name: int(n)
+        for name, n in re.findall(r"^(\w+)\s+(\d+)\s*$", table.split("total")[0], flags=re.M)
+    }
+    total = re.search(r"^total\s+(\d+)\s*$", table, flags=re.M)
+    if not counts or total is None or sum(counts.values()) != int(total.group(1)):
+        raise AssertionError(f"unreadable job-stats table:\n{output}")
+    return counts
+
+
+def dry_run(workdir: Path, *targets: str) -> str:
+    """What `snakemake -n` prints (stdout and stderr: Snakemake logs to both)."""
+    result = snakemake(workdir, "-n", "--cores", "1", *targets)
+    return result.stdout + result.stderr
 
 
 def planned_jobs(workdir: Path, *targets: str) -> dict[str, int]:
     """Jobs per rule a dry run would execute, without `all`."""
-    counts = job_counts(snakemake(workdir, "-n", "--cores", "1", *targets).stdout)
+    counts = job_counts(dry_run(workdir, *targets))
     return {name: n for name, n in counts.items() if name != "all"}
 
 
 def planned_rules(workdir: Path) -> set[str]:
     """Rules a dry run would execute, without `all`."""
-    return set(job_counts(snakemake(workdir, "-n", "--cores", "1").stdout)) - {"all"}
+    return set(job_counts(dry_run(workdir))) - {"all"}
+
+
+def test_job_counts_refuses_output_it_cannot_parse():
+    """An empty or changed dry-run output fails; only Snakemake's own line means nothing to do."""
+    rows = [
+        "Job stats:",
+        "job       count",
+        "------  -------",
+        "claims        1",
+        "all           1",
+    ]
+    table = "\n".join([*rows, "total         2", ""])
+    assert job_counts(f"Building DAG of jobs...\n{table}") == {"claims": 1, "all": 1}
+    assert job_counts(f"Building DAG of jobs...\n{NOTHING_TO_DO}\n") == {}
+    for broken in ("", "Error: something else", table.replace("total         2", "total 3")):
+        with pytest.raises(AssertionError):
+            job_counts(broken)
 
 
 def shorten(config: dict) -> None:
@@ -277,6 +319,56 @@ def test_rerun_gives_byte_identical_tables_and_figures(workflow_copy):
     after = {str(path): path.read_bytes() for path in outputs}
     changed = [name for name in before if before[name] != after[name]]
     assert not changed
+
+
+def csv_bytes(table) -> bytes:
+    """The bytes `write_csv` would write for ``table`` (every table of the pipeline goes so)."""
+    return table.to_csv(index=False, float_format="%.12g").encode()
+
+
+def test_each_config_seed_gives_byte_identical_draws_and_another_seed_different_ones():
+    """Every random draw derives from a seed in the config: simulation.seed (command steps and
+    process noise), faults.seed (SensorNoisy noise), hmm.seed (EM starts) and the gap
+    benchmark's case seeds. Each stage is run twice with its seed and once with seed + 1."""
+    from dtwin.gap.generator import generate_case
+    from dtwin.stages.faults import inject_scenario
+    from dtwin.stages.regimes import fit_regimes
+    from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
+
+    config = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    config["simulation"]["T"] = 6.0
+    config["hmm"].update(n_restarts=2, max_iter=20)
+
+    def with_seed(section: str, seed: int) -> dict:
+        return {**config[section], "seed": seed}
+
+    def physics(seed: int):
+        return simulate_asset(with_seed("simulation", seed), config["command"], config["twin"])
+
+    nominal = physics(config["simulation"]["seed"])
+    theta = fit_twin_surrogates(nominal, config["arx"])
+    surrogate, _ = roll_out_twin(nominal, theta, config["twin"], "physics")
+
+    def faulted(seed: int):
+        return inject_scenario(nominal, surrogate, with_seed("faults", seed), config["twin"])[0]
+
+    residuals = inject_scenario(nominal, surrogate, config["faults"], config["twin"])[1]
+    features = residuals[["e1", "e2a", "e2b", "e4"]]
+
+    def em_fit(seed: int):
+        fit = fit_regimes(features, with_seed("hmm", seed), "fault_fit")[1]
+        return pd.DataFrame(fit.means).assign(log_likelihood=fit.log_likelihood)
+
+    draws = {
+        "simulation.seed": physics,
+        "faults.seed": faulted,
+        "hmm.seed": em_fit,
+        "gap case seed": lambda seed: generate_case("coulomb_friction", seed).recording,
+    }
+    for name, draw in draws.items():
+        first, again, other = (csv_bytes(draw(seed)) for seed in (11, 11, 12))
+        assert first == again, f"{name}: the same seed gave different bytes"
+        assert first != other, f"{name}: another seed gave the same bytes"
 
 
 def test_lint_is_clean(workflow_copy):
