@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import io
+import json
 import tempfile
 from pathlib import Path
 
@@ -195,6 +196,35 @@ def test_a_million_sample_recording_is_read_without_running_out_of_memory(tmp_pa
     peak_mb = int(done.stdout.strip().splitlines()[-1]) / 1024
     # measured 493 MB (2026-11-23; 228 MB at 250k samples): the bound leaves about 50 %
     assert peak_mb < 750, f"peak memory {peak_mb:.0f} MB"
+
+
+def test_a_warning_while_diagnosing_becomes_a_report_note_not_terminal_output(
+    tmp_path, monkeypatch
+):
+    """Users read warnings as failures: the CLI keeps them off stderr and notes them instead."""
+    import importlib
+    import warnings
+
+    module = importlib.import_module("dtwin.gap.diagnose")  # dtwin.gap.diagnose is also a function
+    real = module.diagnose
+
+    def diagnose_with_a_warning(*args, **kwargs):
+        warnings.warn("overflow encountered in matmul", RuntimeWarning, stacklevel=1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(module, "diagnose", diagnose_with_a_warning)
+    case = generate_case("none", 5, n_samples=300)
+    case.recording.to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "twin.yaml").write_text(yaml.safe_dump(case.twin))
+    args = ["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "twin.yaml")]
+    with warnings.catch_warnings(record=True) as escaped:
+        warnings.simplefilter("always")
+        code, message = run_cli([*args, "--out", str(tmp_path / "out")])
+    assert (code, message, escaped) == (0, "", [])
+    notes = json.loads((tmp_path / "out" / "diagnosis.json").read_text())["notes"]
+    noted = [n for n in notes if "RuntimeWarning: overflow encountered in matmul" in n]
+    assert len(noted) == 1 and noted[0].startswith("warning while diagnosing")
+    assert noted[0] in (tmp_path / "out" / "report.md").read_text()
 
 
 #: The EMPS rig (docs/gap.md §Bad input): measured data kept out of the repository; read from
