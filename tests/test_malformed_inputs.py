@@ -135,7 +135,12 @@ def test_diagnose_refuses_malformed_recordings_cleanly(frame):
 
 
 def test_the_spike_recording_finishes_under_a_two_gigabyte_cap(tmp_path):
-    """The recording that once asked for 28.9 GiB: exit 0 or 2 within 30 s under RLIMIT_AS 2 GB."""
+    """The recording that once asked for 28.9 GiB: exit 0 or 2 within 30 s under RLIMIT_AS 2 GB.
+
+    The 30 s are the child's CPU time (measured 2.6 s, imports included, 2026-11-23), not wall
+    time, which a loaded CI machine stretches; the wall-clock timeout only stops a hang.
+    """
+    import resource
     import subprocess
     import sys
 
@@ -147,14 +152,18 @@ def test_the_spike_recording_finishes_under_a_two_gigabyte_cap(tmp_path):
         "from dtwin.cli import main; sys.exit(main(sys.argv[1:]))"
     )
     args = ["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "twin.yaml")]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     done = subprocess.run(
         [sys.executable, "-c", script, *args, "--out", str(tmp_path / "out")],
         capture_output=True,
         text=True,
-        timeout=30,
+        timeout=300,
         cwd=REPO,
     )
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     assert done.returncode in (0, 2), done.stderr
+    cpu_s = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    assert cpu_s < 30, f"{cpu_s:.1f} s of CPU"
 
 
 def test_a_million_sample_recording_is_read_without_running_out_of_memory(tmp_path):
