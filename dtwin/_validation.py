@@ -21,6 +21,7 @@ __all__ = [
     "require_min_length",
     "require_mapping",
     "require_number",
+    "require_seed",
 ]
 
 
@@ -40,6 +41,22 @@ def require_number(name: str, value: Any) -> float:
     if not np.isfinite(value):
         raise DtwinValueError(f"{name} must be finite (got {value})")
     return value
+
+
+def require_seed(name: str, value: Any) -> int:
+    """Return ``value`` as a seed, an integer >= 0.
+
+    An integral float such as ``11.0`` counts, as it does for JSON Schema's ``integer``.
+
+    Examples
+    --------
+    >>> require_seed("simulation.seed", 11.0)
+    11
+    """
+    number = require_number(name, value)
+    if number < 0 or not number.is_integer():
+        raise DtwinValueError(f"{name} must be an integer >= 0 (got {value!r})")
+    return int(value)
 
 
 def require_positive(name: str, value: Any) -> float:

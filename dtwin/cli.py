@@ -6,9 +6,12 @@ Subcommands::
     dtwin generate EFFECT --seed N --out DIR [--magnitude M] [--n-samples N] [--module M]
 
 Bad input gets a one-line message on stderr and exit status 2, never a traceback; an unexpected
-failure gets exit status 3 (set ``DTWIN_DEBUG=1`` for the traceback). Output folders are written
-into a temporary folder beside ``DIR`` and renamed into place, so ``DIR`` is never half-written
-(:func:`dtwin.artifacts.atomic_write_folder`, beside :func:`~dtwin.artifacts.atomic_write`).
+failure gets exit status 3 (set ``DTWIN_DEBUG=1`` for the traceback). No Python warning reaches
+the terminal: a warning raised while diagnosing becomes a line in the report's notes (and in
+``diagnosis.json``), and every warning is logged at INFO (shown with ``--verbose``). Output
+folders are written into a temporary folder beside ``DIR`` and renamed into place, so ``DIR`` is
+never half-written (:func:`dtwin.artifacts.atomic_write_folder`, beside
+:func:`~dtwin.artifacts.atomic_write`).
 Like the Snakemake scripts it is a front end: it parses arguments and the twin file, then calls
 the library (:func:`dtwin.gap.diagnose`, :func:`dtwin.gap.generate_case`), which reads the
 recording itself (:func:`dtwin.gap.read_recording`).
@@ -17,13 +20,16 @@ recording itself (:func:`dtwin.gap.read_recording`).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import os
 import sys
+import warnings
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["main", "build_parser", "load_twin_file"]
+__all__ = ["main", "build_parser", "load_twin_file", "warning_notes"]
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 3
@@ -63,6 +69,35 @@ def _read_heldout(path: str):
         raise CliError(f"held-out {error}") from error
 
 
+def warning_notes(caught: Sequence[warnings.WarningMessage]) -> list[str]:
+    """Return one report note per distinct warning in ``caught`` (category, message, origin).
+
+    Examples
+    --------
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     for _ in range(2):
+    ...         warnings.warn_explicit("overflow", RuntimeWarning, "dtwin/gap/noise.py", 94)
+    >>> warning_notes(caught)  # doctest: +NORMALIZE_WHITESPACE
+    ['warning while diagnosing (the numbers it touches may be unreliable):
+      RuntimeWarning: overflow (noise.py:94, 2 times)']
+    """
+    counts = Counter(
+        (w.category.__name__, str(w.message), Path(w.filename).name, w.lineno) for w in caught
+    )
+    return [
+        "warning while diagnosing (the numbers it touches may be unreliable): "
+        f"{category}: {message} ({filename}:{line}{f', {n} times' if n > 1 else ''})"
+        for (category, message, filename, line), n in counts.items()
+    ]
+
+
+def _with_warning_notes(result, caught: Sequence[warnings.WarningMessage]):
+    """Return the diagnosis with one note per distinct warning caught while it was made."""
+    notes = warning_notes(caught)
+    return dataclasses.replace(result, notes=(*result.notes, *notes)) if notes else result
+
+
 def _diagnose(args: argparse.Namespace) -> int:
     from dtwin.artifacts import atomic_write_folder
     from dtwin.gap.diagnose import diagnose, twin_discretisation, twin_from_mapping
@@ -86,6 +121,7 @@ def _diagnose(args: argparse.Namespace) -> int:
         discretisation=twin_discretisation(twin_content),
         heldout=heldout,
     )
+    result = _with_warning_notes(result, getattr(args, "warnings_caught", ()))
     atomic_write_folder(args.out, lambda tmp: write_report(result, tmp))
     shrink = f", excess gap −{result.shrink_pct:.0f} %" if result.shrink_pct is not None else ""
     print(f"{result.module or '-'}: {result.effect}{shrink} -> {args.out}")
@@ -194,7 +230,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         format="%(levelname)s %(name)s: %(message)s",
     )
     try:
-        return args.run(args)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            args.warnings_caught = caught  # `diagnose` turns them into report notes
+            try:
+                return args.run(args)
+            finally:
+                for message in warning_notes(caught):
+                    logger.info(message)
     except (CliError, DtwinValueError, DtwinTypeError) as error:
         print(f"dtwin {args.command}: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT

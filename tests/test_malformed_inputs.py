@@ -14,17 +14,22 @@ from __future__ import annotations
 import contextlib
 import copy
 import io
+import json
 import tempfile
 from pathlib import Path
 
 import jsonschema
 import numpy as np
 import pandas as pd
+import pytest
 import yaml
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
+from dtwin._validation import DtwinTypeError, DtwinValueError
 from dtwin.cli import main
+from dtwin.gap.generator import generate_case
+from dtwin.gap.recording import OUTLIER_GAP, outlier_mask, read_recording, recording_from_frame
 from dtwin.params import command_params_from_mapping, twin_params_from_mapping
 from tests.conftest import REPO, n_examples
 
@@ -130,7 +135,12 @@ def test_diagnose_refuses_malformed_recordings_cleanly(frame):
 
 
 def test_the_spike_recording_finishes_under_a_two_gigabyte_cap(tmp_path):
-    """The recording that once asked for 28.9 GiB: exit 0 or 2 within 30 s under RLIMIT_AS 2 GB."""
+    """The recording that once asked for 28.9 GiB: exit 0 or 2 within 30 s under RLIMIT_AS 2 GB.
+
+    The 30 s are the child's CPU time (measured 2.6 s, imports included, 2026-11-23), not wall
+    time, which a loaded CI machine stretches; the wall-clock timeout only stops a hang.
+    """
+    import resource
     import subprocess
     import sys
 
@@ -142,14 +152,18 @@ def test_the_spike_recording_finishes_under_a_two_gigabyte_cap(tmp_path):
         "from dtwin.cli import main; sys.exit(main(sys.argv[1:]))"
     )
     args = ["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "twin.yaml")]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     done = subprocess.run(
         [sys.executable, "-c", script, *args, "--out", str(tmp_path / "out")],
         capture_output=True,
         text=True,
-        timeout=30,
+        timeout=300,
         cwd=REPO,
     )
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     assert done.returncode in (0, 2), done.stderr
+    cpu_s = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    assert cpu_s < 30, f"{cpu_s:.1f} s of CPU"
 
 
 def test_a_million_sample_recording_is_read_without_running_out_of_memory(tmp_path):
@@ -193,6 +207,120 @@ def test_a_million_sample_recording_is_read_without_running_out_of_memory(tmp_pa
     assert peak_mb < 750, f"peak memory {peak_mb:.0f} MB"
 
 
+def test_a_warning_while_diagnosing_becomes_a_report_note_not_terminal_output(
+    tmp_path, monkeypatch
+):
+    """Users read warnings as failures: the CLI keeps them off stderr and notes them instead."""
+    import importlib
+    import warnings
+
+    module = importlib.import_module("dtwin.gap.diagnose")  # dtwin.gap.diagnose is also a function
+    real = module.diagnose
+
+    def diagnose_with_a_warning(*args, **kwargs):
+        warnings.warn("overflow encountered in matmul", RuntimeWarning, stacklevel=1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(module, "diagnose", diagnose_with_a_warning)
+    case = generate_case("none", 5, n_samples=300)
+    case.recording.to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "twin.yaml").write_text(yaml.safe_dump(case.twin))
+    args = ["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "twin.yaml")]
+    with warnings.catch_warnings(record=True) as escaped:
+        warnings.simplefilter("always")
+        code, message = run_cli([*args, "--out", str(tmp_path / "out")])
+    assert (code, message, escaped) == (0, "", [])
+    notes = json.loads((tmp_path / "out" / "diagnosis.json").read_text())["notes"]
+    noted = [n for n in notes if "RuntimeWarning: overflow encountered in matmul" in n]
+    assert len(noted) == 1 and noted[0].startswith("warning while diagnosing")
+    assert noted[0] in (tmp_path / "out" / "report.md").read_text()
+
+
+#: The EMPS rig (docs/gap.md §Bad input): measured data kept out of the repository; read from
+#: ../shared/realdata/emps/ beside the checkout where present.
+EMPS = REPO.parent / "shared" / "realdata" / "emps"
+
+
+@pytest.mark.parametrize("column", ["u_cmd", "u_act", "x", "y_A", "y_B", "y_fused", "z"])
+@pytest.mark.parametrize("size", [1e3, 1e6, 1e9, 1e12, 1e15])
+def test_a_spike_of_any_size_in_any_column_is_refused_naming_column_row_and_size(column, size):
+    """The issue's spikes gave `unexplained`, `none` or an internal error by size; now one rule."""
+    frame = generate_case("none", 3, n_samples=300).recording
+    spread = float(np.ptp(frame[column]))
+    frame.loc[41, column] += size * spread
+    with pytest.raises(DtwinValueError) as error:
+        recording_from_frame(frame)
+    message = str(error.value)
+    assert f"recording column '{column}' has 1 isolated outlier" in message
+    assert "at row 42" in message and "× the bulk's spread" in message
+    assert "\n" not in message
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_value_just_inside_the_gap_passes_and_just_beyond_is_refused(sign):
+    """The rule is a threshold on the empty gap: 0.9 and 1.1 times OUTLIER_GAP spreads."""
+    x = np.sin(np.arange(400) / 7.0)
+    low, high = np.quantile(x, [0.01, 0.99])
+    edge = high if sign > 0 else low
+    for factor, refused in ((0.9, False), (1.1, True)):
+        spiked = x.copy()
+        spiked[100] = edge + sign * factor * OUTLIER_GAP * (high - low)
+        assert outlier_mask(spiked)[100] == refused
+        assert outlier_mask(spiked).sum() == refused
+
+
+@pytest.mark.parametrize(
+    ("module", "output"),
+    [("M0", "u_act"), ("M1", "x"), ("M2a", "y_A"), ("M2b", "y_B"), ("M3", "y_fused"), ("M4", "z")],
+)
+def test_a_dead_output_channel_is_refused_like_a_constant_input(tmp_path, module, output):
+    """An output zero throughout read `none` (the twin "matched" a dead sensor): now exit 2."""
+    frame = generate_case("none", 4, n_samples=300).recording.drop(columns="v")
+    frame[output] = 0.0
+    if output == "x":  # x is also an input (M2a, M2b, M4): keep only M1 to test its output
+        frame = frame[["t", "u_act", "x"]]
+    frame.to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "twin.yaml").write_text(yaml.safe_dump(TWIN))
+    args = ["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "twin.yaml")]
+    code, message = run_cli([*args, "--out", str(tmp_path / "out")])
+    assert code == 2 and not (tmp_path / "out").exists()
+    assert f"'{output}' (output of {module}) must vary" in message and "constant 0" in message
+
+
+def test_steps_pulses_clipping_and_heavy_tails_are_not_outliers():
+    """What real rigs record: square-wave commands, 5-sample force pulses of 3x the command,
+    a clipped stretch, a quantized sensor and Student-t(3) noise (largest gap over 2000 draws
+    of 200 samples: 6.0 spreads, measured 2026-11-23; the threshold is 10)."""
+    rng = np.random.default_rng(5)
+    n = 2000
+    t = np.arange(n) * 0.001
+    command = np.sign(np.sin(2 * np.pi * 2.0 * t)) + 0.01 * rng.standard_normal(n)
+    pulses = np.zeros(n)
+    for start in (300, 900, 1500):
+        pulses[start : start + 5] = 3.0
+    position = np.clip(np.cumsum(command) * 1e-3, -0.05, 0.05)
+    signals = {
+        "u_cmd": command,
+        "u_act": command + pulses,
+        "x": position,
+        "y_A": np.round(position, 3),
+        "y_B": position + 0.01 * rng.standard_t(3, size=n),
+    }
+    for name, values in signals.items():
+        assert not outlier_mask(values).any(), name
+    recording_from_frame(pd.DataFrame({"t": t, **signals}))
+
+
+@pytest.mark.skipif(not EMPS.is_dir(), reason=f"EMPS data not present at {EMPS}")
+@pytest.mark.parametrize("name", ["recording_train.csv", "recording_pulses.csv"])
+def test_the_emps_rig_with_force_pulses_passes_validation(name):
+    """A real ball-screw axis with force pulses: largest gap measured 0.085 spreads (pulses)."""
+    recording = read_recording(EMPS / name)
+    assert recording.n_samples == 24841
+    for values in recording.signals.values():
+        assert not outlier_mask(values).any()
+
+
 SCHEMA = yaml.safe_load((REPO / "workflow" / "schemas" / "config.schema.yaml").read_text())
 CONFIG = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
 
@@ -205,7 +333,54 @@ def leaf_paths(node, prefix=()):
         yield prefix
 
 
-LEAVES = [path for path in leaf_paths(CONFIG) if path[0] in ("simulation", "command", "twin")]
+def parse_with_the_library(config: dict) -> None:
+    """Parse every config section with the library's own checks, as the stage scripts do.
+
+    ``acf`` and ``bic`` have no parser of their own (their values go straight into
+    statsmodels and the K sweep); their numbers are checked through the functions they feed.
+    """
+    from dtwin._validation import require_seed
+    from dtwin.arx import arx_orders_from_mapping
+    from dtwin.bias_correction import exponential_moving_average, rate_limit
+    from dtwin.command import n_steps_for
+    from dtwin.fault_injection import fault_schedule
+    from dtwin.gap.diagnose import GapSettings
+    from dtwin.residual_stats import white_noise_band
+    from dtwin.sensitivity_sweep import sweep_grid
+    from dtwin.stages.decisions import mcda_settings_from_mapping
+    from dtwin.stages.faults import fault_magnitudes
+    from dtwin.stages.settings import HmmSettings
+
+    twin = twin_params_from_mapping(config["twin"])
+    n_steps_for(config["simulation"]["T"], twin.dt)
+    require_seed("simulation.seed", config["simulation"]["seed"])
+    require_seed("faults.seed", config["faults"]["seed"])
+    command_params_from_mapping(config["command"])
+    arx_orders_from_mapping(config["arx"])
+    white_noise_band(config["acf"]["white_noise_n"])
+    HmmSettings.from_mapping(config["hmm"])
+    HmmSettings.from_mapping(
+        {**config["hmm"], **config["bic"], "n_states": max(config["bic"]["ks"])}, "bic"
+    )
+    signal = np.linspace(0.0, 1.0, 10)
+    exponential_moving_average(signal, config["correction"]["ema_alpha"])
+    rate_limit(signal, config["correction"]["rate_max"])
+    fault_schedule(config["faults"]["schedule"])
+    fault_magnitudes(config["faults"])
+    mcda_settings_from_mapping(config["mcda"])
+    sweep = config["sensitivity"]
+    sweep_grid(
+        sweep["alphas"], sweep["sensor_A_mults"], sweep["sensor_B_mults"], sweep["n_replicates"]
+    )
+    HmmSettings.from_mapping(sweep["hmm"], "sensitivity.hmm")
+    settings = dict(config["gap"]["diagnose"])  # as scripts/gap_diagnose.py splits them
+    settings.pop("train_frac", None), settings.pop("calibrate", None)
+    GapSettings.from_mapping(settings)
+
+
+#: Every leaf of every config section (lists are leaves: a whole list is replaced).
+LEAVES = list(leaf_paths(CONFIG))
+assert {path[0] for path in LEAVES} == set(CONFIG), "a config section has no leaf to fuzz"
 bad_value = st.one_of(
     st.just(None),
     st.text(max_size=5),
@@ -217,7 +392,11 @@ bad_value = st.one_of(
 )
 
 
-@settings(max_examples=n_examples(150), deadline=None)
+def test_the_default_config_parses_with_the_library():
+    parse_with_the_library(copy.deepcopy(CONFIG))
+
+
+@settings(max_examples=n_examples(300), deadline=None)
 @given(st.sampled_from(LEAVES), st.one_of(bad_value, st.just("<delete>")))
 def test_schema_and_library_agree_on_malformed_configs(path, value):
     config = copy.deepcopy(CONFIG)
@@ -233,6 +412,12 @@ def test_schema_and_library_agree_on_malformed_configs(path, value):
         dotted = ".".join(str(p) for p in path)
         reported = [".".join(str(p) for p in e.absolute_path) for e in errors]
         assert any(dotted.startswith(r) for r in reported), (dotted, reported)
-    else:  # the schema accepts: the library must too, with no traceback from deep inside
-        twin_params_from_mapping(config["twin"])
-        command_params_from_mapping(config["command"])
+        return
+    # the schema accepts: the library must too. Two known exceptions get the library's own
+    # one-line error instead: an integral float such as `n_states: 4.0` (a JSON Schema integer,
+    # not an integer count for the library) and simulation.T / twin.dt giving < 2 samples.
+    try:
+        parse_with_the_library(config)
+    except (DtwinValueError, DtwinTypeError):
+        integral_float = isinstance(value, float) and value.is_integer()
+        assert integral_float or path in (("twin", "dt"), ("simulation", "T")), (path, value)

@@ -547,6 +547,8 @@ def _score_candidates(work: _ModuleWork, n_train: int, settings: GapSettings):
                 weight=0.0,
             )
         )
+    if not reports:  # a calibrated M3 or M4: no candidate once parameter_mismatch is out
+        return []
     best = min(r.score for r in reports)
     weights = np.array([math.exp(-(r.score - best) / 2.0) for r in reports])
     weights /= weights.sum()
@@ -673,6 +675,8 @@ def _choose(flagged: list[_ModuleWork], ranked: Mapping[str, list], settings: Ga
     source = max(flagged, key=lambda w: w.gap_cal / w.threshold) if flagged else None
     chosen = None
     if source is not None:
+        if not ranked[source.name]:
+            return source, None
         best = ranked[source.name][0]
         chosen = best if best.heldout_shrink_pct >= 100 * settings.min_share else None
     return source, chosen
@@ -817,6 +821,8 @@ def _heldout_series(rec: Recording, source, ranked, held: slice) -> dict[str, np
         "recorded": source.data.output[held],
         "before": source.sim_before[held],
     }
+    if not ranked[source.name]:
+        return series
     best_prediction = next(
         p for e, f, p, g in source.candidates if e.name == ranked[source.name][0].effect
     )

@@ -27,6 +27,9 @@ from dtwin.wiring import MODULES, SIGNALS
 
 __all__ = [
     "MIN_SAMPLES",
+    "OUTLIER_GAP",
+    "OUTLIER_QUANTILE",
+    "MAX_MAGNITUDE",
     "STEP_TOLERANCE",
     "Recording",
     "read_recording",
@@ -40,6 +43,15 @@ logger = logging.getLogger(__name__)
 MIN_SAMPLES = 200
 #: Largest allowed deviation of one time step from dt, as a fraction of dt (rounding aside).
 STEP_TOLERANCE = 0.01
+#: Outlier rule (docs/gap.md §Bad input): the bulk of a column is its values between the
+#: ``OUTLIER_QUANTILE`` and ``1 − OUTLIER_QUANTILE`` quantiles, and its spread the width of that
+#: range; values beyond an empty gap wider than ``OUTLIER_GAP`` spreads (on either side of the
+#: bulk) are isolated outliers, and the recording is refused.
+OUTLIER_QUANTILE = 0.01
+#: Widest empty gap between the bulk of a column and its extreme values, in spreads of the bulk.
+OUTLIER_GAP = 10.0
+#: Largest magnitude a signal value may have (its square must stay far from float64 overflow).
+MAX_MAGNITUDE = 1e100
 _MAX_ROWS_LISTED = 5
 
 
@@ -150,6 +162,91 @@ def _check_time(t: np.ndarray, resolution: float) -> float:
     return dt
 
 
+def outlier_mask(values: np.ndarray) -> np.ndarray:
+    """Return which samples of one column are isolated outliers (docs/gap.md §Bad input).
+
+    Parameters
+    ----------
+    values : numpy.ndarray, shape (n_samples,)
+        Finite values of one column.
+
+    Returns
+    -------
+    numpy.ndarray of bool, shape (n_samples,)
+        True where a value lies beyond an empty gap wider than :data:`OUTLIER_GAP` times the
+        spread of the column's bulk (its central ``1 − 2·OUTLIER_QUANTILE`` of values). A spike
+        is refused whatever its size once it clears that gap; steps, pulses and clipped stretches
+        fill the range between their levels with at least 1 % of the samples (or with rising and
+        falling edges) and are not outliers.
+
+    Examples
+    --------
+    >>> x = np.sin(np.arange(300) / 10.0)
+    >>> x[7] = 1e11
+    >>> np.flatnonzero(outlier_mask(x))
+    array([7])
+    >>> bool(outlier_mask(np.sign(np.sin(np.arange(300) / 10.0))).any())
+    False
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        low, high = np.quantile(values, [OUTLIER_QUANTILE, 1.0 - OUTLIER_QUANTILE])
+        allowed = OUTLIER_GAP * (high - low)
+        mask = np.zeros(len(values), dtype=bool)
+        for sign, edge in ((1.0, high), (-1.0, low)):
+            beyond = np.sort(sign * values[sign * values > sign * edge])
+            if beyond.size == 0:
+                continue
+            gaps = np.diff(beyond, prepend=sign * edge)
+            wide = np.flatnonzero(gaps > allowed)
+            if wide.size:
+                mask |= sign * values >= beyond[wide[0]]
+    return mask
+
+
+def _check_outliers(name: str, values: np.ndarray) -> None:
+    huge = np.abs(values) > MAX_MAGNITUDE
+    if huge.any():
+        raise DtwinValueError(
+            f"recording column '{name}' must have values within ±{MAX_MAGNITUDE:g} (got "
+            f"{values[huge][0]:.3g} at {_rows(huge)})"
+        )
+    mask = outlier_mask(values)
+    if not mask.any():
+        return
+    bulk = values[~mask]
+    low, high = float(bulk.min()), float(bulk.max())
+    spread = float(np.subtract(*np.quantile(values, [1.0 - OUTLIER_QUANTILE, OUTLIER_QUANTILE])))
+    worst = values[mask][np.argmax(np.abs(values[mask] - np.median(values)))]
+    distance = max(worst - high, low - worst)
+    size = (
+        f"{distance / spread:.2g}× the bulk's spread {spread:.3g}"
+        if spread > 0
+        else (f"the other values are all {low:.6g}")
+    )
+    count = int(mask.sum())
+    raise DtwinValueError(
+        f"recording column '{name}' has {count} isolated outlier{'s' if count > 1 else ''} "
+        f"(worst {worst:.3g}, {size}) at {_rows(mask)}; values beyond a gap of {OUTLIER_GAP:g} "
+        "spreads from the bulk are refused: remove or repair them"
+    )
+
+
+def _check_used_signals(signals: Mapping[str, np.ndarray], modules: list[str]) -> None:
+    """Refuse outliers in any signal a diagnosable module uses, and a constant module output."""
+    used = [m for m in MODULES if m.name in modules]
+    names = {s for m in used for s in (*m.inputs, m.output) if s in signals}
+    for name in (s for s in SIGNALS if s in names):
+        _check_outliers(name, signals[name])
+    for module in used:
+        values = signals[module.output]
+        if float(np.ptp(values)) <= 1e-12 * float(np.max(np.abs(values))):
+            raise DtwinValueError(
+                f"recording column '{module.output}' (output of {module.name}) must vary over "
+                f"the recording (got the constant {values[0]:g}); a dead channel cannot be "
+                "diagnosed"
+            )
+
+
 def recording_from_frame(frame: pd.DataFrame) -> Recording:
     """Return a validated :class:`Recording` from a table with column ``t`` and module signals.
 
@@ -197,6 +294,7 @@ def recording_from_frame(frame: pd.DataFrame) -> Recording:
     resolution = _time_resolution(frame["t"])
     t = _numeric_column("t", frame["t"])
     dt = _check_time(t, resolution)
+    _check_used_signals(signals, modules)
     if ignored:
         logger.info("ignoring recording columns that are not module signals: %s", ignored)
     return Recording(t=t, dt=dt, signals=signals, ignored=ignored, time_resolution=resolution)

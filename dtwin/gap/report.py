@@ -204,13 +204,14 @@ def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
         t, recorded = d.series["t"], d.series["recorded"]
         after_label = "twin + effect" if d.effect != "unexplained" else "twin + best candidate"
         ax.plot(t, recorded - d.series["before"], color="tab:red", lw=0.8, label="recorded − twin")
-        ax.plot(
-            t,
-            recorded - d.series["after"],
-            color="tab:green",
-            lw=0.8,
-            label=f"recorded − ({after_label})",
-        )
+        if "after" in d.series:  # no candidate (a calibrated M3 or M4): nothing to add
+            ax.plot(
+                t,
+                recorded - d.series["after"],
+                color="tab:green",
+                lw=0.8,
+                label=f"recorded − ({after_label})",
+            )
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_xlabel("t (s), held-out part")
         ax.set_ylabel(f"{d.module} output error (recording units)")

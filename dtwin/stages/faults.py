@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dtwin._validation import require_seed
 from dtwin.fault_injection import (
     DRIFT_ORIGINS,
     REGIMES,
@@ -85,7 +86,7 @@ def inject_scenario(
     """
     faulted = inject_faults(
         surrogate,
-        np.random.default_rng(faults["seed"]),
+        np.random.default_rng(require_seed("faults.seed", faults["seed"])),
         alpha=twin["fusion"]["alpha"],
         w1=twin["kpi"]["w1"],
         w2=twin["kpi"]["w2"],

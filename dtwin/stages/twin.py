@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dtwin._validation import require_seed
 from dtwin.arx import arx_orders_from_mapping
 from dtwin.command import make_command, n_steps_for
 from dtwin.params import command_params_from_mapping, twin_params_from_mapping
@@ -41,7 +42,7 @@ def simulate_asset(
     """
     twin_params = twin_params_from_mapping(twin)
     n_steps = n_steps_for(simulation["T"], twin_params.dt)
-    rng = np.random.default_rng(simulation["seed"])
+    rng = np.random.default_rng(require_seed("simulation.seed", simulation["seed"]))
     u_cmd = make_command(n_steps, twin_params.dt, command_params_from_mapping(command), rng)
     return simulate_physics(twin_params, u_cmd, rng)
 
