@@ -27,7 +27,7 @@ MAX_HEIGHT = 9.0
 #: Allowed widths: full width (7.0–7.5 in) or one column (3.4–3.6 in).
 WIDTHS: tuple[tuple[float, float], ...] = ((7.0, 7.5), (COLUMN_WIDTH - 0.1, COLUMN_WIDTH + 0.1))
 #: Two texts overlap when their boxes share more than this share of the smaller box's area.
-OVERLAP_SHARE = 0.05
+OVERLAP_SHARE = 0.01
 #: Slack at the page edge before a text counts as off the page, pixels at the figure's dpi.
 EDGE_SLACK_PX = 1.0
 

@@ -89,7 +89,7 @@ def plot_hmm_posteriors(states: pd.DataFrame, summary: Mapping[str, Any]) -> Fig
     _stack(ax_s, t, smoothed, labels)
     panel_title(ax_s, "A", r"Smoothed posteriors $\gamma_t(k) = P(S_t = k \mid e_{1:T})$")
     ax_s.tick_params(labelbottom=False)
-    ax_s.legend(ncol=len(labels), loc="lower right", bbox_to_anchor=(1, 1.0), borderaxespad=0)
+    figure.legend(*ax_s.get_legend_handles_labels(), ncol=len(labels), loc="outside upper right")
     ax_f = figure.add_subplot(grid[1, 0], sharex=ax_s)
     filtered = posterior_matrix(states, "filtered").argmax(1)
     differs = np.where(filtered != smoothed.argmax(1), filtered, -1)

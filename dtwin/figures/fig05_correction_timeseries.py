@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping
 from typing import Any
 
@@ -59,19 +60,22 @@ def _clip_spikes(ax: Axes, t: np.ndarray, series: list[np.ndarray]) -> None:
         return
     limit = 1.6 * bulk
     ax.set_ylim(-limit, limit)
-    worst = series[0]
-    for index in np.flatnonzero(np.abs(worst) > limit)[:2]:
-        sign = np.sign(worst[index])
-        ax.annotate(
-            f"{worst[index]:.2f}",
-            (t[index], sign * limit),
-            xytext=(6, -sign * 8),
-            textcoords="offset points",
-            ha="left",
-            va="center",
-            fontsize=7,
-            arrowprops={"arrowstyle": "->", "lw": 0.6, "color": "#333333"},
-        )
+    worst = max(series, key=lambda v: float(np.max(np.abs(v))))
+    clipped = np.flatnonzero(np.abs(worst) > limit)
+    index = int(clipped[np.argmax(np.abs(worst[clipped]))])
+    sign = np.sign(worst[index])
+    extra = f" ({clipped.size} clipped)" if clipped.size > 1 else ""
+    ax.annotate(
+        f"{worst[index]:.2f}{extra}",
+        (t[index], sign * limit),
+        xytext=(6, -sign * 8),
+        textcoords="offset points",
+        ha="left",
+        va="center",
+        fontsize=7,
+        arrowprops={"arrowstyle": "->", "lw": 0.6, "color": "#333333"},
+        in_layout=False,
+    )
 
 
 def plot_correction_timeseries(
@@ -113,15 +117,7 @@ def plot_correction_timeseries(
         )
         ax.set_ylabel(axis_label(e))
         if causes and e in causes:
-            ax.text(
-                0.01,
-                0.03,
-                causes[e].replace(". Cause: ", ".\nCause: "),
-                transform=ax.transAxes,
-                fontsize=7,
-                va="bottom",
-                bbox={"facecolor": "white", "alpha": 0.85, "lw": 0, "pad": 1.0},
-            )
+            _print_cause(ax, causes[e])
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
     handles, labels = axes[0, 0].get_legend_handles_labels()
@@ -129,6 +125,21 @@ def plot_correction_timeseries(
     labels += [r for r, _, _ in _unique(spans)]
     figure.legend(handles, labels, loc="outside upper center", ncol=6)
     return figure
+
+
+def _print_cause(ax: Axes, cause: str) -> None:
+    """Write ``cause`` in head-room added above the data, so it hides none of the curves."""
+    low, high = ax.get_ylim()
+    ax.set_ylim(low, high + 0.75 * (high - low))
+    ax.text(
+        0.01,
+        0.98,
+        textwrap.fill(cause, 52),
+        transform=ax.transAxes,
+        fontsize=7,
+        va="top",
+        in_layout=False,
+    )
 
 
 def _unique(spans):

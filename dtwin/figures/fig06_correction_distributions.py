@@ -13,7 +13,14 @@ from scipy.stats import gaussian_kde
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.figures._correction_cause import unchanged_cause, window_stats
 from dtwin.figures._correction_metrics import metrics_beside_r
-from dtwin.figures._style import AFTER_COLOR, BEFORE_COLOR, axis_label, new_figure, panel_title
+from dtwin.figures._style import (
+    AFTER_COLOR,
+    BEFORE_COLOR,
+    RESIDUAL_UNITS,
+    axis_label,
+    new_figure,
+    panel_title,
+)
 from dtwin.wiring import MODULES, RESIDUALS
 
 __all__ = [
@@ -108,7 +115,8 @@ def plot_correction_distributions(
         ax.set_ylim(bottom=0)
         panel_title(ax, chr(ord("A") + index), f"{module.name} {module.title}")
         ax.set_xlabel(axis_label(e))
-        ax.set_ylabel("density")
+        unit = RESIDUAL_UNITS[e]
+        ax.set_ylabel(f"density (1/{unit})" if " " not in unit else f"density (per {unit[:-1]})")
         ax.legend(loc="upper right", handlelength=1.2)
         if causes and e in causes:
             ax.text(

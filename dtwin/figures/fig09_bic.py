@@ -53,18 +53,18 @@ def _draw(ax, curves) -> None:
             _min_label(curve, who),
             (best["K"], 0),
             textcoords="offset points",
-            xytext=(-8, 8) if who == "ours" else (-8, 22),
-            ha="right",
-            va="bottom",
+            xytext=(-8, 8) if who == "ours" else (0, -7),
+            ha="right" if who == "ours" else "center",
+            va="bottom" if who == "ours" else "top",
             color=color,
             fontsize=7,
-            arrowprops={"arrowstyle": "-", "lw": 0.5, "color": color},
+            arrowprops={"arrowstyle": "-", "lw": 0.5, "color": color} if who == "ours" else None,
         )
         top = max(top, float(relative[curve["K"] >= K_ZOOM].max()))
     ks = sorted(set().union(*(set(c["K"]) for _, c, _, _ in curves)))
     ax.set_xticks([k for k in ks if k >= K_ZOOM])
     ax.set_xlim(K_ZOOM - 0.4, max(ks) + 0.4)
-    ax.set_ylim(-0.06 * top, 1.08 * top)
+    ax.set_ylim(-0.16 * top, 1.08 * top)
 
 
 def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restarts: int) -> Figure:

@@ -181,7 +181,7 @@ def gap_benchmark(
     targets: Mapping[str, float],
     no_effect: str = "none",
 ) -> FigureArtifact:
-    """The ``gap_benchmark`` artifact: the figure, the benchmark's metrics and its checks.
+    """Return the ``gap_benchmark`` artifact: the figure, the benchmark's metrics, its checks.
 
     Parameters
     ----------
