@@ -19,6 +19,19 @@ from dtwin.state_tables import posterior_matrix
 __all__ = ["fig04_hmm_posteriors", "plot_hmm_posteriors"]
 
 
+#: Where R's nominal fit comes from, and why it compares in magnitude only.
+R_NOTE = (
+    "R's nominal K=4 fit (ARX_vs_Phys.R, one start, seed 123) runs on R's own noise "
+    "draws (and zero-seeded rollouts): the same size of problem, not the same data, "
+    "so the numbers are comparable in magnitude only"
+)
+#: What the figure is drawn from (the JSON's ``figure.provenance``).
+PROVENANCE = (
+    "results/regimes/nominal_states.csv and nominal_model.json (nominal_regimes rule); "
+    "crosscheck on R's fault features"
+)
+
+
 def _stack(ax: Axes, t: np.ndarray, posteriors: np.ndarray, labels: list[str]) -> None:
     colors = [STATE_COLORS[k % len(STATE_COLORS)] for k in range(len(labels))]
     ax.stackplot(t, posteriors.T, colors=colors, labels=labels, lw=0)
@@ -104,6 +117,25 @@ def plot_hmm_posteriors(states: pd.DataFrame, summary: Mapping[str, Any]) -> Fig
     return figure
 
 
+def _caption(summary: Mapping[str, Any], r_nominal: Mapping[str, Any]) -> str:
+    """Return the one-line caption: the fit beside R's and why the picture differs."""
+    return (
+        f"K = {summary['n_states']} HMM, log L {summary['log_likelihood']:.1f}, BIC "
+        f"{summary['bic']:.1f} (R: {r_nominal['log_likelihood']:.1f} on R's own draw). "
+        "Cleaner blocks than R's 2/3 flicker: a different draw and the best of several EM "
+        "starts (optimiser). Strip B marks where the causal filtered argmax differs."
+    )
+
+
+def _expected_dwell(self_prob: np.ndarray, labels: list, t: pd.Series) -> dict[str, float]:
+    """Expected time in each state, dt / (1 − A_kk), s (inf for an absorbing state)."""
+    dt = float(t.iloc[1] - t.iloc[0])
+    return {
+        label: (dt / (1.0 - p) if p < 1 else float("inf"))
+        for label, p in zip(labels, self_prob, strict=True)
+    }
+
+
 def _filtered_vs_smoothed(smoothed: np.ndarray, filtered: np.ndarray) -> dict[str, float]:
     """Share of steps whose most likely state agrees, and the mean total-variation distance."""
     return {
@@ -134,13 +166,8 @@ def fig04_hmm_posteriors(
     smoothed = posterior_matrix(states, "gamma")
     filtered = posterior_matrix(states, "filtered")
     figure = plot_hmm_posteriors(states, summary)
-    transmat = np.asarray(summary["transmat"])
-    dt = float(states["t"].iloc[1] - states["t"].iloc[0])
-    self_prob = np.diag(transmat)
-    dwell_s = {
-        label: (dt / (1.0 - p) if p < 1 else float("inf"))
-        for label, p in zip(summary["states"], self_prob, strict=True)
-    }
+    self_prob = np.diag(np.asarray(summary["transmat"]))
+    dwell_s = _expected_dwell(self_prob, summary["states"], states["t"])
     r_nominal = r_numbers["hmm_nominal_k4"]
     checks = [
         validity_finite("posteriors_finite", "smoothed and filtered posteriors", states),
@@ -182,11 +209,7 @@ def fig04_hmm_posteriors(
         "converged": summary["converged"],
         "r_log_likelihood": r_nominal["log_likelihood"],
         "r_bic": r_nominal["bic"],
-        "r_note": (
-            "R's nominal K=4 fit (ARX_vs_Phys.R, one start, seed 123) runs on R's own noise "
-            "draws (and zero-seeded rollouts): the same size of problem, not the same data, "
-            "so the numbers are comparable in magnitude only"
-        ),
+        "r_note": R_NOTE,
         "startprob": summary["startprob"],
         "transmat": summary["transmat"],
         "expected_dwell_s": dwell_s,
@@ -208,12 +231,6 @@ def fig04_hmm_posteriors(
         metrics,
         checks,
         paper_figure="Fig. 4",
-        caption=(
-            f"K = {summary['n_states']} HMM, log L {summary['log_likelihood']:.1f}, BIC "
-            f"{summary['bic']:.1f} (R: {r_nominal['log_likelihood']:.1f} on R's own draw). "
-            "Cleaner blocks than R's 2/3 flicker: a different draw and the best of several EM "
-            "starts (optimiser). Strip B marks where the causal filtered argmax differs."
-        ),
-        provenance="results/regimes/nominal_states.csv and nominal_model.json "
-        "(nominal_regimes rule); crosscheck on R's fault features",
+        caption=_caption(summary, r_nominal),
+        provenance=PROVENANCE,
     )

@@ -179,25 +179,29 @@ def fig09_bic(
     }
     falling = metrics["still_decreasing_at_max_k"]
     max_k = max(metrics["ks"])
-    edge = [name for name, yes in falling.items() if yes]
-    caption = (
-        f"BIC still falling at the largest K tested ({max_k}) for "
-        f"{', '.join(n.replace('_', ' ') for n in edge)}: no minimum within the sweep, "
-        "not a minimum at another K; fit-to-fit zig-zags of one EM start set are larger "
-        "than the differences that would place it (optimiser). "
-        if edge
-        else ""
-    ) + "R's curves are on R's own draw, each relative to its own minimum."
     return FigureArtifact(
         "fig09_bic",
         figure,
         metrics,
         [_with_edge_note(check, falling, max_k) for check in checks],
         paper_figure="Fig. 9",
-        caption=caption,
+        caption=_caption(falling, max_k),
         provenance="results/bic_sweep.csv (bic_sweep rule); R's BIC_vs_K.R and "
         "CovarianceAnalysis tables",
     )
+
+
+def _caption(falling: Mapping[str, bool], max_k: int) -> str:
+    """Return the one-line caption: whether the sweep found a minimum at all."""
+    edge = [name.replace("_", " ") for name, yes in falling.items() if yes]
+    head = (
+        f"BIC still falling at the largest K tested ({max_k}) for {', '.join(edge)}: no "
+        "minimum within the sweep, not a minimum at another K; fit-to-fit zig-zags of one EM "
+        "start set are larger than the differences that would place it (optimiser). "
+        if edge
+        else ""
+    )
+    return head + "R's curves are on R's own draw, each relative to its own minimum."
 
 
 def _with_edge_note(check: Check, falling: Mapping[str, bool], max_k: int) -> Check:

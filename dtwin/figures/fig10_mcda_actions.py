@@ -120,6 +120,18 @@ def single_step_lock_ins(timeline: pd.DataFrame) -> dict[str, Any]:
     }
 
 
+def _caption(returns: int, lock_ins: Mapping[str, Any], dwell_s: float) -> str:
+    """Return the one-line caption: why the published figure looks different, what ours adds."""
+    return (
+        "Fixed TOPSIS of RMCDA 0.3.1 (weights on criteria); the published Fig. 10 used "
+        "RMCDA 0.3, whose weights scale the alternatives, hence its DownweightSensorA/B "
+        f"alternation in 0–10 s (the paper's code). Ours returns to NoAction {returns} "
+        f"times (a deliberate fix); {lock_ins['n']} single-step raw flips each lock an "
+        f"action in for the {dwell_s:g} s dwell ({lock_ins['steps_held']} steps against the "
+        "raw best)."
+    )
+
+
 def _mostly(counts: pd.DataFrame, regime: str, action: str) -> tuple[float, bool]:
     row = counts.loc[regime] if regime in counts.index else pd.Series(dtype=float)
     share = float(row.get(action, 0) / row.sum()) if row.sum() else 0.0
@@ -215,14 +227,7 @@ def fig10_mcda_actions(
         metrics,
         checks,
         paper_figure="Fig. 10",
-        caption=(
-            "Fixed TOPSIS of RMCDA 0.3.1 (weights on criteria); the published Fig. 10 used "
-            "RMCDA 0.3, whose weights scale the alternatives, hence its DownweightSensorA/B "
-            f"alternation in 0–10 s (the paper's code). Ours returns to NoAction {returns} "
-            f"times (a deliberate fix); {lock_ins['n']} single-step raw flips each lock an "
-            f"action in for the {mcda['min_dwell_sec']:g} s dwell ({lock_ins['steps_held']} "
-            "steps against the raw best)."
-        ),
+        caption=_caption(returns, lock_ins, float(mcda["min_dwell_sec"])),
         provenance="results/mcda/actions.csv (mcda_actions rule); R's RMCDA 0.3.1 counts",
     )
 

@@ -319,37 +319,50 @@ def fig11_sensitivity(
         "r_signals_crosscheck": crosscheck_metrics,
     }
     mode = _modes(summary[(summary["source"] == "ours") & (summary["method"] == method)])
-    notes = {
-        "range_23_40": f"method: {mode}; the paper's band is drawn in every facet",
-        "one_mode_with_restarts": (
-            f"optimiser: {mode}, with {sensitivity['hmm']['n_restarts']} EM starts, so the "
-            "best-likelihood segmentation is sometimes the worse one for e1"
-        ),
-    }
-    generic = f"{mode}; e1 before correction is identical in every configuration"
-    checks = [
-        replace(c, note=notes.get(c.id, generic))
-        if c.kind == "claim" and not c.passed and c.note is None
-        else c
-        for c in checks
-    ]
+    checks = _with_notes(checks, mode, int(sensitivity["hmm"]["n_restarts"]))
     return FigureArtifact(
         "fig11_sensitivity",
         figure,
         metrics,
         checks,
         paper_figure="Fig. 11",
-        caption=(
-            "e1 before correction is identical in all configurations (α and sensor noise do "
-            f"not reach the plant), so the sweep tests only the HMM segmentation. {mode[0].upper()}"
-            f"{mode[1:]}. One replicate: no intervals."
-            if int(sensitivity["n_replicates"]) == 1
-            else "e1 before correction is identical in all configurations, so the sweep tests "
-            f"only the HMM segmentation. {mode[0].upper()}{mode[1:]}."
-        ),
-        provenance="results/sensitivity/*.json (sweep_point rule, one job per configuration); "
-        "R's RobustnessAnalysis.R re-run",
+        caption=_caption(mode, int(sensitivity["n_replicates"])),
+        provenance=PROVENANCE,
     )
+
+
+#: What the figure is drawn from (the JSON's ``figure.provenance``).
+PROVENANCE = (
+    "results/sensitivity/*.json (sweep_point rule, one job per configuration); R's "
+    "RobustnessAnalysis.R re-run"
+)
+
+
+def _caption(mode: str, n_replicates: int) -> str:
+    """Return the one-line caption: what the sweep measures and where ours sit."""
+    return (
+        "e1 before correction is identical in all configurations (α and sensor noise do not "
+        f"reach the plant), so the sweep tests only the HMM segmentation. {mode[:1].upper()}"
+        f"{mode[1:]}." + (" One replicate: no intervals." if n_replicates == 1 else "")
+    )
+
+
+def _with_notes(checks: list[Check], mode: str, n_restarts: int) -> list[Check]:
+    """Give each failed claim of the sweep a one-line cause (``mode``: where ours sit)."""
+    notes = {
+        "range_23_40": f"method: {mode}; the paper's band is drawn in every facet",
+        "one_mode_with_restarts": (
+            f"optimiser: {mode}, with {n_restarts} EM starts, so the best-likelihood "
+            "segmentation is sometimes the worse one for e1"
+        ),
+    }
+    generic = f"{mode}; e1 before correction is identical in every configuration"
+    return [
+        replace(c, note=notes.get(c.id, generic))
+        if c.kind == "claim" and not c.passed and c.note is None
+        else c
+        for c in checks
+    ]
 
 
 def _modes(ours: pd.DataFrame) -> str:
