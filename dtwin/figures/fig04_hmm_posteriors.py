@@ -128,7 +128,7 @@ def _caption(summary: Mapping[str, Any], r_nominal: Mapping[str, Any]) -> str:
 
 
 def _expected_dwell(self_prob: np.ndarray, labels: list, t: pd.Series) -> dict[str, float]:
-    """Expected time in each state, dt / (1 − A_kk), s (inf for an absorbing state)."""
+    """Return the expected time in each state, dt / (1 − A_kk), s (inf if absorbing)."""
     dt = float(t.iloc[1] - t.iloc[0])
     return {
         label: (dt / (1.0 - p) if p < 1 else float("inf"))
