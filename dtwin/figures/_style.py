@@ -242,13 +242,17 @@ def panel_title(ax: Axes, letter: str, text: str = "", **kwargs: Any) -> None:
 
 
 def save_figure(
-    figure: Figure, paths: Sequence[str | os.PathLike], tight: bool = True, dpi: int = PNG_DPI
+    figure: Figure,
+    paths: Sequence[str | os.PathLike],
+    tight: bool = True,
+    dpi: float | None = None,
 ) -> None:
     """Save ``figure`` to every path (format from the suffix), atomically and without timestamps.
 
     PNG files carry no "Software" tag and PDF files no creation date or producer, so the same
     data gives byte-identical files on a rerun. ``tight=False`` keeps the figure's own size
-    (the print size); ``tight=True`` crops to the drawn content.
+    (the print size); ``tight=True`` crops to the drawn content. ``dpi`` defaults to
+    matplotlib's ``savefig.dpi`` (:data:`PNG_DPI` once :func:`apply_style` ran).
     """
     for path in paths:
         suffix = os.path.splitext(str(path))[1].lower()
@@ -275,7 +279,7 @@ def publish_artifact(
     from dtwin.figures._print_check import print_check
 
     check = print_check(artifact.figure)
-    save_figure(artifact.figure, paths, tight=False)
+    save_figure(artifact.figure, paths, tight=False, dpi=PNG_DPI)
     return write_artifact(
         json_path,
         artifact.name,
