@@ -74,6 +74,8 @@ COLUMN_WIDTH = 3.5
 BASE_FONT_PT = 8.0
 #: No text of any figure is smaller than this (checked by :func:`publish_artifact`), points.
 MIN_FONT_PT = 7.0
+#: Margin the constrained layout keeps around every panel and the page edge, inches.
+LAYOUT_PAD_IN = 0.06
 #: Resolution of every PNG, dots per inch.
 PNG_DPI = 300
 
@@ -233,7 +235,9 @@ def new_figure(height: float, width: float = FULL_WIDTH) -> Figure:
     Applies :func:`apply_style` first, so every figure of the set starts from the same defaults.
     """
     apply_style()
-    return plt.figure(figsize=(width, height), layout="constrained")
+    figure = plt.figure(figsize=(width, height), layout="constrained")
+    figure.get_layout_engine().set(w_pad=LAYOUT_PAD_IN, h_pad=LAYOUT_PAD_IN)
+    return figure
 
 
 def panel_title(ax: Axes, letter: str, text: str = "", **kwargs: Any) -> None:

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 from scipy.stats import gaussian_kde
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
@@ -112,6 +113,7 @@ def plot_correction_distributions(
         )
         ax.axvline(0, color="#333333", lw=0.5, ls=":")
         ax.set_xlim(low, high)
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=4))
         ax.set_ylim(bottom=0)
         panel_title(ax, chr(ord("A") + index), f"{module.name} {module.title}")
         ax.set_xlabel(axis_label(e))

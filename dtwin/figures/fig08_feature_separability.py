@@ -172,6 +172,7 @@ def _mark_clipped(ax: Axes, data: list[np.ndarray]) -> None:
         va="top" if extreme > 0 else "bottom",
         fontsize=7,
         arrowprops={"arrowstyle": "->", "lw": 0.6, "color": "#333333"},
+        in_layout=False,
     )
 
 

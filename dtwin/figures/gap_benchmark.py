@@ -66,7 +66,7 @@ def draw_confusion(ax: Axes, table: pd.DataFrame) -> None:
     counts = matrix.to_numpy()
     share = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
     ax.imshow(share, cmap="Blues", vmin=0, vmax=1, aspect="auto")
-    ax.set_xticks(range(len(answers)), answers, rotation=60, ha="right", rotation_mode="anchor")
+    ax.set_xticks(range(len(answers)), answers, rotation=90)
     ax.set_yticks(range(len(truths)), truths)
     ax.grid(False)
     for (i, j), value in np.ndenumerate(counts):
@@ -170,6 +170,19 @@ def plot_gap_benchmark(table: pd.DataFrame, target_pct: float, no_effect: str = 
     return figure
 
 
+def _misses(table: pd.DataFrame, n_shown: int = 3) -> str:
+    """Return " Misses: true → diagnosed (magnitude m); …" for the first wrong diagnoses."""
+    wrong = table[~table.effect_ok.astype(bool)]
+    if wrong.empty:
+        return ""
+    shown = "; ".join(
+        f"{row.expected_effect} → {row.diagnosed_effect} (magnitude {row.magnitude:.2f})"
+        for row in wrong.head(n_shown).itertuples()
+    )
+    more = f" and {len(wrong) - n_shown} more" if len(wrong) > n_shown else ""
+    return f" Misses: {shown}{more}."
+
+
 def _percent(value: float | None) -> str:
     return "–" if value is None else f"{100 * value:.0f} %"
 
@@ -203,7 +216,7 @@ def gap_benchmark(
         f"effect): module {_percent(metrics['module_accuracy'])}, effect "
         f"{_percent(metrics['effect_accuracy'])}, none {_percent(metrics['none_accuracy'])}, "
         f"out-of-list → unexplained {_percent(metrics['unexplained_accuracy'])}, median "
-        f"excess gap removed {metrics['median_shrink_pct'] or 0:.0f} %."
+        f"excess gap removed {metrics['median_shrink_pct'] or 0:.0f} %." + _misses(table)
     )
     return FigureArtifact(
         "gap_benchmark",
