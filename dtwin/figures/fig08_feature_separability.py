@@ -164,10 +164,10 @@ def _mark_clipped(ax: Axes, data: list[np.ndarray]) -> None:
     box = next(i for i, d in enumerate(data, start=1) if extreme in d)
     edge = high if extreme > 0 else low
     ax.annotate(
-        f"{int(beyond.sum())} pt beyond, to {extreme:.1f}",
+        f"{int(beyond.sum())} beyond, to {extreme:.1f}",
         (box, edge),
-        xytext=(0, -10 if extreme > 0 else 10),
-        textcoords="offset points",
+        xytext=(0.5, 0.88 if extreme > 0 else 0.12),
+        textcoords="axes fraction",
         ha="center",
         va="top" if extreme > 0 else "bottom",
         fontsize=7,
