@@ -211,3 +211,21 @@ def test_every_figure_starts_from_the_shared_style(path):
     assert "new_figure" in names
     assert not calls & {"suptitle", "tight_layout", "set_size_inches"}
     assert "figsize" not in path.read_text()
+
+
+def test_gap_benchmark_draws_the_paper_family_only():
+    table = benchmark_table().assign(family="paper")
+    rig = table.head(2).assign(family="rig", expected_effect="rig_only_effect")
+    metrics = {
+        "n_cases": len(table),
+        "cases_per_effect": table.groupby("effect").size().to_dict(),
+        "module_accuracy": 0.9,
+        "effect_accuracy": 0.8,
+        "none_accuracy": 1.0,
+        "unexplained_accuracy": 1.0,
+        "median_shrink_pct": 85.0,
+    }
+    artifact = gap_benchmark(pd.concat([table, rig]), metrics, [], {"median_shrink_pct": 85.0})
+    rows = [label.get_text() for label in artifact.figure.axes[0].get_yticklabels()]
+    assert "rig_only_effect" not in rows
+    assert artifact.caption.endswith("2 cases of other families are in the JSON only.")

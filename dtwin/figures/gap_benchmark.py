@@ -199,7 +199,8 @@ def gap_benchmark(
     Parameters
     ----------
     table : DataFrame
-        :func:`dtwin.gap.benchmark.score_cases`.
+        :func:`dtwin.gap.benchmark.score_cases`; only the paper asset's cases (``family``
+        ``"paper"``, or every case without that column) are drawn.
     metrics : mapping
         :func:`dtwin.gap.benchmark.benchmark_metrics`.
     checks : sequence of Check
@@ -209,6 +210,9 @@ def gap_benchmark(
     no_effect : str
         The effect name of cases without an effect.
     """
+    family = table["family"] if "family" in table.columns else pd.Series("paper", table.index)
+    others = int((family != "paper").sum())
+    table = table[family == "paper"]
     figure = plot_gap_benchmark(table, targets["median_shrink_pct"], no_effect)
     per_effect = sorted(set(metrics["cases_per_effect"].values()))
     caption = (
@@ -217,7 +221,7 @@ def gap_benchmark(
         f"{_percent(metrics['effect_accuracy'])}, none {_percent(metrics['none_accuracy'])}, "
         f"out-of-list → unexplained {_percent(metrics['unexplained_accuracy'])}, median "
         f"excess gap removed {metrics['median_shrink_pct'] or 0:.0f} %." + _misses(table)
-    )
+    ) + (f" {others} cases of other families are in the JSON only." if others else "")
     return FigureArtifact(
         "gap_benchmark",
         figure,
