@@ -58,12 +58,31 @@ class ArtifactValidityError(DtwinValueError):
 
 @dataclass
 class FigureArtifact:
-    """A drawn figure (a matplotlib Figure) with the numbers behind it and its checks."""
+    """A drawn figure (a matplotlib Figure) with the numbers behind it and its checks.
+
+    ``paper_figure`` names the paper's figure it reproduces (``"Fig. 5"``, or ``None``),
+    ``caption`` says in one line how it differs from the paper and why (draw, optimiser,
+    method or the paper's code), ``provenance`` what it is drawn from; all three go in the
+    JSON under ``"figure"`` rather than in the figure's title.
+    """
 
     name: str
     figure: Any
     metrics: dict[str, Any]
     checks: list[Check] = field(default_factory=list)
+    paper_figure: str | None = None
+    caption: str = ""
+    provenance: str = ""
+
+    def figure_info(self) -> dict[str, Any]:
+        """Return the JSON's ``"figure"`` entry: paper figure, caption, provenance, size (in)."""
+        size = getattr(self.figure, "get_size_inches", lambda: (None, None))()
+        return {
+            "paper_figure": self.paper_figure,
+            "caption": self.caption,
+            "provenance": self.provenance,
+            "size_in": [round(float(v), 3) for v in size] if size[0] is not None else None,
+        }
 
 
 @dataclass(frozen=True)
@@ -232,12 +251,15 @@ def write_artifact(
     files: Sequence[str | os.PathLike],
     metrics: Mapping[str, Any],
     checks: Sequence[Check],
+    figure: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Write the artifact JSON and raise if a validity check failed.
 
-    A files-non-empty validity check is appended automatically. The JSON is written in every
-    case (so the failing numbers can be read), then :class:`ArtifactValidityError` is raised
-    for failed validity checks, which makes Snakemake fail the job and remove its outputs.
+    A files-non-empty validity check is appended automatically; ``figure`` (paper figure,
+    caption, provenance: :meth:`FigureArtifact.figure_info`) is written under ``"figure"``.
+    The JSON is written in every case (so the failing numbers can be read), then
+    :class:`ArtifactValidityError` is raised for failed validity checks, which makes
+    Snakemake fail the job and remove its outputs.
 
     Returns
     -------
@@ -248,6 +270,7 @@ def write_artifact(
     payload = {
         "artifact": artifact,
         "files": [Path(f).name for f in files],
+        **({"figure": dict(figure)} if figure is not None else {}),
         "metrics": dict(metrics),
         "checks": [asdict(check) for check in all_checks],
     }

@@ -1,10 +1,10 @@
 """gap_benchmark: score every diagnosis against its withheld truth.
 
 Inputs: ``diagnoses`` (diagnosis.json per case), ``truths`` (key.json per case, same order).
-Outputs: ``paper_figures/gap_benchmark.{png,pdf}`` (confusion matrix, accuracy vs magnitude,
-shrink per effect), ``gap_benchmark.json`` ({artifact, files, metrics, checks}; the targets of
-docs/gap.md §Targets are claims), ``results/gap/benchmark.csv`` (one row per case, columns in
-:mod:`dtwin.gap.benchmark`). Config: none beyond the case list.
+Outputs: ``paper_figures/gap_benchmark.{png,pdf}`` (drawn by
+:mod:`dtwin.figures.gap_benchmark`), ``gap_benchmark.json`` ({artifact, files, figure, metrics,
+checks}; the targets of docs/gap.md §Targets are claims), ``results/gap/benchmark.csv`` (one
+row per case, columns in :mod:`dtwin.gap.benchmark`). Config: none beyond the case list.
 """
 
 from dtwin._script import start_rule
@@ -15,8 +15,11 @@ start_rule(snakemake)
 import json
 from pathlib import Path
 
-from dtwin.artifacts import write_artifact, write_csv
-from dtwin.gap.benchmark import benchmark_checks, benchmark_metrics, draw_benchmark, score_cases
+from dtwin.artifacts import write_csv
+from dtwin.figures._style import publish_artifact
+from dtwin.figures.gap_benchmark import gap_benchmark
+from dtwin.gap.benchmark import TARGETS, benchmark_checks, benchmark_metrics, score_cases
+from dtwin.gap.effects import NONE
 
 triples = [
     (Path(key).parent.name, json.loads(Path(key).read_text()), json.loads(Path(diag).read_text()))
@@ -25,7 +28,6 @@ triples = [
 table = score_cases(triples)
 metrics = benchmark_metrics(table)
 write_csv(table, snakemake.output.table)
-figures = [snakemake.output.png, snakemake.output.pdf]
-draw_benchmark(table, metrics, figures)
 checks = benchmark_checks(table, metrics)
-write_artifact(snakemake.output.json, "gap_benchmark", figures, metrics, checks)
+artifact = gap_benchmark(table, metrics, checks, TARGETS, NONE)
+publish_artifact(artifact, [snakemake.output.png, snakemake.output.pdf], snakemake.output.json)

@@ -225,6 +225,27 @@ def test_every_artifact_is_produced_with_passing_validity_checks(workflow_copy):
     ]
 
 
+def test_every_figure_is_print_ready_with_its_caption(workflow_copy):
+    """300-dpi PNG at print width beside a vector PDF; caption and print check in the JSON."""
+    from tests.test_figure_style import png_size_and_dpi
+
+    for artifact in ARTIFACTS:
+        folder = workflow_copy / "paper_figures"
+        payload = json.loads((folder / f"{artifact}.json").read_text())
+        width_in, height_in = payload["figure"]["size_in"]
+        assert 7.0 <= width_in <= 7.5 or 3.4 <= width_in <= 3.6, artifact
+        assert payload["figure"]["caption"], artifact
+        check = next(c for c in payload["checks"] if c["id"] == "print_size_and_text")
+        assert check["passed"] and check["observed"]["min_font_pt"] >= 7, artifact
+        width, height, dpi = png_size_and_dpi(folder / f"{artifact}.png")
+        assert round(dpi) == 300
+        assert (width, height) == (round(300 * width_in), round(300 * height_in)), artifact
+        assert (folder / f"{artifact}.pdf").read_bytes().startswith(b"%PDF")
+        if artifact.startswith(("fig05", "fig06", "fig11")):
+            failed = [c for c in payload["checks"] if c["kind"] == "claim" and not c["passed"]]
+            assert all(c["note"] for c in failed), artifact
+
+
 def test_fault_tables_keep_the_contract_columns(workflow_copy):
     faults = workflow_copy / "results" / "faults"
     residuals = (faults / "residuals.csv").read_text().splitlines()

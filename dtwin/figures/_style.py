@@ -1,9 +1,29 @@
-"""Shared figure style and a deterministic, atomic figure writer."""
+"""The figure style of the set, and a deterministic, atomic figure writer.
+
+Every figure is drawn at its print size: :data:`FULL_WIDTH` (a journal's full text width) or
+:data:`COLUMN_WIDTH` (one column), with :data:`BASE_FONT_PT` text in one font (DejaVu Sans,
+shipped with matplotlib, so every machine draws the same glyphs) and mathtext notation
+for signals (:func:`tex`). One colour map per meaning, used by every figure:
+
+- :data:`REGIME_COLORS`: the scheduled regimes of the fault scenario;
+- :data:`MODULE_COLORS`: the modules M0 … M4 (and :data:`SURROGATE_FILL` for how the twin
+  replaces each module);
+- :data:`BEFORE_COLOR` / :data:`AFTER_COLOR`: a residual before and after the correction;
+- :data:`OURS_COLOR` / :data:`R_COLOR` / :data:`R_SIGNALS_COLOR`: our number, the R code's
+  number, ours on R's signals;
+- :data:`STATE_COLORS`: unlabelled HMM states (deliberately not the regime colours).
+
+Titles are short (or absent) and start with a panel letter (:func:`panel_title`); provenance
+and the paper-figure number go in the artifact JSON and the report caption. PNG files are
+written at :data:`PNG_DPI` dpi beside a vector PDF (:func:`save_figure`), without timestamps,
+so a rerun gives byte-identical files. :func:`publish_artifact` also checks the print rules
+(:func:`dtwin.figures._print_check.print_check`) and fails the rule if a figure breaks them.
+"""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import matplotlib.pyplot as plt
@@ -11,30 +31,79 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from dtwin.artifacts import atomic_write, write_artifact
+from dtwin.artifacts import FigureArtifact, atomic_write, write_artifact
 
 __all__ = [
+    "FULL_WIDTH",
+    "COLUMN_WIDTH",
+    "BASE_FONT_PT",
+    "MIN_FONT_PT",
+    "PNG_DPI",
     "PHYSICS_COLOR",
     "SURROGATE_COLOR",
+    "OURS_COLOR",
+    "R_COLOR",
+    "R_SIGNALS_COLOR",
+    "ALT_METHOD_COLOR",
     "BAND_COLOR",
+    "PAPER_BAND_COLOR",
     "MODULE_COLORS",
+    "SURROGATE_FILL",
     "REGIME_COLORS",
     "STATE_COLORS",
     "BEFORE_COLOR",
     "AFTER_COLOR",
-    "R_COLOR",
+    "SIGNAL_UNITS",
     "RESIDUAL_UNITS",
+    "tex",
+    "axis_label",
     "apply_style",
+    "new_figure",
+    "panel_title",
     "save_figure",
     "publish_artifact",
     "regime_spans",
     "shade_regimes",
 ]
 
+#: Full text width of a journal page, inches (every full-width figure is drawn at this size).
+FULL_WIDTH = 7.2
+#: One column of a two-column page, inches.
+COLUMN_WIDTH = 3.5
+#: Body text (labels, legends), points; titles are one point larger, ticks half a point smaller.
+BASE_FONT_PT = 8.0
+#: No text of any figure is smaller than this (checked by :func:`publish_artifact`), points.
+MIN_FONT_PT = 7.0
+#: Margin the constrained layout keeps around every panel and the page edge, inches.
+LAYOUT_PAD_IN = 0.06
+#: Resolution of every PNG, dots per inch.
+PNG_DPI = 300
+
 PHYSICS_COLOR = "#0b2545"
 SURROGATE_COLOR = "#5fa8a0"
+#: Our number wherever ours stands beside R's.
+OURS_COLOR = PHYSICS_COLOR
+#: The R code's number (its own draw or its own run).
+R_COLOR = "#8c8c8c"
+#: Our method on R's exact signals.
+R_SIGNALS_COLOR = SURROGATE_COLOR
+#: A second method of ours beside the configured one (Fig. 11: the paper's §4.3 correction).
+ALT_METHOD_COLOR = "#CC79A7"
+#: Confidence bands and white-noise limits.
 BAND_COLOR = "#b3001b"
-MODULE_COLORS = {"arx": "#d7ecea", "algebraic": "#f3e3c3", "source": "#e4e4e4"}
+#: The range the paper claims, drawn as a shaded band.
+PAPER_BAND_COLOR = "#f2d8a7"
+#: Modules of the twin (Okabe–Ito, colour-blind safe; not the regime colours' order).
+MODULE_COLORS = {
+    "M0": "#56B4E9",
+    "M1": "#0072B2",
+    "M2a": "#009E73",
+    "M2b": "#66C2A5",
+    "M3": "#CC79A7",
+    "M4": "#E69F00",
+}
+#: Box fill of how the twin replaces a module (paper Fig. 1).
+SURROGATE_FILL = {"arx": "#d7ecea", "algebraic": "#f3e3c3", "source": "#e4e4e4"}
 #: Ground-truth regimes of the fault scenario (Okabe–Ito, colour-blind safe).
 REGIME_COLORS = {
     "Nominal": "#0072B2",
@@ -56,15 +125,46 @@ STATE_COLORS = (
 )
 BEFORE_COLOR = "#9db08f"
 AFTER_COLOR = PHYSICS_COLOR
-R_COLOR = "#8c8c8c"
+#: Unit of each signal of the pipeline (paper §3.1).
+SIGNAL_UNITS = {
+    "u_cmd": "N",
+    "u_act": "N",
+    "x": "m",
+    "v": "m/s",
+    "y_A": "m",
+    "y_B": "m",
+    "y_fused": "m",
+    "z": "KPI units",
+}
 #: Unit of each residual channel (surrogate − physics of the module output).
 RESIDUAL_UNITS = {
-    "e0": "actuation units",
+    "e0": "N",
     "e1": "m",
     "e2a": "m",
     "e2b": "m",
     "e3": "m",
     "e4": "KPI units",
+}
+
+_TEX = {
+    "u_cmd": r"$u_\mathrm{cmd}$",
+    "u_act": r"$u_\mathrm{act}$",
+    "x": r"$x$",
+    "v": r"$v$",
+    "y_A": r"$y_A$",
+    "y_B": r"$y_B$",
+    "y_fused": r"$y_\mathrm{fused}$",
+    "z": r"$z$",
+    "e0": r"$e_0$",
+    "e1": r"$e_1$",
+    "e2a": r"$e_{2a}$",
+    "e2b": r"$e_{2b}$",
+    "e3": r"$e_3$",
+    "e4": r"$e_4$",
+    "e_abs_sum": r"$\Sigma|e|$",
+    "e_rms": r"$e_\mathrm{rms}$",
+    "e1_diff": r"$\Delta e_1$",
+    "e3_diff": r"$\Delta e_3$",
 }
 
 _METADATA = {
@@ -73,19 +173,55 @@ _METADATA = {
 }
 
 
+def tex(name: str) -> str:
+    r"""Return the mathtext of a signal, residual or feature name (the name itself if unknown).
+
+    Examples
+    --------
+    >>> tex("u_act"), tex("e2a"), tex("other")
+    ('$u_\\mathrm{act}$', '$e_{2a}$', 'other')
+    """
+    return _TEX.get(name, name)
+
+
+def axis_label(name: str, units: Mapping[str, str] | None = None) -> str:
+    """Return ``"<mathtext> (<unit>)"`` for a signal or residual (its unit from ``units``).
+
+    Examples
+    --------
+    >>> axis_label("x")
+    '$x$ (m)'
+    """
+    table = {**SIGNAL_UNITS, **RESIDUAL_UNITS, **(units or {})}
+    unit = table.get(name)
+    return f"{tex(name)} ({unit})" if unit else tex(name)
+
+
 def apply_style() -> None:
-    """Set the project's matplotlib defaults (readable sizes, no top/right spines)."""
+    """Set the project's matplotlib defaults: one font, print-size text, 300-dpi PNG."""
     plt.rcParams.update(
         {
             "figure.dpi": 100,
-            "savefig.dpi": 150,
-            "font.size": 9,
-            "axes.titlesize": 10,
-            "axes.labelsize": 9,
+            "savefig.dpi": PNG_DPI,
+            "font.family": "DejaVu Sans",
+            "mathtext.fontset": "dejavusans",
+            "font.size": BASE_FONT_PT,
+            "axes.titlesize": BASE_FONT_PT + 0.5,
+            "axes.titlelocation": "left",
+            "axes.labelsize": BASE_FONT_PT,
+            "xtick.labelsize": BASE_FONT_PT - 0.5,
+            "ytick.labelsize": BASE_FONT_PT - 0.5,
+            "legend.fontsize": BASE_FONT_PT - 0.5,
+            "figure.titlesize": BASE_FONT_PT + 1,
+            "axes.linewidth": 0.6,
+            "lines.linewidth": 1.0,
+            "xtick.major.width": 0.6,
+            "ytick.major.width": 0.6,
             "axes.spines.top": False,
             "axes.spines.right": False,
             "axes.grid": True,
             "grid.alpha": 0.25,
+            "grid.linewidth": 0.5,
             "legend.frameon": False,
             "pdf.fonttype": 42,
             "svg.hashsalt": "dtwin",
@@ -93,31 +229,69 @@ def apply_style() -> None:
     )
 
 
-def save_figure(figure: Figure, paths: Sequence[str | os.PathLike]) -> None:
+def new_figure(height: float, width: float = FULL_WIDTH) -> Figure:
+    """Return an empty figure of print size ``width`` × ``height`` inches, constrained layout.
+
+    Applies :func:`apply_style` first, so every figure of the set starts from the same defaults.
+    """
+    apply_style()
+    figure = plt.figure(figsize=(width, height), layout="constrained")
+    figure.get_layout_engine().set(w_pad=LAYOUT_PAD_IN, h_pad=LAYOUT_PAD_IN)
+    return figure
+
+
+def panel_title(ax: Axes, letter: str, text: str = "", **kwargs: Any) -> None:
+    """Title ``ax`` with a bold panel letter and an optional short description, left-aligned."""
+    ax.set_title(rf"$\mathbf{{{letter}}}$  {text}".rstrip(), loc="left", **kwargs)
+
+
+def save_figure(
+    figure: Figure,
+    paths: Sequence[str | os.PathLike],
+    tight: bool = True,
+    dpi: float | None = None,
+) -> None:
     """Save ``figure`` to every path (format from the suffix), atomically and without timestamps.
 
     PNG files carry no "Software" tag and PDF files no creation date or producer, so the same
-    data gives byte-identical files on a rerun.
+    data gives byte-identical files on a rerun. ``tight=False`` keeps the figure's own size
+    (the print size); ``tight=True`` crops to the drawn content. ``dpi`` defaults to
+    matplotlib's ``savefig.dpi`` (:data:`PNG_DPI` once :func:`apply_style` ran).
     """
     for path in paths:
         suffix = os.path.splitext(str(path))[1].lower()
         metadata = _METADATA.get(suffix, {})
 
         def write(tmp: str, metadata: dict = metadata) -> None:
-            figure.savefig(tmp, metadata=metadata, bbox_inches="tight")
+            figure.savefig(tmp, metadata=metadata, dpi=dpi, bbox_inches="tight" if tight else None)
 
         atomic_write(path, write)
     plt.close(figure)
 
 
-def publish_artifact(artifact, paths: Sequence[str | os.PathLike], json_path: str | os.PathLike):
-    """Save a :class:`dtwin.stages.FigureArtifact`'s figure to ``paths`` and write its JSON.
+def publish_artifact(
+    artifact: FigureArtifact, paths: Sequence[str | os.PathLike], json_path: str | os.PathLike
+):
+    """Check the print rules, save the figure at print size to ``paths`` and write its JSON.
 
-    Raises :class:`dtwin.artifacts.ArtifactValidityError` (after writing the JSON) when a
-    validity check failed, so the rule fails and Snakemake removes its outputs.
+    The print check (:func:`dtwin.figures._print_check.print_check`: size, smallest font,
+    text overlaps, text inside the page) is appended to the artifact's checks, and the
+    figure's caption and paper number are written under ``"figure"``. Raises
+    :class:`dtwin.artifacts.ArtifactValidityError` (after writing the JSON) when a validity
+    check failed, so the rule fails and Snakemake removes its outputs.
     """
-    save_figure(artifact.figure, paths)
-    return write_artifact(json_path, artifact.name, paths, artifact.metrics, artifact.checks)
+    from dtwin.figures._print_check import print_check
+
+    check = print_check(artifact.figure)
+    save_figure(artifact.figure, paths, tight=False, dpi=PNG_DPI)
+    return write_artifact(
+        json_path,
+        artifact.name,
+        paths,
+        artifact.metrics,
+        [*artifact.checks, check],
+        figure=artifact.figure_info(),
+    )
 
 
 def regime_spans(t: Any, regimes: Any) -> list[tuple[str, float, float]]:
@@ -148,4 +322,4 @@ def shade_regimes(
     for regime, start, end in spans:
         ax.axvspan(start, end, color=REGIME_COLORS.get(regime, "#dddddd"), alpha=alpha, lw=0)
         if lines and start > spans[0][1]:
-            ax.axvline(start, color="#555555", lw=0.8, ls="--")
+            ax.axvline(start, color="#555555", lw=0.6, ls="--")

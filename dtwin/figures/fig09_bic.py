@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
-from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
-from dtwin.figures._style import PHYSICS_COLOR, R_COLOR, apply_style
+from dtwin.figures._style import OURS_COLOR, R_COLOR, new_figure, panel_title
 from dtwin.reference.crosscheck_result import CrosscheckResult
 
 __all__ = ["fig09_bic", "plot_bic", "bracket_checks", "start_stability"]
@@ -22,55 +21,54 @@ PAPER_K_MIN = 8
 
 #: Titles of the two data sets (r_notes.md §6 (a) and (b)).
 TITLES = {
-    "nominal_residuals": "A  Nominal run: six z-scored residuals",
-    "fault_features": "B  Fault scenario: ten z-scored features",
+    "nominal_residuals": "Nominal run: six residuals",
+    "fault_features": "Fault scenario: ten features",
 }
 
 
-#: Curves whose small-K values dwarf the rest (range > this × the range for K >= 4) are drawn
-#: on a log axis when all values are positive.
-LOG_SCALE_RATIO = 2.5
+#: Smallest K drawn: below it BIC − min is thousands and would flatten the question (K ≥ 5).
+K_ZOOM = 4
 
 
-def _needs_log_scale(curves) -> bool:
-    values = pd.concat([c["bic"] for _, c, _, _ in curves])
-    tail = pd.concat([c.loc[c["K"] >= 4, "bic"] for _, c, _, _ in curves])
-    if tail.empty or values.size == tail.size or values.min() <= 0:
-        return False
-    return bool((values.max() - values.min()) > LOG_SCALE_RATIO * (tail.max() - tail.min()))
+def _min_label(curve: pd.DataFrame, who: str) -> str:
+    """``"min K=8"``, or ``"lowest tested K=9, still falling"`` at the sweep's edge."""
+    k_best = int(curve.loc[curve["bic"].idxmin(), "K"])
+    prefix = "" if who == "ours" else "R "
+    if k_best == int(curve["K"].max()):
+        return f"{prefix}lowest tested K={k_best},\nstill falling"
+    return f"{prefix}min K={k_best}"
 
 
 def _draw(ax, curves) -> None:
-    """Plot each curve (``(who, table with K and bic, colour, label)``), star its minimum."""
+    """Plot BIC − min(BIC) of each curve (``(who, table with K and bic, colour, label)``)."""
+    top = 0.0
     for who, curve, color, label in curves:
+        curve = curve.sort_values("K")
+        relative = curve["bic"] - curve["bic"].min()
         style = "o-" if who == "ours" else "s--"
-        ax.plot(
-            curve["K"],
-            curve["bic"],
-            style,
-            color=color,
-            lw=2 if who == "ours" else 1.3,
-            ms=6 if who == "ours" else 5,
-            label=label,
-        )
+        ax.plot(curve["K"], relative, style, color=color, lw=1.2, ms=3.5, label=label)
         best = curve.loc[curve["bic"].idxmin()]
-        ax.plot(best["K"], best["bic"], "*", color=color, ms=15)
+        ax.plot(best["K"], 0, "*", color=color, ms=9)
         ax.annotate(
-            f"{'min' if who == 'ours' else 'R min'} K={int(best['K'])}",
-            (best["K"], best["bic"]),
+            _min_label(curve, who),
+            (best["K"], 0),
             textcoords="offset points",
-            xytext=(-12, 0) if who == "ours" else (0, 11),
+            xytext=(-8, 8) if who == "ours" else (0, -7),
             ha="right" if who == "ours" else "center",
-            va="center" if who == "ours" else "bottom",
+            va="bottom" if who == "ours" else "top",
             color=color,
-            fontsize=8,
+            fontsize=7,
+            arrowprops={"arrowstyle": "-", "lw": 0.5, "color": color} if who == "ours" else None,
         )
+        top = max(top, float(relative[curve["K"] >= K_ZOOM].max()))
     ks = sorted(set().union(*(set(c["K"]) for _, c, _, _ in curves)))
-    ax.set_xticks(ks)
+    ax.set_xticks([k for k in ks if k >= K_ZOOM])
+    ax.set_xlim(K_ZOOM - 0.4, max(ks) + 0.4)
+    ax.set_ylim(-0.16 * top, 1.08 * top)
 
 
 def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restarts: int) -> Figure:
-    """Draw BIC against K for each data set: ours (best of ``n_restarts`` starts) and R's.
+    """Draw BIC − min(BIC) against K for each data set: ours and R's, each on its own data.
 
     Parameters
     ----------
@@ -81,33 +79,24 @@ def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restar
     n_restarts : int
         Starts per K of our sweep (for the legend).
     """
-    apply_style()
     datasets = list(dict.fromkeys(table["dataset"]))
-    figure, axes = plt.subplots(1, len(datasets), figsize=(6 * len(datasets), 4.6), squeeze=False)
+    figure = new_figure(3.0)
+    axes = np.atleast_1d(figure.subplots(1, len(datasets)))
     r_label = {
-        "nominal_residuals": "R, BIC_vs_K.R (1 start per K)",
-        "fault_features": "R, CovarianceAnalysis (best of 5)",
+        "nominal_residuals": "R on R's draw, 1 start per K",
+        "fault_features": "R on R's draw, best of 5",
     }
-    for ax, name in zip(axes[0], datasets, strict=True):
+    for index, (ax, name) in enumerate(zip(axes, datasets, strict=True)):
         ours = table[table["dataset"] == name]
         r = r_tables.get(name)
-        curves = [("ours", ours, PHYSICS_COLOR, f"ours (best of {n_restarts} starts)")]
+        curves = [("ours", ours, OURS_COLOR, f"ours, best of {n_restarts} starts")]
         if r is not None:
             curves.append(("R", r, R_COLOR, r_label.get(name, "R")))
         _draw(ax, curves)
-        if _needs_log_scale(curves):
-            ax.set_yscale("log")
-            ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-            ax.yaxis.set_major_formatter(ScalarFormatter())
-            ax.yaxis.set_minor_formatter(NullFormatter())
-            ax.set_ylabel("BIC (log scale)")
-        ax.set_title(TITLES.get(name, name), loc="left")
+        panel_title(ax, chr(ord("A") + index), TITLES.get(name, name))
         ax.set_xlabel("number of states K")
-        if ax.get_yscale() != "log":
-            ax.set_ylabel("BIC = −2 log L + p log n")
-        ax.legend(loc="upper right", fontsize=8)
-    figure.suptitle("Model selection: BIC against the number of HMM states (paper Fig. 9)")
-    figure.tight_layout()
+        ax.set_ylabel("BIC − min BIC")
+        ax.legend(loc="upper right")
     return figure
 
 
@@ -271,4 +260,40 @@ def fig09_bic(
             for name, group in table.groupby("dataset", sort=False)
         },
     }
-    return FigureArtifact("fig09_bic", figure, metrics, checks)
+    falling = metrics["still_decreasing_at_max_k"]
+    max_k = max(metrics["ks"])
+    return FigureArtifact(
+        "fig09_bic",
+        figure,
+        metrics,
+        [_with_edge_note(check, falling, max_k) for check in checks],
+        paper_figure="Fig. 9",
+        caption=_caption(falling, max_k),
+        provenance="results/bic_sweep.csv (bic_sweep rule); R's BIC_vs_K.R and "
+        "CovarianceAnalysis tables",
+    )
+
+
+def _caption(falling: Mapping[str, bool], max_k: int) -> str:
+    """Return the one-line caption: whether the sweep found a minimum at all."""
+    edge = [name.replace("_", " ") for name, yes in falling.items() if yes]
+    head = (
+        f"BIC still falling at the largest K tested ({max_k}) for {', '.join(edge)}: no "
+        "minimum within the sweep, not a minimum at another K; fit-to-fit zig-zags of one EM "
+        "start set are larger than the differences that would place it (optimiser). "
+        if edge
+        else ""
+    )
+    return head + "R's curves are on R's own draw, each relative to its own minimum."
+
+
+def _with_edge_note(check: Check, falling: Mapping[str, bool], max_k: int) -> Check:
+    """Give a failed K-minimum claim the cause when the BIC is still falling at the edge."""
+    name = check.id.removeprefix("bic_minimum_at_k8_")
+    if check.kind != "claim" or check.passed or not falling.get(name):
+        return check
+    note = (
+        f"optimiser/sweep: BIC still falling at K = {max_k}, the largest K tested, so the "
+        "sweep finds no minimum; the observed K is the sweep's edge, not a minimum"
+    )
+    return replace(check, note=note)

@@ -5,65 +5,131 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
-from dtwin.figures._style import PHYSICS_COLOR, apply_style, regime_spans, shade_regimes
+from dtwin.figures._style import (
+    PHYSICS_COLOR,
+    REGIME_COLORS,
+    new_figure,
+    panel_title,
+    regime_spans,
+    shade_regimes,
+)
 from dtwin.mcda import ACTIONS, NO_ACTION
 from dtwin.reference.columns import R_MCDA_VERSION
 from dtwin.reference.crosscheck_result import CrosscheckResult
 
-__all__ = ["fig10_mcda_actions", "plot_mcda_actions"]
+__all__ = ["fig10_mcda_actions", "plot_mcda_actions", "single_step_lock_ins"]
 
 ACTION_ORDER = [NO_ACTION, *(a.name for a in ACTIONS)]
 
 
-def plot_mcda_actions(timeline: pd.DataFrame) -> Figure:
-    """Actions over time (top) and decision confidence (bottom), true regimes shaded.
+def plot_mcda_actions(timeline: pd.DataFrame, warm_up_s: float) -> Figure:
+    """Actions over time (top) and the TOPSIS closeness gap (bottom), true regimes shaded.
 
-    ``timeline`` has columns ``t`` (s), ``regime``, ``action``, ``confidence``, ``gate``.
+    Parameters
+    ----------
+    timeline : DataFrame
+        Columns ``t`` (s), ``regime``, ``action``, ``best``, ``confidence``, ``gate``.
+    warm_up_s : float
+        Length of the rolling feature window, s: the first ``warm_up_s`` are shaded as the
+        window filling (its steps are not decisions).
     """
-    apply_style()
-    figure, (ax_action, ax_conf) = plt.subplots(
-        2, 1, figsize=(11, 6), sharex=True, height_ratios=[3, 1.2]
-    )
+    figure = new_figure(3.8)
+    ax_action, ax_conf = figure.subplots(2, 1, sharex=True, height_ratios=[3, 1.1])
     t = timeline["t"].to_numpy()
-    regimes = timeline["regime"].to_numpy()
-    spans = regime_spans(t, regimes)
+    spans = regime_spans(t, timeline["regime"].to_numpy())
     for ax in (ax_action, ax_conf):
         shade_regimes(ax, spans, alpha=0.15)
+        ax.axvspan(
+            t[0], t[0] + warm_up_s, facecolor="none", edgecolor="#aaaaaa", hatch="////", lw=0
+        )
     for regime, start, end in spans:
         ax_action.text(
             (start + end) / 2,
-            1.01,
+            1.02,
             regime,
             transform=ax_action.get_xaxis_transform(),
             ha="center",
             va="bottom",
-            fontsize=8,
+            color=REGIME_COLORS.get(regime, "black"),
         )
     levels = {name: index for index, name in enumerate(ACTION_ORDER)}
-    y = timeline["action"].map(levels).to_numpy()
     ax_action.scatter(
-        t, y, s=6, color=PHYSICS_COLOR, zorder=3, label="selected (after dwell/margin)"
+        t, timeline["best"].map(levels), s=9, color="#b0b0b0", lw=0, label="raw TOPSIS best / gate"
     )
-    best = timeline["best"].map(levels).to_numpy()
     ax_action.scatter(
-        t, best + 0.18, s=2, color="#999999", zorder=2, label="raw TOPSIS best / gate"
+        t,
+        timeline["action"].map(levels),
+        s=2.5,
+        color=PHYSICS_COLOR,
+        lw=0,
+        label="selected (after dwell and margin)",
     )
     ax_action.set_yticks(range(len(ACTION_ORDER)), ACTION_ORDER)
     ax_action.set_ylim(-0.6, len(ACTION_ORDER) - 0.4)
-    ax_action.set_ylabel("action")
-    ax_action.legend(loc="lower right", fontsize=8, frameon=True)
-    ax_action.set_title("TOPSIS-selected action over the true regimes (paper Fig. 10)", pad=16)
-    ax_conf.plot(t, timeline["confidence"], color=PHYSICS_COLOR, lw=0.8)
-    ax_conf.set_ylabel("confidence\n(best − 2nd)")
+    ax_action.grid(False)
+    panel_title(ax_action, "A")
+    ax_conf.plot(t, timeline["confidence"], color=PHYSICS_COLOR, lw=0.6)
+    ax_conf.set_ylabel("TOPSIS\ncloseness gap")
     ax_conf.set_xlabel("time (s)")
-    figure.tight_layout()
+    ax_conf.set_xlim(t[0], t[-1])
+    panel_title(ax_conf, "B")
+    handles, labels = ax_action.get_legend_handles_labels()
+    handles.append(Patch(facecolor="none", edgecolor="#aaaaaa", hatch="////", lw=0))
+    labels.append(f"first {warm_up_s:g} s: rolling window filling")
+    figure.legend(handles, labels, loc="outside lower center", ncol=3, markerscale=2)
     return figure
+
+
+def single_step_lock_ins(timeline: pd.DataFrame) -> dict[str, Any]:
+    """Count switches to an action that the raw TOPSIS best chose for one step only.
+
+    The dwell then holds that action although the next raw best differs (review of Fig. 10:
+    the zero crossings of e1 ≈ −0.2·x in DynamicsOff).
+
+    Returns
+    -------
+    dict
+        ``n`` (such switches), ``steps_held`` (steps of the actions they locked in at which the
+        raw best was another action) and ``steps_held_by_regime``.
+    """
+    actions = timeline["action"].to_numpy()
+    best = timeline["best"].to_numpy()
+    regimes = timeline["regime"].to_numpy()
+    n, held = 0, np.zeros(len(actions), dtype=bool)
+    for step in np.flatnonzero(actions[1:] != actions[:-1]) + 1:
+        action = actions[step]
+        one_step = best[step] == action and (step + 1 >= len(best) or best[step + 1] != action)
+        if action == NO_ACTION or not one_step:
+            continue
+        n += 1
+        end = step
+        while end < len(actions) and actions[end] == action:
+            end += 1
+        held[step:end] = best[step:end] != action
+    by_regime = pd.Series(regimes[held]).value_counts().sort_index()
+    return {
+        "n": n,
+        "steps_held": int(held.sum()),
+        "steps_held_by_regime": {str(k): int(v) for k, v in by_regime.items()},
+    }
+
+
+def _caption(returns: int, lock_ins: Mapping[str, Any], dwell_s: float) -> str:
+    """Return the one-line caption: why the published figure looks different, what ours adds."""
+    return (
+        "Fixed TOPSIS of RMCDA 0.3.1 (weights on criteria); the published Fig. 10 used "
+        "RMCDA 0.3, whose weights scale the alternatives, hence its DownweightSensorA/B "
+        f"alternation in 0–10 s (the paper's code). Ours returns to NoAction {returns} "
+        f"times (a deliberate fix); {lock_ins['n']} single-step raw flips each lock an "
+        f"action in for the {dwell_s:g} s dwell ({lock_ins['steps_held']} steps against the "
+        "raw best)."
+    )
 
 
 def _mostly(counts: pd.DataFrame, regime: str, action: str) -> tuple[float, bool]:
@@ -95,7 +161,8 @@ def fig10_mcda_actions(
     crosscheck : CrosscheckResult
         ``results/mcda/crosscheck.json`` (legacy mode on R's inputs vs R's timeline).
     """
-    figure = plot_mcda_actions(timeline)
+    figure = plot_mcda_actions(timeline, float(mcda["roll_sec"]))
+    lock_ins = single_step_lock_ins(timeline)
     counts = pd.crosstab(timeline["regime"], timeline["action"])
     actions = timeline["action"].to_numpy()
     after_action = np.flatnonzero(actions != NO_ACTION)
@@ -151,8 +218,18 @@ def fig10_mcda_actions(
         "n_gated_steps": int(timeline["gate"].sum()),
         "confidence_median": float(timeline["confidence"].median()),
         "weights": dict(mcda["weights"]),
+        "warm_up_s": float(mcda["roll_sec"]),
+        "single_step_lock_ins": lock_ins,
     }
-    return FigureArtifact("fig10_mcda_actions", figure, metrics, checks)
+    return FigureArtifact(
+        "fig10_mcda_actions",
+        figure,
+        metrics,
+        checks,
+        paper_figure="Fig. 10",
+        caption=_caption(returns, lock_ins, float(mcda["min_dwell_sec"])),
+        provenance="results/mcda/actions.csv (mcda_actions rule); R's RMCDA 0.3.1 counts",
+    )
 
 
 def _gate_violations(timeline: pd.DataFrame, dwell: int) -> int:

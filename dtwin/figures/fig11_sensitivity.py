@@ -10,16 +10,30 @@ beside R's and checks the paper's claims about the sweep (§5) on ours and on R'
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
-from dtwin.figures._fig11_claims import GRID, sweep_claim_numbers, sweep_claims
-from dtwin.figures._style import BAND_COLOR, PHYSICS_COLOR, SURROGATE_COLOR, apply_style
+from dtwin.figures._fig11_claims import (
+    GRID,
+    PAPER_RANGE_PCT,
+    R_MODE_SPLIT_PCT,
+    sweep_claim_numbers,
+    sweep_claims,
+)
+from dtwin.figures._style import (
+    ALT_METHOD_COLOR,
+    OURS_COLOR,
+    PAPER_BAND_COLOR,
+    R_COLOR,
+    R_SIGNALS_COLOR,
+    new_figure,
+)
 from dtwin.reference.sweep_crosscheck import crosscheck_r_sweep_inputs
 from dtwin.sensitivity_sweep import alpha_trends
 
@@ -28,93 +42,113 @@ __all__ = ["plot_sensitivity", "fig11_sensitivity", "sweep_claim_numbers"]
 #: Relative spread of e1's RMSE across configurations that still counts as "identical".
 E1_IDENTICAL_RTOL = 1e-12
 
-_METHOD_TITLES = {
-    "code": "code: Viterbi state means, κ 0.6, rate 5e-4 (r_notes.md §7C)",
-    "paper": "paper §4.3 values: posterior-weighted means, κ 0.8, rate 0.05",
+#: Legend words of the correction methods (r_notes.md §7C; paper §4.3).
+_METHOD_LABELS = {
+    "code": "ours, code's correction (Viterbi means, κ 0.6, rate 5e-4)",
+    "paper": "ours, paper §4.3 correction (κ 0.8, rate 0.05)",
 }
+_METHOD_STYLE = {
+    "code": {"color": OURS_COLOR, "marker": "o", "ls": "-"},
+    "paper": {"color": ALT_METHOD_COLOR, "marker": "^", "ls": ":"},
+}
+LOW_MODE_LABEL = f"ours, low-mode HMM solution (< {R_MODE_SPLIT_PCT:g} %)"
 
 
 def _facet_values(frame: pd.DataFrame, m_a: float, m_b: float) -> pd.DataFrame:
     return frame[(frame["m_A"] == m_a) & (frame["m_B"] == m_b)].sort_values("alpha")
 
 
-def _draw_facet(
-    ax: Any,
-    curves: Sequence[tuple[pd.DataFrame | None, str]],
-    m_a: float,
-    m_b: float,
-    ours_label: str,
-) -> dict[str, Any]:
-    """Draw one (m_A, m_B) facet: ours with its interval, ours on R's signals, R's re-run.
-
-    ``curves`` is ``[(ours, label), (ours on R's signals or None, …), (R or None, …)]``;
-    returns the legend handles drawn.
-    """
-    (ours, _), (on_r, on_r_label), (r_sweep, r_label) = curves
-    facet = _facet_values(ours, m_a, m_b)
+def _draw_ours(ax: Any, facet: pd.DataFrame, method: str, n_rep: int) -> dict[str, Any]:
+    """Our mean per α (interval bars only with replicates); low-mode points drawn open."""
+    style = _METHOD_STYLE.get(method, _METHOD_STYLE["code"])
+    color, marker = style["color"], style["marker"]
     handles: dict[str, Any] = {}
-    handles[ours_label] = ax.errorbar(
-        facet["alpha"],
-        facet["drmse_e1_mean"],
-        yerr=[
-            facet["drmse_e1_mean"] - facet["drmse_e1_lo"],
-            facet["drmse_e1_hi"] - facet["drmse_e1_mean"],
-        ],
-        color=PHYSICS_COLOR,
-        marker="o",
-        ms=4,
-        lw=1.2,
-        capsize=2.5,
+    label = _METHOD_LABELS.get(method, f"ours, {method}")
+    (handles[label],) = ax.plot(
+        facet["alpha"], facet["drmse_e1_mean"], color=color, ls=style["ls"], lw=0.9, marker=None
     )
+    high = facet["drmse_e1_mean"] >= R_MODE_SPLIT_PCT
+    ax.plot(facet["alpha"][high], facet["drmse_e1_mean"][high], marker, color=color, ms=3.5)
+    low = facet[~high]
+    if not low.empty:
+        (open_marker,) = ax.plot(
+            low["alpha"], low["drmse_e1_mean"], marker, mfc="white", color=color, ms=4
+        )
+        if method == "code":
+            handles[LOW_MODE_LABEL] = open_marker
+    if n_rep > 1:
+        ax.errorbar(
+            facet["alpha"],
+            facet["drmse_e1_mean"],
+            yerr=[
+                facet["drmse_e1_mean"] - facet["drmse_e1_lo"],
+                facet["drmse_e1_hi"] - facet["drmse_e1_mean"],
+            ],
+            fmt="none",
+            ecolor=color,
+            lw=0.7,
+            capsize=1.5,
+        )
+    handles[label] = Line2D([], [], color=color, ls=style["ls"], marker=marker, ms=3.5, lw=0.9)
+    return handles
+
+
+def _draw_facet(
+    ax: Any, curves: Mapping[str, pd.DataFrame | None], m_a: float, m_b: float, n_rep: int
+) -> dict[str, Any]:
+    """Draw one (m_A, m_B) facet: the paper's band, ours per method, on R's signals, R's run.
+
+    ``curves`` maps ``"ours:<method>"``, ``"r_signals"`` and ``"r_rerun"`` to their tables
+    (``None`` or empty when absent); returns the legend handles drawn.
+    """
+    handles: dict[str, Any] = {
+        "paper's range (~23–40 %)": ax.axhspan(
+            *PAPER_RANGE_PCT, color=PAPER_BAND_COLOR, alpha=0.6, lw=0
+        )
+    }
+    on_r = curves.get("r_signals")
     if on_r is not None and not on_r.empty:
         facet_r = _facet_values(on_r, m_a, m_b)
-        (handles[on_r_label],) = ax.plot(
+        (handles["our HMM on R's exact signals"],) = ax.plot(
             facet_r["alpha"],
             facet_r["drmse_e1_mean"],
-            color=SURROGATE_COLOR,
+            color=R_SIGNALS_COLOR,
             marker="D",
-            ms=3.5,
-            lw=1.0,
+            ms=2.5,
+            lw=0.8,
             ls="--",
         )
+    r_sweep = curves.get("r_rerun")
     if r_sweep is not None:
         facet_rr = _facet_values(r_sweep, m_a, m_b)
-        (handles[r_label],) = ax.plot(
-            facet_rr["alpha"],
-            facet_rr["drmse_e1_pct"],
-            color=BAND_COLOR,
-            marker="s",
-            mfc="none",
-            ms=5,
-            lw=0,
+        (handles["R re-run (1 EM start)"],) = ax.plot(
+            facet_rr["alpha"], facet_rr["drmse_e1_pct"], "s", color=R_COLOR, mfc="none", ms=4
         )
+    for key, frame in curves.items():
+        if key.startswith("ours:") and frame is not None and not frame.empty:
+            facet = _facet_values(frame, m_a, m_b)
+            handles.update(_draw_ours(ax, facet, key.removeprefix("ours:"), n_rep))
     return handles
 
 
 def _label_facet(ax: Any, i: int, j: int, shape: tuple[int, int], m_a: float, m_b: float) -> None:
-    """Column titles, row labels, the x label and the shared y label of facet (i, j)."""
+    """Column titles, row labels, the x label and the y label of facet (i, j)."""
     n_rows, n_cols = shape
     if i == 0:
-        ax.set_title(f"Sensor B ×{m_b:g}", fontsize=9)
+        ax.set_title(f"Sensor B ×{m_b:g}", loc="center")
     if j == n_cols - 1:
         ax.yaxis.set_label_position("right")
-        ax.set_ylabel(f"Sensor A ×{m_a:g}", rotation=270, labelpad=12)
+        ax.set_ylabel(f"Sensor A ×{m_a:g}", rotation=270, labelpad=10)
+    elif j == 0:
+        ax.set_ylabel(r"$\Delta\mathrm{RMSE}_{e_1}$ (%)")
     if i == n_rows - 1:
         ax.set_xlabel("fusion weight α")
-    if j == 0 and i == n_rows // 2:
-        ax.text(
-            -0.32 if n_cols > 1 else -0.2,
-            0.5,
-            "ΔRMSE$_{e1}$ (%)",
-            rotation=90,
-            va="center",
-            ha="center",
-            transform=ax.transAxes,
-        )
 
 
 def _y_limits(summary: pd.DataFrame, r_sweep: pd.DataFrame | None) -> tuple[float, float]:
-    values = summary[["drmse_e1_lo", "drmse_e1_hi"]].to_numpy().ravel()
+    values = np.concatenate(
+        [summary[["drmse_e1_lo", "drmse_e1_hi"]].to_numpy().ravel(), list(PAPER_RANGE_PCT)]
+    )
     if r_sweep is not None:
         values = np.concatenate([values, r_sweep["drmse_e1_pct"].to_numpy()])
     low, high = float(np.nanmin(values)), float(np.nanmax(values))
@@ -128,7 +162,7 @@ def plot_sensitivity(
     methods: Sequence[str],
     interval: float,
 ) -> Figure:
-    """Draw the faceted sweep, one panel set per correction method.
+    """Draw the sweep as one facet grid (rows Sensor A, columns Sensor B), every method in it.
 
     Parameters
     ----------
@@ -136,59 +170,36 @@ def plot_sensitivity(
         From :func:`dtwin.sensitivity_sweep.summarize_sweep` (sources ``ours`` and optionally
         ``r_signals``).
     r_sweep : DataFrame or None
-        R's re-run (:func:`dtwin.reference.loaders.load_r_sweep`), drawn on the ``code`` panels.
+        R's re-run (:func:`dtwin.reference.loaders.load_r_sweep`, the ``code`` correction).
     methods : sequence of str
-        Correction methods, one panel set each, left to right.
+        Correction methods, each its own marker in every facet.
     interval : float
-        Probability mass of the drawn interval (for the legend).
+        Probability mass of the interval bars (drawn only with more than one replicate).
     """
-    apply_style()
     mults_a = sorted(summary["m_A"].unique())
     mults_b = sorted(summary["m_B"].unique())
     alphas = sorted(summary["alpha"].unique())
     n_rep = int(summary["n_replicates"].max())
-    width = max(2.4 * len(mults_b), 4.5)
-    figure = plt.figure(figsize=(width * len(methods) + 0.6, 2.1 * len(mults_a) + 1.3))
-    panels = np.atleast_1d(figure.subfigures(1, len(methods), wspace=0.04))
+    figure = new_figure(min(1.75 * len(mults_a) + 1.3, 8.0))
+    axes = figure.subplots(len(mults_a), len(mults_b), sharex=True, sharey=True, squeeze=False)
+    ours = summary[summary["source"] == "ours"]
+    curves: dict[str, pd.DataFrame | None] = {
+        "r_signals": summary[(summary["source"] == "r_signals") & (summary["method"] == "code")],
+        "r_rerun": r_sweep,
+        **{f"ours:{m}": ours[ours["method"] == m] for m in reversed(list(methods))},
+    }
     y_limits = _y_limits(summary, r_sweep)
-    ours_label = (
-        "ours (numpy draws)"
-        if n_rep == 1
-        else (f"ours: mean of {n_rep} replicates, {interval:.0%} interval")
-    )
     handles: dict[str, Any] = {}
-    for panel, method in zip(panels, methods, strict=True):
-        axes = panel.subplots(len(mults_a), len(mults_b), sharex=True, sharey=True, squeeze=False)
-        curves = [
-            (summary[(summary["source"] == "ours") & (summary["method"] == method)], ""),
-            (
-                summary[(summary["source"] == "r_signals") & (summary["method"] == method)],
-                "our HMM on R's exact signals",
-            ),
-            (
-                r_sweep if method == "code" else None,
-                "R re-run (1 EM start per configuration)",
-            ),
-        ]
-        for i, m_a in enumerate(mults_a):
-            for j, m_b in enumerate(mults_b):
-                ax = axes[i, j]
-                handles.update(_draw_facet(ax, curves, m_a, m_b, ours_label))
-                ax.set_ylim(*y_limits)
-                ax.set_xticks(alphas)
-                ax.axhline(0, color="#999999", lw=0.5)
-                _label_facet(ax, i, j, axes.shape, m_a, m_b)
-        panel.suptitle(_METHOD_TITLES.get(method, method), fontsize=10)
+    for (i, j), ax in np.ndenumerate(axes):
+        handles.update(_draw_facet(ax, curves, mults_a[i], mults_b[j], n_rep))
+        ax.set_ylim(*y_limits)
+        ax.set_xticks(alphas)
+        _label_facet(ax, i, j, axes.shape, mults_a[i], mults_b[j])
+    if n_rep > 1:
+        handles[f"bars: {interval:.0%} interval of {n_rep} replicates"] = Line2D([], [], lw=0)
+    order = sorted(handles, key=lambda k: (not k.startswith("ours"), k))
     figure.legend(
-        list(handles.values()),
-        list(handles),
-        loc="lower center",
-        ncol=len(handles),
-        bbox_to_anchor=(0.5, -0.04),
-    )
-    figure.suptitle(
-        "Sensitivity of the plant residual improvement to fusion and sensor noise (paper Fig. 11)",
-        y=1.04,
+        [handles[k] for k in order], order, loc="outside lower center", ncol=2, handlelength=2.2
     )
     return figure
 
@@ -307,4 +318,63 @@ def fig11_sensitivity(
         "alpha_slopes": trends.to_dict(orient="records"),
         "r_signals_crosscheck": crosscheck_metrics,
     }
-    return FigureArtifact("fig11_sensitivity", figure, metrics, checks)
+    mode = _modes(summary[(summary["source"] == "ours") & (summary["method"] == method)])
+    checks = _with_notes(checks, mode, int(sensitivity["hmm"]["n_restarts"]))
+    return FigureArtifact(
+        "fig11_sensitivity",
+        figure,
+        metrics,
+        checks,
+        paper_figure="Fig. 11",
+        caption=_caption(mode, int(sensitivity["n_replicates"])),
+        provenance=PROVENANCE,
+    )
+
+
+#: What the figure is drawn from (the JSON's ``figure.provenance``).
+PROVENANCE = (
+    "results/sensitivity/*.json (sweep_point rule, one job per configuration); R's "
+    "RobustnessAnalysis.R re-run"
+)
+
+
+def _caption(mode: str, n_replicates: int) -> str:
+    """Return the one-line caption: what the sweep measures and where ours sit."""
+    return (
+        "e1 before correction is identical in all configurations (α and sensor noise do not "
+        f"reach the plant), so the sweep tests only the HMM segmentation. {mode[:1].upper()}"
+        f"{mode[1:]}." + (" One replicate: no intervals." if n_replicates == 1 else "")
+    )
+
+
+def _with_notes(checks: list[Check], mode: str, n_restarts: int) -> list[Check]:
+    """Give each failed claim of the sweep a one-line cause (``mode``: where ours sit)."""
+    notes = {
+        "range_23_40": f"method: {mode}; the paper's band is drawn in every facet",
+        "one_mode_with_restarts": (
+            f"optimiser: {mode}, with {n_restarts} EM starts, so the best-likelihood "
+            "segmentation is sometimes the worse one for e1"
+        ),
+    }
+    generic = f"{mode}; e1 before correction is identical in every configuration"
+    return [
+        replace(c, note=notes.get(c.id, generic))
+        if c.kind == "claim" and not c.passed and c.note is None
+        else c
+        for c in checks
+    ]
+
+
+def _modes(ours: pd.DataFrame) -> str:
+    """Where our configurations sit: the high mode's range and the low-mode count."""
+    values = ours["drmse_e1_mean"].to_numpy(dtype=float)
+    high, low = values[values >= R_MODE_SPLIT_PCT], values[values < R_MODE_SPLIT_PCT]
+    words = (
+        f"ours {high.min():.1f}–{high.max():.1f} % in {high.size} of {values.size}"
+        if high.size
+        else ""
+    )
+    if low.size:
+        words += f"{'; ' if words else 'ours '}{low.size} in a low mode at "
+        words += f"{low.min():.1f}–{low.max():.1f} % (another HMM solution, open markers)"
+    return words

@@ -4,9 +4,8 @@ Specification: docs/gap.md §Benchmark (cases, rules) and §Targets.
 
 :func:`score_cases` joins each case's key (the truth from :mod:`dtwin.gap.generator`) with its
 ``diagnosis.json`` and returns one row per case; :func:`benchmark_metrics` gives the accuracies
-docs/gap.md §Targets sets targets for; :func:`benchmark_checks` states them as checks;
-:func:`draw_benchmark` draws the confusion matrix, accuracy vs magnitude and the shrinks per
-effect.
+docs/gap.md §Targets sets targets for; :func:`benchmark_checks` states them as checks. The
+figure is drawn by :mod:`dtwin.figures.gap_benchmark`.
 
 Table columns (:func:`score_cases`): ``case, family, effect, module, expected_effect, in_list,
 magnitude, snr, n_samples, diagnosed_module, diagnosed_effect, shrink_pct, raw_shrink_pct,
@@ -15,7 +14,6 @@ kpi_shrink_pct, module_ok, effect_ok``.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -25,14 +23,7 @@ import pandas as pd
 from dtwin.artifacts import Check
 from dtwin.gap.effects import NONE, UNEXPLAINED
 
-__all__ = [
-    "TARGETS",
-    "RIG_TARGETS",
-    "score_cases",
-    "benchmark_metrics",
-    "benchmark_checks",
-    "draw_benchmark",
-]
+__all__ = ["TARGETS", "RIG_TARGETS", "score_cases", "benchmark_metrics", "benchmark_checks"]
 
 #: The targets on the full benchmark (docs/gap.md §Targets) (≥ 10 cases per effect).
 TARGETS: dict[str, float] = {
@@ -169,65 +160,3 @@ def benchmark_checks(table: pd.DataFrame, metrics: Mapping[str, Any]) -> list[Ch
                 )
             )
     return checks
-
-
-def draw_benchmark(
-    table: pd.DataFrame, metrics: Mapping[str, Any], paths: Iterable[str | os.PathLike]
-) -> None:
-    """Draw the benchmark figure (confusion matrix, accuracy vs magnitude, shrinks) to ``paths``."""
-    import matplotlib.pyplot as plt
-
-    from dtwin.figures._style import save_figure
-
-    fig, axes = plt.subplots(1, 3, figsize=(18, 6), gridspec_kw={"width_ratios": [1.4, 1, 1.2]})
-    truths = sorted(table.expected_effect.unique())
-    answers = sorted(set(table.diagnosed_effect) | set(truths))
-    matrix = pd.crosstab(table.expected_effect, table.diagnosed_effect).reindex(
-        index=truths, columns=answers, fill_value=0
-    )
-    ax = axes[0]
-    ax.imshow(matrix.to_numpy(), cmap="Blues")
-    ax.set_xticks(range(len(answers)), answers, rotation=60, ha="right", fontsize=8)
-    ax.set_yticks(range(len(truths)), truths, fontsize=8)
-    for (i, j), value in np.ndenumerate(matrix.to_numpy()):
-        if value:
-            ax.text(j, i, str(value), ha="center", va="center", fontsize=8)
-    ax.set_xlabel("diagnosed effect")
-    ax.set_ylabel("true effect (out-of-list → unexplained)")
-    ax.set_title("Confusion matrix")
-    ax = axes[1]
-    scored = table[table.expected_effect != NONE].copy()
-    scored["bin"] = pd.cut(scored.magnitude, [0, 0.25, 0.5, 0.75, 1.0], include_lowest=True)
-    grouped = scored.groupby("bin", observed=False)
-    centres = [0.125, 0.375, 0.625, 0.875]
-    ax.plot(centres, grouped.effect_ok.mean().to_numpy(), "o-", label="effect right")
-    ax.plot(centres, grouped.module_ok.mean().to_numpy(), "s--", label="module right")
-    ax.set_ylim(0, 1.05)
-    ax.set_xlabel("effect magnitude (0 = barely above noise, 1 = strong)")
-    ax.set_ylabel("accuracy")
-    ax.set_title("Accuracy vs magnitude")
-    ax.legend()
-    ax = axes[2]
-    right = table[table.in_list & table.effect_ok]
-    effects = sorted(right.effect.unique())
-    data = [pd.to_numeric(right[right.effect == e].shrink_pct).dropna().to_numpy() for e in effects]
-    if effects:
-        ax.boxplot(data, vert=False)
-        ax.set_yticks(range(1, len(effects) + 1), effects, fontsize=8)
-    ax.axvline(85, color="k", ls="--", lw=1)
-    ax.set_xlabel("held-out excess gap removed, % (right diagnoses)")
-    ax.set_title("Shrink per effect")
-
-    def fmt(value):
-        return "–" if value is None else f"{100 * value:.0f} %"
-
-    fig.suptitle(
-        f"Gap diagnoser on {metrics['n_cases']} withheld-effect cases: "
-        f"module {fmt(metrics['module_accuracy'])}, effect {fmt(metrics['effect_accuracy'])}, "
-        f"none {fmt(metrics['none_accuracy'])}, "
-        f"out-of-list → unexplained {fmt(metrics['unexplained_accuracy'])}, "
-        f"median excess shrink {metrics['median_shrink_pct'] or 0:.0f} %",
-        fontsize=11,
-    )
-    fig.tight_layout()
-    save_figure(fig, paths)

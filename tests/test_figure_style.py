@@ -1,0 +1,231 @@
+"""The figure style of the set: print size, fonts, overlaps, 300-dpi PNG, one entry point.
+
+The workflow test (tests/test_workflow.py) checks every produced artifact's files and its
+``print_size_and_text`` validity check; these tests check the rules themselves, fast.
+"""
+
+from __future__ import annotations
+
+import ast
+import struct
+import zlib
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from dtwin.figures._print_check import drawn_texts, print_check
+from dtwin.figures._style import (
+    COLUMN_WIDTH,
+    FULL_WIDTH,
+    MIN_FONT_PT,
+    PNG_DPI,
+    new_figure,
+    panel_title,
+    save_figure,
+    tex,
+)
+from dtwin.figures.fig01_pipeline import fig01_pipeline
+from dtwin.figures.fig06_correction_distributions import bw_nrd0
+from dtwin.figures.fig10_mcda_actions import single_step_lock_ins
+from dtwin.figures.gap_benchmark import gap_benchmark, wilson_interval
+from tests.conftest import REPO
+
+FIGURE_MODULES = [
+    *sorted((REPO / "dtwin" / "figures").glob("fig*.py")),
+    REPO / "dtwin" / "figures" / "gap_benchmark.py",
+]
+
+
+def png_size_and_dpi(path) -> tuple[int, int, float]:
+    """Width and height in pixels and the dpi of a PNG (from its IHDR and pHYs chunks)."""
+    data = path.read_bytes()
+    width, height = struct.unpack(">II", data[16:24])
+    at = data.index(b"pHYs")
+    per_metre, _, unit = struct.unpack(">IIB", data[at + 4 : at + 13])
+    assert unit == 1  # metres
+    assert zlib.crc32(data[at : at + 13]) == struct.unpack(">I", data[at + 13 : at + 17])[0]
+    return width, height, per_metre * 0.0254
+
+
+def clean_figure(width: float = FULL_WIDTH):
+    figure = new_figure(2.5, width)
+    ax = figure.add_subplot()
+    ax.plot([0, 1], [0, 1], label="a line")
+    ax.set(xlabel="time (s)", ylabel=tex("x") + " (m)")
+    panel_title(ax, "A", "Short title")
+    ax.legend()
+    return figure
+
+
+@pytest.mark.parametrize("width", [FULL_WIDTH, COLUMN_WIDTH])
+def test_a_print_size_figure_with_set_fonts_passes(width):
+    check = print_check(clean_figure(width))
+    assert check.passed, check.observed
+    assert check.observed["min_font_pt"] >= MIN_FONT_PT
+
+
+def test_a_wide_figure_fails():
+    figure = clean_figure()
+    figure.set_size_inches(12, 5)
+    check = print_check(figure)
+    assert not check.passed and check.observed["width_in"] == 12
+
+
+def test_small_text_is_named():
+    figure = clean_figure()
+    figure.axes[0].text(0.1, 0.8, "tiny words", fontsize=5)
+    check = print_check(figure)
+    assert not check.passed and check.observed["too_small"] == ["tiny words"]
+
+
+def test_overlapping_and_off_page_text_is_named():
+    figure = clean_figure()
+    ax = figure.axes[0]
+    ax.text(0.5, 0.5, "first label")
+    ax.text(0.52, 0.5, "second label")
+    figure.text(0.9, 0.5, "runs off the right edge of the page")
+    check = print_check(figure)
+    assert not check.passed
+    assert ["first label", "second label"] in check.observed["overlapping"]
+    assert any("runs off" in text for text in check.observed["off_page"])
+
+
+def test_hidden_text_is_not_counted():
+    figure = clean_figure()
+    figure.axes[0].text(0.5, 0.5, "hidden", fontsize=4, visible=False)
+    assert "hidden" not in {t.text for t in drawn_texts(figure)}
+    assert print_check(figure).passed
+
+
+def test_png_is_300_dpi_at_print_size_and_reruns_byte_identical(tmp_path):
+    paths = [tmp_path / "a.png", tmp_path / "a.pdf"]
+    save_figure(clean_figure(), paths, tight=False)
+    first = [p.read_bytes() for p in paths]
+    save_figure(clean_figure(), paths, tight=False)
+    assert [p.read_bytes() for p in paths] == first
+    width, height, dpi = png_size_and_dpi(paths[0])
+    assert round(dpi) == PNG_DPI
+    assert (width, height) == (round(FULL_WIDTH * PNG_DPI), round(2.5 * PNG_DPI))
+    assert b"/MediaBox [ 0 0 518.4 180 ]" in first[1]  # vector PDF at 7.2 x 2.5 in
+
+
+def test_fig01_is_drawn_at_print_size_without_collisions():
+    arx = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["arx"]
+    artifact = fig01_pipeline(arx)
+    check = print_check(artifact.figure)
+    assert check.passed, check.observed
+    assert artifact.paper_figure == "Fig. 1" and artifact.caption
+    texts = {t.text for t in drawn_texts(artifact.figure)}
+    assert "$y_A$" in texts and "$x$, $v$" in texts and "u_cmd" not in " ".join(texts)
+
+
+def benchmark_table() -> pd.DataFrame:
+    rows = []
+    for effect in ("coulomb_friction", "sensor_delay", "none", "unexplained"):
+        for i in range(3):
+            right = not (effect == "sensor_delay" and i == 0)
+            rows.append(
+                {
+                    "effect": effect,
+                    "expected_effect": effect,
+                    "in_list": effect not in ("none", "unexplained"),
+                    "magnitude": 0.1 + 0.3 * i,
+                    "diagnosed_effect": effect if right else "none",
+                    "shrink_pct": 80.0 + 5 * i,
+                    "module_ok": right,
+                    "effect_ok": right,
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def test_gap_benchmark_shares_rows_and_reads_at_print_size():
+    table = benchmark_table()
+    metrics = {
+        "n_cases": len(table),
+        "cases_per_effect": table.groupby("effect").size().to_dict(),
+        "module_accuracy": 0.9,
+        "effect_accuracy": 0.8,
+        "none_accuracy": 1.0,
+        "unexplained_accuracy": 1.0,
+        "median_shrink_pct": 85.0,
+    }
+    artifact = gap_benchmark(table, metrics, [], {"median_shrink_pct": 85.0})
+    check = print_check(artifact.figure)
+    assert check.passed, check.observed
+    matrix, shrinks, _ = artifact.figure.axes
+    assert matrix.get_shared_y_axes().joined(matrix, shrinks)
+    rows = [label.get_text() for label in matrix.get_yticklabels()]
+    dots = shrinks.collections[0].get_offsets()
+    # every dot sits on its own effect's row of the confusion matrix
+    assert {rows[int(y)] for _, y in dots} == {"coulomb_friction", "sensor_delay"}
+    assert artifact.caption.startswith("12 withheld-effect cases (3 per effect)")
+
+
+def test_wilson_interval_matches_the_closed_form():
+    low, high = wilson_interval(8, 10)
+    assert low == pytest.approx(0.4902, abs=1e-4) and high == pytest.approx(0.9433, abs=1e-4)
+    assert np.isnan(wilson_interval(0, 0)[0])
+
+
+def test_bandwidth_is_r_bw_nrd0():
+    values = np.array([0.0, 1.0, 2.0, 3.0, 100.0])
+    # R: bw.nrd0(c(0, 1, 2, 3, 100)) = 0.9 * min(sd, IQR / 1.34) * 5^(-1/5)
+    assert bw_nrd0(values) == pytest.approx(0.9 * (2.0 / 1.34) * 5 ** (-0.2))
+    heavy = np.r_[np.random.default_rng(0).normal(0, 0.003, 900), np.linspace(-0.1, 0.1, 100)]
+    scott = np.std(heavy, ddof=1) * len(heavy) ** (-0.2)
+    assert bw_nrd0(heavy) < 0.5 * scott  # follows the core, not the tails
+
+
+def test_a_single_raw_step_that_locks_an_action_in_is_counted():
+    best = ["NoAction"] * 3 + ["BiasCorrect"] + ["ReidentifyPlant"] * 6
+    action = ["NoAction"] * 3 + ["BiasCorrect"] * 4 + ["ReidentifyPlant"] * 3
+    timeline = pd.DataFrame({"best": best, "action": action, "regime": ["DynamicsOff"] * 10})
+    assert single_step_lock_ins(timeline) == {
+        "n": 1,
+        "steps_held": 3,
+        "steps_held_by_regime": {"DynamicsOff": 3},
+    }
+
+
+@pytest.mark.parametrize("path", FIGURE_MODULES, ids=lambda p: p.stem)
+def test_every_figure_starts_from_the_shared_style(path):
+    """Figures are created only through new_figure (print size, fonts); no suptitle."""
+    tree = ast.parse(path.read_text())
+    calls = {
+        node.func.attr
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+    }
+    names = {
+        node.func.id
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+    }
+    assert "new_figure" in names
+    assert not calls & {"suptitle", "tight_layout", "set_size_inches"}
+    assert "figsize" not in path.read_text()
+
+
+def test_gap_benchmark_draws_the_paper_family_only():
+    table = benchmark_table().assign(family="paper")
+    rig = table.head(2).assign(family="rig", expected_effect="rig_only_effect")
+    metrics = {
+        "n_cases": len(table),
+        "cases_per_effect": table.groupby("effect").size().to_dict(),
+        "module_accuracy": 0.9,
+        "effect_accuracy": 0.8,
+        "none_accuracy": 1.0,
+        "unexplained_accuracy": 1.0,
+        "median_shrink_pct": 85.0,
+    }
+    artifact = gap_benchmark(pd.concat([table, rig]), metrics, [], {"median_shrink_pct": 85.0})
+    rows = [label.get_text() for label in artifact.figure.axes[0].get_yticklabels()]
+    assert "rig_only_effect" not in rows
+    assert artifact.caption.endswith("2 cases of other families are in the JSON only.")
