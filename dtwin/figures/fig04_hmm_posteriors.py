@@ -173,6 +173,7 @@ def fig04_hmm_posteriors(
     figure = plot_hmm_posteriors(states, summary)
     self_prob = np.diag(np.asarray(summary["transmat"]))
     dwell_s = _expected_dwell(self_prob, summary["states"], states["t"])
+    dt = float(states["t"].iloc[1] - states["t"].iloc[0])
     r_nominal = r_numbers["hmm_nominal_k4"]
     checks = [
         validity_finite("posteriors_finite", "smoothed and filtered posteriors", states),
