@@ -24,6 +24,7 @@ from matplotlib.figure import Figure
 from dtwin._validation import DtwinValueError
 from dtwin.artifacts import Check, FigureArtifact
 from dtwin.claims import wilson_interval
+from dtwin.figures._style import new_figure, panel_title
 
 __all__ = [
     "HEADLINE_NUMBERS",
@@ -265,11 +266,12 @@ def _claims_panel(ax: plt.Axes, claims: pd.DataFrame) -> None:
         label="fails in draw 0 (main run)",
     )  # fmt: skip
     ax.set_yticks(y, [_label(c) for c in claims["claim"]])
-    ax.tick_params(axis="y", labelsize=6.5)
+    ax.tick_params(axis="y", labelsize=7)
     ax.set_xlim(-0.02, 1.02)
     ax.set_xlabel(f"share of the {int(claims['n'].iloc[0])} draws (95 % Wilson)")
     ax.axvline(0.5, color="#8c8c8c", lw=0.6, ls=":")
-    ax.legend(loc="lower left", fontsize=7, frameon=False, bbox_to_anchor=(0.0, 1.0))
+    ax.legend(loc="lower right", fontsize=7, frameon=False)
+    panel_title(ax, "a", "claims across draws")
 
 
 def _explanation_panel(ax: plt.Axes, table: pd.DataFrame, r_values: Mapping[str, float]) -> None:
@@ -285,9 +287,9 @@ def _explanation_panel(ax: plt.Axes, table: pd.DataFrame, r_values: Mapping[str,
                 edgecolor="black", lw=0.6, zorder=4,
             )  # fmt: skip
     ax.axhline(0, color="#8c8c8c", lw=0.6)
-    ax.set_xlabel("mean of x in the DynamicsOff window (m)")
-    ax.set_ylabel("dRMSE of the correction (%)")
-    ax.set_title("e1/e4: ★ R's draw, ○ draw 0 (ours)", fontsize=8)
+    ax.set_xlabel(r"mean of $x$ in the DynamicsOff window (m)")
+    ax.set_ylabel(r"$\Delta$RMSE of the correction (%)")
+    panel_title(ax, "b", r"$e_1$, $e_4$: ★ R's draw, ○ draw 0")
     ax.legend(fontsize=7, frameon=False)
 
 
@@ -305,13 +307,10 @@ def plot_claims_across_draws(
     r_values : mapping
         R's draw: ``dynamics_off_mean_x`` (m), ``drmse_pct_e1``, ``drmse_pct_e4`` (%).
     """
-    with plt.rc_context({"font.size": 8, "axes.titlesize": 9, "axes.labelsize": 8}):
-        figure, (ax_claims, ax_e1) = plt.subplots(
-            1, 2, figsize=(7.0, 4.6), gridspec_kw={"width_ratios": [1.1, 1.0]}
-        )
-        _claims_panel(ax_claims, claims)
-        _explanation_panel(ax_e1, table, r_values)
-        figure.tight_layout()
+    figure = new_figure(4.6)
+    ax_claims, ax_e1 = figure.subplots(1, 2, width_ratios=[1.1, 1.0])
+    _claims_panel(ax_claims, claims)
+    _explanation_panel(ax_e1, table, r_values)
     return figure
 
 
