@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import logging
-import time
 
 import numpy as np
 import pandas as pd
@@ -272,18 +271,14 @@ def test_bic_sweep_extends_k_until_the_minimum_is_bracketed():
 
 
 def test_best_of_ten_reaches_depmix_loglik_and_regime_accuracy(r_pipeline, r_features):
-    fit_hmm(r_features[:200], 2, n_restarts=1, seed=0)  # warm-up (imports, caches)
-    start = time.perf_counter()
+    # its time (target < 0.5 s on two cores) is a benchmark: `make bench` (benchmarks/run.py)
     fit = fit_hmm(r_features, 4, n_restarts=10, seed=11)
-    elapsed = time.perf_counter() - start
-    print(f"10 restarts, K=4, T=1000, D=10: {elapsed:.3f} s; best logL {fit.log_likelihood:.4f}")
     assert fit.log_likelihood >= R_BEST_LOGLIK - 1e-2
     assert fit.bic == pytest.approx(4887.941, abs=0.05)
     assert fit.converged
     mapping = hungarian_map(fit.viterbi, r_pipeline["regime"])
     scores = classification_scores(mapping.predicted, r_pipeline["regime"])
     assert scores.accuracy == pytest.approx(0.85, abs=1e-3)
-    assert elapsed < 5.0  # target < 0.5 s on two cores; generous for loaded CI machines
 
 
 def test_scaling_underflow_falls_back_to_log_implementation():
