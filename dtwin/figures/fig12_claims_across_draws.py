@@ -287,7 +287,7 @@ def _explanation_panel(ax: plt.Axes, table: pd.DataFrame, r_values: Mapping[str,
                 edgecolor="black", lw=0.6, zorder=4,
             )  # fmt: skip
     ax.axhline(0, color="#8c8c8c", lw=0.6)
-    ax.set_xlabel(r"mean of $x$ in the DynamicsOff window (m)")
+    ax.set_xlabel(r"DynamicsOff mean of $x$ (m)")
     ax.set_ylabel(r"$\Delta$RMSE of the correction (%)")
     panel_title(ax, "b", r"$e_1$, $e_4$: ★ R's draw, ○ draw 0")
     ax.legend(fontsize=7, frameon=False)
