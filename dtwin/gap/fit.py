@@ -413,6 +413,8 @@ def _fit_delay(
 
     for delay in DELAY_GRID if near is None else (near,):
         fit_at(delay)
+    if not fits:  # no ARX start at the tried delays: the one nearest to them
+        fit_at(min(starts, key=lambda d: abs(d - (near or 0))))
     best = min(fits, key=lambda d: fits[d].train_rms)
     for delay in range(best - 2, best + 3):
         fit_at(delay)
