@@ -460,25 +460,29 @@ def _linear_windows(
     return lfilter([1.0], den, drive, axis=1)
 
 
-def _force_loop(w, x0, v0, step: HoldMatrices, force: Force, inv_m: float, out) -> None:
-    """Exact steps with a state-dependent force, one predictor-corrector pass per step."""
+def _force_loop(w, x0, v0, steps: tuple[HoldMatrices, HoldMatrices], force: Force, inv_m, out):
+    """Exact steps with a state-dependent force, one predictor-corrector pass per step.
+
+    The input ``w`` enters with ``step``'s hold; the force, a continuous function of the state
+    whatever holds the input, always enters with the first-order hold (trapezoidal): a force
+    held over the sample (explicit) feeds energy into a lightly damped plant and can diverge.
+    """
+    step, force_step = steps  # the input's hold, the first-order hold
     (a11, a12), (a21, a22) = step.a.tolist()
-    p1, p2 = step.b_prev.tolist()
-    n1, n2 = step.b_next.tolist()
+    q1, q2 = force_step.b_prev.tolist()
+    r1, r2 = force_step.b_next.tolist()
+    w = np.asarray(w, dtype=float)
+    w_next = np.concatenate([w[1:], w[-1:]])
+    drive_x = (step.b_prev[0] * w + step.b_next[0] * w_next).tolist()
+    drive_v = (step.b_prev[1] * w + step.b_next[1] * w_next).tolist()
     x, v = float(x0), float(v0)
     out[0] = x
-    w = w.tolist()
     for j in range(1, len(w)):
         f_prev = force(x, v) * inv_m
-        drive_prev = w[j - 1] - f_prev
-        xp = a11 * x + a12 * v + p1 * drive_prev
-        vp = a21 * x + a22 * v + p2 * drive_prev
-        if n1 or n2:
-            predicted = w[j] - f_prev
-            f_next = force(xp + n1 * predicted, vp + n2 * predicted) * inv_m
-            xp += n1 * (w[j] - f_next)
-            vp += n2 * (w[j] - f_next)
-        x, v = xp, vp
+        x_free = a11 * x + a12 * v + drive_x[j - 1] - q1 * f_prev
+        v_free = a21 * x + a22 * v + drive_v[j - 1] - q2 * f_prev
+        f_next = force(x_free - r1 * f_prev, v_free - r2 * f_prev) * inv_m
+        x, v = x_free - r1 * f_next, v_free - r2 * f_next
         out[j] = x
         if not -1e300 < x < 1e300:
             out[j:] = np.inf
@@ -543,17 +547,19 @@ def exact_plant_response(
     Notes
     -----
     Paper §3.1 M1, ``m·ẍ = u − c·ẋ − k·x − F(x, ẋ)``, discretised exactly for the linear part
-    (:func:`hold_matrices`); the force enters with the same hold, evaluated at the previous state
-    and, for the first-order hold, at a predicted next state (one predictor-corrector pass).
+    (:func:`hold_matrices`); the force, a continuous function of the state, always enters with the
+    first-order hold, evaluated at the previous state and at a predicted next state (one
+    predictor-corrector pass, second order in ``dt``).
     Without a force the whole response is a linear filter, windows side by side.
     """
     step = hold_matrices(c / m, k / m, dt, hold)
     w = np.asarray(u, dtype=float) / m
     out = np.zeros(len(w))
     if force is not None:
+        steps = (step, step if hold == FOH else hold_matrices(c / m, k / m, dt, FOH))
         for start, stop in windows:
             block = np.zeros(stop - start)
-            _force_loop(w[start:stop], x_start[start], v_start[start], step, force, 1 / m, block)
+            _force_loop(w[start:stop], x_start[start], v_start[start], steps, force, 1 / m, block)
             out[start:stop] = block
         return out
     by_length: dict[int, list[int]] = {}

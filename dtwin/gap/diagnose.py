@@ -285,6 +285,7 @@ def _scales(data: ModuleData, n_train: int, noise_std: float, lin: Mapping[str, 
         noise_std=float(noise_std),
         stiffness=float(lin.get("k", 0.0)) or 1.0,
         mass=float(lin.get("m", 0.0)) or 1.0,
+        output_mean=float(np.mean(output[:n_train])),
     )
 
 

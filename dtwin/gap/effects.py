@@ -76,6 +76,9 @@ class Scales:
         The module's output noise standard deviation (used by quantization), output units.
     stiffness, mass : float
         The plant's ``k`` and ``m`` in the twin (M1; else 0).
+    output_mean : float
+        Mean of the module's output over the training part (where a rig's spring is likely
+        centred when its position is recorded with an offset), output units.
     """
 
     input_max: float
@@ -87,6 +90,7 @@ class Scales:
     noise_std: float
     stiffness: float = 0.0
     mass: float = 0.0
+    output_mean: float = 0.0
 
 
 Bounds = list[tuple[float, float]]
@@ -290,6 +294,12 @@ def find_lattice(y: np.ndarray, low: float, high: float, n_grid: int = 400):
 MAX_DELAY_SAMPLES = 25
 
 
+def _centre_bounds(s: Scales) -> tuple[float, float]:
+    """Return the bounds of a spring's centre: 3 standard deviations about the mean, and 0."""
+    reach = 3.0 * s.output_std
+    return (min(s.output_mean - reach, -reach), max(s.output_mean + reach, reach))
+
+
 def _delay_bounds(s: Scales) -> Bounds:
     return [(0.0, MAX_DELAY_SAMPLES * s.dt)]
 
@@ -346,13 +356,16 @@ EFFECTS: tuple[Effect, ...] = (
     Effect(
         "cubic_stiffness",
         ("M1",),
-        ("k3",),
-        ("input units / output units^3",),
+        ("k3", "x0"),
+        ("input units / output units^3", "output units"),
         "force",
-        "F = k3·x^3",
-        lambda s: [(-50.0 * s.stiffness / s.output_std**2, 50.0 * s.stiffness / s.output_std**2)],
-        lambda s: [[0.0]],
-        lambda s: [0.1 * s.stiffness / s.output_std**2],
+        "F = k3·(x − x0)^3  (x0: the spring's centre in recording units)",
+        lambda s: [
+            (-50.0 * s.stiffness / s.output_std**2, 50.0 * s.stiffness / s.output_std**2),
+            _centre_bounds(s),
+        ],
+        lambda s: [[0.0, 0.0], [0.0, s.output_mean]],
+        lambda s: [0.1 * s.stiffness / s.output_std**2, s.output_std],
     ),
     Effect(
         "quadratic_damping",

@@ -187,7 +187,7 @@ def _residual_fn(data, effect, fixed, free_names, n_train, segments):
         )
         error = (predicted - target)[mask] / scale
         error = np.where(np.isnan(predicted[mask]), 0.0, error)  # unscored warm-up samples
-        return np.nan_to_num(error, nan=1e6, posinf=1e6, neginf=-1e6)
+        return np.clip(np.nan_to_num(error, nan=1e6, posinf=1e6, neginf=-1e6), -1e6, 1e6)
 
     return residual, scale
 
@@ -256,29 +256,46 @@ def fit_candidate(
     costs = [float(np.sum(residual(x0) ** 2)) for x0 in starts]
     best_x, best_cost = starts[int(np.argmin(costs))], min(costs)
     for index in np.argsort(costs)[:_N_REFINE]:
-        try:
-            result = least_squares(
-                residual,
-                starts[index],
-                bounds=(low, high),
-                x_scale=x_scale,
-                method="trf",
-                max_nfev=_MAX_NFEV,
-                ftol=1e-6,
-                xtol=1e-6,
-                gtol=1e-8,
-            )
-        except (ValueError, FloatingPointError) as error:  # pragma: no cover - defensive
-            logger.debug("fit of %s failed from start %d: %s", effect, index, error)
+        result = _scaled_least_squares(residual, starts[index], low, high, x_scale)
+        if result is None:
+            logger.debug("fit of %s failed from start %d", effect, index)
             continue
-        cost = float(np.sum(result.fun**2))
+        x_fit, cost = result
         if cost < best_cost:
-            best_x, best_cost = result.x, cost
+            best_x, best_cost = x_fit, cost
     lin = dict(lin_start)
     lin.update({k: float(v) for k, v in zip(free, best_x[: len(free)], strict=True)})
     theta = tuple(float(v) for v in best_x[len(free) :])
     n_used = max(1, sum(b - a - 1 for a, b in segments or [(0, n_train)]))
     return CandidateFit(lin, theta, len(best_x), math.sqrt(best_cost / n_used) * scale)
+
+
+def _scaled_least_squares(residual, start, low, high, typical) -> tuple[np.ndarray, float] | None:
+    """Minimise ``Σ residual(x)²`` over ``x / typical``; return ``(x, cost)`` or None on failure.
+
+    Every parameter is fitted in units of its typical size, so that the finite-difference
+    step of the Jacobian is relative to that size. SciPy's default step is absolute for
+    ``|x| < 1`` (``√ε ≈ 1.5e-8``): a cubic stiffness of typical size 1e10 (a rig recorded in
+    micrometres) started at 0 would see a zero Jacobian column and never move.
+    """
+
+    def scaled(z: np.ndarray) -> np.ndarray:
+        return residual(z * typical)
+
+    try:
+        result = least_squares(
+            scaled,
+            start / typical,
+            bounds=(low / typical, high / typical),
+            method="trf",
+            max_nfev=_MAX_NFEV,
+            ftol=1e-6,
+            xtol=1e-6,
+            gtol=1e-8,
+        )
+    except (ValueError, FloatingPointError):  # pragma: no cover - defensive
+        return None
+    return result.x * typical, float(np.sum(result.fun**2))
 
 
 def _fit_quantization(data, effect, lin_start, n_train, free, lin_bounds) -> CandidateFit:

@@ -209,8 +209,13 @@ def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float):
         tanh = math.tanh
         return lambda x, v: fc * tanh(v / vs)
     if effect.name == "cubic_stiffness":
-        k3 = float(theta[0])
-        return lambda x, v: k3 * x * x * x
+        k3, centre = float(theta[0]), float(theta[1])
+
+        def cubic(x, v):
+            offset = x - centre
+            return k3 * offset * offset * offset
+
+        return cubic
     if effect.name == "quadratic_damping":
         c2 = float(theta[0])
         return lambda x, v: c2 * v * abs(v)

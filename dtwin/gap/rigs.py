@@ -229,6 +229,8 @@ def generate_rig_case(
     strength = low * (high / low) ** magnitude if high else 0.0
     states, force, noise, params, linear = _run(rig, seed + 1, effect, strength, n)
     u_rec, x_rec = _to_recording_units(rig, rng, force, states[:, 0] + noise)
+    if effect == "cubic_stiffness":  # the spring's centre: the recorded position's offset
+        params["x0"] = rig["x_offset_phys"]
     t = np.arange(n) * rig["dt"]
     recording = pd.DataFrame({"t": t, "u_act": u_rec, "x": x_rec})
     contribution = float(np.std(states[:, 0] - linear[:, 0]))
@@ -253,6 +255,7 @@ def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
         "k": us / xs,
         "Fc": us,
         "k3": us / xs**3,
+        "x0": xs,
         "c2": us / xs**2,
     }
     plant = {name: value * per_unit[name] for name, value in rig["plant"].items()}
