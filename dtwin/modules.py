@@ -46,7 +46,9 @@ __all__ = [
     "ZOH",
     "FOH",
     "DISCRETISATIONS",
-    "EXACT_HOLDS",
+    "BANDLIMITED",
+    "require_discretisation",
+    "Force",
     "ModuleContract",
     "CONTRACTS",
     "LINEAR_PARAMS",
@@ -56,10 +58,6 @@ __all__ = [
     "plant_matrices",
     "PlantTrajectory",
     "plant_response",
-    "HoldMatrices",
-    "hold_matrices",
-    "exact_plant_response",
-    "free_response_basis",
     "fuse",
     "kpi",
 ]
@@ -68,11 +66,12 @@ __all__ = [
 EULER = "euler"
 #: Exact zero-order-hold discretisation (the plant through the matrix exponential).
 ZOH = "zoh"
-#: Exact first-order-hold discretisation: the input linear between samples (band-limited input).
+#: Exact first-order-hold discretisation: the input linear between samples.
 FOH = "foh"
-DISCRETISATIONS: tuple[str, ...] = (EULER, ZOH, FOH)
-#: The exact discretisations of :func:`exact_plant_response`.
-EXACT_HOLDS: tuple[str, ...] = (ZOH, FOH)
+#: Exact discretisation of a band-limited input (a windowed-sinc interpolation of the samples).
+BANDLIMITED = "bandlimited"
+#: Every discretisation a twin file may name (the exact ones: :mod:`dtwin.exact_plant`).
+DISCRETISATIONS: tuple[str, ...] = (EULER, ZOH, FOH, BANDLIMITED)
 
 
 @dataclass(frozen=True)
@@ -136,9 +135,8 @@ CONTRACTS: dict[str, ModuleContract] = {
 LINEAR_PARAMS: dict[str, tuple[str, ...]] = {name: c.params for name, c in CONTRACTS.items()}
 
 
-def _require_discretisation(
-    discretisation: str, allowed: tuple[str, ...] = DISCRETISATIONS
-) -> None:
+def require_discretisation(discretisation: str, allowed: tuple[str, ...] = DISCRETISATIONS) -> None:
+    """Raise ValueError unless ``discretisation`` is one of ``allowed``."""
     if discretisation not in allowed:
         raise ValueError(
             f"discretisation must be one of {', '.join(allowed)} (got {discretisation!r})"
@@ -175,7 +173,7 @@ def lag_coefficient(tau: float, dt: float, discretisation: str = EULER) -> float
     >>> round(lag_coefficient(0.15, 0.02), 6)
     0.875173
     """
-    _require_discretisation(discretisation)
+    require_discretisation(discretisation)
     return math.exp(-dt / tau)
 
 
@@ -250,9 +248,9 @@ def plant_matrices(
     Continuous ``ṡ = F·s + g·(u/m + ξ)``, ``F = [[0, 1], [−k/m, −c/m]]``, ``g = (0, 1)ᵀ``.
     Euler: ``A = I + dt·F``, ``b_accel = dt·g``. Zero-order hold: ``A = exp(F·dt)``,
     ``b_accel = ∫₀^dt exp(F·s) ds·g`` (one matrix exponential of the augmented matrix).
-    In both ``b_force = b_accel/m``. The first-order hold is :func:`hold_matrices`.
+    In both ``b_force = b_accel/m``. Other holds: :func:`dtwin.exact_plant.hold_matrices`.
     """
-    _require_discretisation(discretisation, (EULER, ZOH))
+    require_discretisation(discretisation, (EULER, ZOH))
     if discretisation == EULER:
         a = np.array([[1.0, dt], [-dt * k / m, 1.0 - dt * c / m]])
         b_accel = np.array([[0.0], [dt]])
@@ -323,9 +321,9 @@ def plant_response(
     ``v[k] = v[k−1] + dt·acc``, ``x[k] = x[k−1] + dt·v[k−1]`` (position uses the old
     velocity). The arithmetic is done in this order, on the element types given, so every user
     gets the same bits as its former copy of the loop. The gap diagnoser's exact plant is
-    :func:`exact_plant_response`.
+    :func:`dtwin.exact_plant.exact_plant_response`.
     """
-    _require_discretisation(discretisation, (EULER, ZOH))
+    require_discretisation(discretisation, (EULER, ZOH))
     n_steps = len(u)
     xs = np.zeros(n_steps)
     vs = np.zeros(n_steps)
@@ -379,197 +377,6 @@ def _zoh_loop(u, matrices: PlantMatrices, k, force, noise, xs, vs) -> None:
         if noise is not None:
             state = state + b_accel[:, 0] * noise[j]
         xs[j], vs[j] = state
-
-
-# --- the exact plant of the gap diagnoser (zero- or first-order hold) ---------------------
-
-
-class HoldMatrices(NamedTuple):
-    """One exact step ``s[k] = a·s[k−1] + b_prev·w[k−1] + b_next·w[k]``, ``s = (x, v)``.
-
-    ``w`` is the acceleration input (force per unit mass, ``(u − F)/m``); ``a`` has shape
-    (2, 2), ``b_prev`` and ``b_next`` shape (2,). The zero-order hold has ``b_next = 0``.
-    """
-
-    a: np.ndarray
-    b_prev: np.ndarray
-    b_next: np.ndarray
-
-
-def hold_matrices(c_per_m: float, k_per_m: float, dt: float, hold: str) -> HoldMatrices:
-    """Return the exact discretisation of ``ẍ = w − (c/m)·ẋ − (k/m)·x`` over one sample.
-
-    Parameters
-    ----------
-    c_per_m, k_per_m : float
-        Damping and stiffness per unit mass, 1/s and 1/s² (``k = 0``: an integrating plant).
-    dt : float
-        Sample period, s.
-    hold : {"zoh", "foh"}
-        The input between samples: held (zero-order hold, a digital controller's output) or
-        linear (first-order hold, a band-limited excitation such as a multisine through a DAC
-        and an anti-aliasing filter).
-
-    Returns
-    -------
-    HoldMatrices
-
-    Notes
-    -----
-    With ``F = [[0, 1], [−k/m, −c/m]]``, ``g = (0, 1)ᵀ`` and the augmented state
-    ``(s, w, Δ)``, ``ṡ = F·s + g·w``, ``ẇ = Δ/dt``: one matrix exponential of the
-    augmented matrix gives ``s[k] = e₁₁·s[k−1] + e₁₂·w[k−1] + e₁₃·(w[k] − w[k−1])``, exact for
-    a piecewise-linear input (``Δ = 0``: the zero-order hold).
-
-    Examples
-    --------
-    >>> step = hold_matrices(0.0, 0.0, 0.1, "foh")  # a free mass: x gains w·dt²/2 per step
-    >>> [round(float(b), 6) for b in step.b_prev + step.b_next]
-    [0.005, 0.1]
-    """
-    _require_discretisation(hold, EXACT_HOLDS)
-    augmented = np.zeros((4, 4))
-    augmented[:2, :2] = [[0.0, 1.0], [-k_per_m, -c_per_m]]
-    augmented[1, 2] = 1.0
-    augmented[2, 3] = 1.0 / dt
-    exact = expm(augmented * dt)
-    slope = exact[:2, 3] if hold == FOH else np.zeros(2)
-    return HoldMatrices(exact[:2, :2], exact[:2, 2] - slope, slope)
-
-
-def _linear_windows(
-    w: np.ndarray, x0: np.ndarray, v0: np.ndarray, step: HoldMatrices
-) -> np.ndarray:
-    """Positions of windows of the linear plant, each row from its own initial state.
-
-    ``w`` has shape (n_windows, length): the acceleration input of each window; ``x0``, ``v0``
-    shape (n_windows,). The response is one linear filter per row (free plus forced
-    response, :func:`scipy.signal.lfilter` along axis 1).
-    """
-    a, b_prev, b_next = step
-    den = np.array([1.0, -(a[0, 0] + a[1, 1]), a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]])
-    # C·adj(zI − A)·b = b₀·z + (a₁₂·b₁ − a₂₂·b₀) for C = (1, 0): a strictly proper numerator
-    num_prev = np.array([0.0, b_prev[0], a[0, 1] * b_prev[1] - a[1, 1] * b_prev[0]])
-    num_next = np.array([0.0, b_next[0], a[0, 1] * b_next[1] - a[1, 1] * b_next[0]])
-    w_next = np.concatenate([w[:, 1:], w[:, -1:]], axis=1)
-    drive = lfilter(num_prev, [1.0], w, axis=1) + lfilter(num_next, [1.0], w_next, axis=1)
-    x1_free = a[0, 0] * x0 + a[0, 1] * v0
-    drive[:, 0] += x0
-    if drive.shape[1] > 1:
-        drive[:, 1] += x1_free - (a[0, 0] + a[1, 1]) * x0
-    return lfilter([1.0], den, drive, axis=1)
-
-
-def _force_loop(w, x0, v0, steps: tuple[HoldMatrices, HoldMatrices], force: Force, inv_m, out):
-    """Exact steps with a state-dependent force, one predictor-corrector pass per step.
-
-    The input ``w`` enters with ``step``'s hold; the force, a continuous function of the state
-    whatever holds the input, always enters with the first-order hold (trapezoidal): a force
-    held over the sample (explicit) feeds energy into a lightly damped plant and can diverge.
-    """
-    step, force_step = steps  # the input's hold, the first-order hold
-    (a11, a12), (a21, a22) = step.a.tolist()
-    q1, q2 = force_step.b_prev.tolist()
-    r1, r2 = force_step.b_next.tolist()
-    w = np.asarray(w, dtype=float)
-    w_next = np.concatenate([w[1:], w[-1:]])
-    drive_x = (step.b_prev[0] * w + step.b_next[0] * w_next).tolist()
-    drive_v = (step.b_prev[1] * w + step.b_next[1] * w_next).tolist()
-    x, v = float(x0), float(v0)
-    out[0] = x
-    for j in range(1, len(w)):
-        f_prev = force(x, v) * inv_m
-        x_free = a11 * x + a12 * v + drive_x[j - 1] - q1 * f_prev
-        v_free = a21 * x + a22 * v + drive_v[j - 1] - q2 * f_prev
-        f_next = force(x_free - r1 * f_prev, v_free - r2 * f_prev) * inv_m
-        x, v = x_free - r1 * f_next, v_free - r2 * f_next
-        out[j] = x
-        if not -1e300 < x < 1e300:
-            out[j:] = np.inf
-            return
-
-
-def free_response_basis(step: HoldMatrices, length: int) -> np.ndarray:
-    """Return the position's free response to unit initial states, shape ``(length, 2)``.
-
-    Column 0 starts from ``(x, v) = (1, 0)``, column 1 from ``(0, 1)``: row ``j`` is the first
-    row of ``A^j`` (:class:`HoldMatrices`).
-    """
-    a = step.a
-    den = [1.0, -(a[0, 0] + a[1, 1]), a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]]
-    seeds = np.zeros((2, max(length, 2)))
-    seeds[0, 0], seeds[0, 1] = 1.0, a[0, 0] - (a[0, 0] + a[1, 1])  # x₀ = 1, x₁ = a₁₁
-    seeds[1, 1] = a[0, 1]  # x₀ = 0, x₁ = a₁₂
-    return lfilter([1.0], den, seeds, axis=1)[:, :length].T
-
-
-def exact_plant_response(
-    u: np.ndarray,
-    m: float,
-    c: float,
-    k: float,
-    dt: float,
-    *,
-    windows: Sequence[tuple[int, int]],
-    x_start: np.ndarray,
-    v_start: np.ndarray,
-    hold: str = FOH,
-    force: Force | None = None,
-) -> np.ndarray:
-    """Return the plant's position, exactly discretised, over windows restarted from states.
-
-    Parameters
-    ----------
-    u : array, shape (n_samples,)
-        Force input (input units), already corrected for offset and delay.
-    m, c, k : float
-        Mass, viscous damping, stiffness (input units per position unit and its derivatives);
-        ``k = 0`` is an integrating plant.
-    dt : float
-        Sample period, s.
-    windows : sequence of (start, stop)
-        Each window ``[start, stop)`` is simulated from the state ``(x_start[start],
-        v_start[start])`` (free run: one window over everything). Samples outside every window
-        are 0.
-    x_start, v_start : array, shape (n_samples,)
-        The states windows may start from (the recorded position, the velocity estimated from
-        it), position units and position units/s.
-    hold : {"zoh", "foh"}, default "foh"
-        The input between samples (:func:`hold_matrices`).
-    force : callable, optional
-        The ``force`` hook ``F(x, v)``, input units, opposing the motion.
-
-    Returns
-    -------
-    numpy.ndarray, shape (n_samples,)
-        Position; ``inf`` from the sample where a window diverges.
-
-    Notes
-    -----
-    Paper §3.1 M1, ``m·ẍ = u − c·ẋ − k·x − F(x, ẋ)``, discretised exactly for the linear part
-    (:func:`hold_matrices`); the force, a continuous function of the state, always enters with the
-    first-order hold, evaluated at the previous state and at a predicted next state (one
-    predictor-corrector pass, second order in ``dt``).
-    Without a force the whole response is a linear filter, windows side by side.
-    """
-    step = hold_matrices(c / m, k / m, dt, hold)
-    w = np.asarray(u, dtype=float) / m
-    out = np.zeros(len(w))
-    if force is not None:
-        steps = (step, step if hold == FOH else hold_matrices(c / m, k / m, dt, FOH))
-        for start, stop in windows:
-            block = np.zeros(stop - start)
-            _force_loop(w[start:stop], x_start[start], v_start[start], steps, force, 1 / m, block)
-            out[start:stop] = block
-        return out
-    by_length: dict[int, list[int]] = {}
-    for start, stop in windows:
-        by_length.setdefault(stop - start, []).append(start)
-    for length, starts in by_length.items():
-        rows = np.asarray(starts)[:, None] + np.arange(length)
-        block = _linear_windows(w[rows], x_start[rows[:, 0]], v_start[rows[:, 0]], step)
-        out[rows] = block
-    return out
 
 
 # --- the algebraic modules (M3, M4) -------------------------------------------------------

@@ -15,6 +15,7 @@ import pytest
 import yaml
 
 from dtwin.cli import main
+from dtwin.exact_plant import exact_plant_response
 from dtwin.gap import (
     diagnose,
     diagnosis_to_dict,
@@ -24,7 +25,6 @@ from dtwin.gap import (
     twin_from_mapping,
 )
 from dtwin.gap.effects import EFFECT_NAMES
-from dtwin.modules import exact_plant_response
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = json.loads((ROOT / "workflow/schemas/diagnosis.schema.json").read_text())

@@ -35,6 +35,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from dtwin._validation import DtwinTypeError, DtwinValueError, require_in_range
+from dtwin.exact_plant import EXACT_HOLDS
 from dtwin.gap.effects import (
     NONE,
     PARAMETER_MISMATCH,
@@ -71,7 +72,7 @@ from dtwin.gap.noise import (
 )
 from dtwin.gap.oe_reference import output_error_reference
 from dtwin.gap.recording import Recording, diagnosable_modules
-from dtwin.modules import DISCRETISATIONS, EULER, EXACT_HOLDS
+from dtwin.modules import DISCRETISATIONS, EULER
 from dtwin.params import TwinParams, twin_params_from_mapping
 from dtwin.wiring import MODULES
 
@@ -878,9 +879,9 @@ def diagnose(
         Fraction of samples, from the start, used for fitting; the rest is held out.
     settings : GapSettings, optional
         Decision constants.
-    discretisation : {"euler", "zoh", "foh"}, optional
+    discretisation : {"euler", "zoh", "foh", "bandlimited"}, optional
         The plant's discretisation (the twin file's ``discretisation``); None: the exact hold
-        (zero- or first-order) that fits the training part best.
+        (zero-order, first-order or band-limited) that fits the training part best.
     heldout : Recording, optional
         A separate validation experiment: every gap is measured on it, and the first
         ``round(train_frac·n)`` samples of ``recording`` are the training part.

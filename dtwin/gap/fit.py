@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from dtwin.exact_plant import hold_matrices
 from dtwin.gap.effects import MAX_DELAY_SAMPLES, Effect, Scales, find_lattice
 from dtwin.gap.models import (
     LINEAR_PARAMS,
@@ -38,7 +39,7 @@ from dtwin.gap.models import (
     plant_windows,
     simulate_module,
 )
-from dtwin.modules import EULER, FOH, hold_matrices
+from dtwin.modules import EULER, ZOH
 
 __all__ = [
     "CandidateFit",
@@ -339,7 +340,9 @@ def _exact_plant_from_arx(x, u, dt, factor, hold):
 
     The ARX poles are mapped to continuous ones (``s = ln(z)/step``), which give ``c/m`` and
     ``k/m``; ``m`` matches the static gain of the numerator (its coefficient sum), which is
-    finite for an integrating plant too. The first-order hold adds the same-sample input.
+    finite for an integrating plant too. The first-order and band-limited holds add the
+    same-sample input (a band-limited input also reaches ``x[k]`` through later samples, which
+    the output-error refinement then accounts for).
     """
     xs, us = x[::factor], u[::factor]
     step = dt * factor
@@ -347,7 +350,8 @@ def _exact_plant_from_arx(x, u, dt, factor, hold):
     if n < 20:
         return None
     rows = np.arange(2, n)
-    lags = [us[rows], us[rows - 1], us[rows - 2]] if hold == FOH else [us[rows - 1], us[rows - 2]]
+    same_sample = hold != ZOH  # the first-order and band-limited holds let u[k] act on x[k]
+    lags = [us[rows], us[rows - 1], us[rows - 2]] if same_sample else [us[rows - 1], us[rows - 2]]
     phi = np.column_stack([xs[rows - 1], xs[rows - 2], *lags, np.ones(len(rows))])
     coef, *_ = np.linalg.lstsq(phi, xs[rows], rcond=None)
     poles = np.roots([1.0, -coef[0], -coef[1]]).astype(complex)
@@ -357,10 +361,9 @@ def _exact_plant_from_arx(x, u, dt, factor, hold):
     c_per_m = max(float(-continuous.sum().real), 0.0)
     k_per_m = max(float((continuous[0] * continuous[1]).real), 0.0)
     gain_arx = float(np.sum(coef[2:-1]))
-    a, b_prev, b_next = hold_matrices(c_per_m, k_per_m, step, hold)
-    num = [b_next[0], b_prev[0] + a[0, 1] * b_next[1] - a[1, 1] * b_next[0]]
-    num.append(a[0, 1] * b_prev[1] - a[1, 1] * b_prev[0])
-    gain_unit = float(np.sum(num))
+    # the static gain is the same for every hold (its taps sum to the zero-order hold's)
+    a, taps, _ = hold_matrices(c_per_m, k_per_m, step, ZOH)
+    gain_unit = float(taps[0, 0] * (1.0 - a[1, 1]) + a[0, 1] * taps[0, 1])
     if not gain_arx > 0 or not gain_unit > 0:
         return None
     m = gain_unit / gain_arx

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.signal import savgol_filter
 
+from dtwin.exact_plant import exact_plant_response, free_response_basis, hold_matrices
 from dtwin.gap.effects import (
     Effect,
     Scales,
@@ -40,10 +41,7 @@ from dtwin.gap.effects import (
 from dtwin.modules import (
     EULER,
     LINEAR_PARAMS,
-    exact_plant_response,
-    free_response_basis,
     fuse,
-    hold_matrices,
     kpi,
     lag_coefficient,
     lag_response,
@@ -88,8 +86,8 @@ class ModuleData:
     scales : Scales
         Data scales for effect bounds.
     discretisation : str
-        M1: ``"euler"`` (the paper's twin), ``"zoh"`` or ``"foh"`` (exact;
-        :func:`dtwin.modules.exact_plant_response`).
+        M1: ``"euler"`` (the paper's twin), ``"zoh"``, ``"foh"`` or ``"bandlimited"`` (exact;
+        :func:`dtwin.exact_plant.exact_plant_response`).
     horizon : int or None
         M1 with an exact discretisation: simulate in windows of this many samples, each
         restarted from the recorded state (None: free run).
@@ -320,7 +318,7 @@ def _window_states(data, u, m, c, k, windows, warmup) -> tuple[np.ndarray, np.nd
     """Return the windows' initial states: least squares on each one's first ``warmup`` samples.
 
     The linear plant's forced response from rest is removed from the recorded position; the
-    rest is the free response ``Φ·s₀`` (:func:`~dtwin.modules.free_response_basis`).
+    rest is the free response ``Φ·s₀`` (:func:`~dtwin.exact_plant.free_response_basis`).
     """
     n = len(u)
     zeros = np.zeros(n)

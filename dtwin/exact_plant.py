@@ -1,0 +1,272 @@
+"""The plant (module M1) discretised exactly, for any sample rate: the gap diagnoser's plant.
+
+Specification: docs/gap.md §Calibration (the plant's discretisation).
+
+The paper's simulator steps the plant ``m·ẍ = u − c·ẋ − k·x − F(x, ẋ)`` by explicit Euler
+(:func:`dtwin.modules.plant_response`), right at its ~150 samples per period and wrong at 10.
+Here the linear part is discretised exactly, through matrix exponentials, for what the input does
+between samples (the **hold**):
+
+- :data:`~dtwin.modules.ZOH`: held (a digital controller's output);
+- :data:`~dtwin.modules.FOH`: linear between samples (it lets ``u[k]`` act on ``x[k]``);
+- :data:`~dtwin.modules.BANDLIMITED`: the band-limited interpolation of the samples (a windowed
+  sinc, :data:`SINC_TAPS` samples each side), what a multisine through a DAC and an
+  anti-aliasing filter is; exact for any input below the Nyquist frequency up to the window.
+
+One step is ``s[k] = a·s[k−1] + d[k−1]`` with ``s = (x, v)`` and the drive
+``d[k−1] = Σ_j taps[j]·w[k−1+first+j]`` (:class:`HoldMatrices`, :func:`hold_matrices`), ``w``
+the input per unit mass. A state-dependent force ``F`` (a candidate effect) always enters with
+the first-order hold, by one predictor-corrector pass per step (:func:`exact_plant_response`).
+Arrays are time-first, shape ``(n_samples,)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+from scipy.linalg import expm
+from scipy.signal import lfilter
+
+from dtwin.modules import BANDLIMITED, FOH, ZOH, Force, require_discretisation
+
+__all__ = [
+    "EXACT_HOLDS",
+    "SINC_TAPS",
+    "HoldMatrices",
+    "hold_matrices",
+    "exact_plant_response",
+    "free_response_basis",
+]
+
+#: The exact discretisations of :func:`exact_plant_response`.
+EXACT_HOLDS: tuple[str, ...] = (ZOH, FOH, BANDLIMITED)
+#: Samples on each side of an interval the band-limited hold interpolates from (Lanczos window).
+SINC_TAPS = 8
+_QUADRATURE_NODES = 24
+
+
+class HoldMatrices(NamedTuple):
+    """One exact step ``s[k] = a·s[k−1] + Σ_j taps[j]·w[k−1+first+j]``, ``s = (x, v)``.
+
+    ``w`` is the acceleration input (force per unit mass, ``(u − F)/m``); ``a`` has shape
+    (2, 2), ``taps`` shape (n_taps, 2). The zero-order hold has one tap (``first = 0``), the
+    first-order hold two (``w[k−1]``, ``w[k]``), the band-limited hold ``2·SINC_TAPS``.
+    """
+
+    a: np.ndarray
+    taps: np.ndarray
+    first: int
+
+    def drive(self, w: np.ndarray) -> np.ndarray:
+        """Return ``d`` of shape ``(n, 2)``: ``d[k−1]`` drives step ``k`` (ends repeat ``w``)."""
+        w = np.asarray(w, dtype=float)
+        before, after = max(-self.first, 0), self.first + len(self.taps) - 1
+        padded = np.concatenate([np.full(before, w[0]), w, np.full(max(after, 0), w[-1])])
+        out = np.zeros((len(w), 2))
+        for j, tap in enumerate(self.taps):
+            start = before + self.first + j
+            out += np.outer(padded[start : start + len(w)], tap)
+        return out
+
+
+def hold_matrices(c_per_m: float, k_per_m: float, dt: float, hold: str) -> HoldMatrices:
+    """Return the exact discretisation of ``ẍ = w − (c/m)·ẋ − (k/m)·x`` over one sample.
+
+    Parameters
+    ----------
+    c_per_m, k_per_m : float
+        Damping and stiffness per unit mass, 1/s and 1/s² (``k = 0``: an integrating plant).
+    dt : float
+        Sample period, s.
+    hold : {"zoh", "foh", "bandlimited"}
+        The input between samples (see the module docstring).
+
+    Returns
+    -------
+    HoldMatrices
+
+    Notes
+    -----
+    With ``F = [[0, 1], [−k/m, −c/m]]``, ``g = (0, 1)ᵀ`` and the augmented state
+    ``(s, w, Δ)``, ``ṡ = F·s + g·w``, ``ẇ = Δ/dt``: one matrix exponential of the
+    augmented matrix gives ``s[k] = e₁₁·s[k−1] + e₁₂·w[k−1] + e₁₃·(w[k] − w[k−1])``, exact for
+    a piecewise-linear input (``Δ = 0``: the zero-order hold). The band-limited hold's taps are
+    ``dt·∫₀¹ exp(F·dt·(1−τ))·g·h(τ − j) dτ`` for the normalised Lanczos kernel ``h``, by
+    Gauss–Legendre quadrature (:data:`_QUADRATURE_NODES` nodes).
+
+    Examples
+    --------
+    >>> step = hold_matrices(0.0, 0.0, 0.1, "foh")  # a free mass: x gains w·dt²/2 per step
+    >>> [round(float(b), 6) for b in step.taps.ravel()]
+    [0.003333, 0.05, 0.001667, 0.05]
+    >>> bool(np.allclose(hold_matrices(0.3, 40.0, 0.05, "bandlimited").taps.sum(axis=0),
+    ...                  hold_matrices(0.3, 40.0, 0.05, "zoh").taps[0]))
+    True
+    """
+    require_discretisation(hold, EXACT_HOLDS)
+    augmented = np.zeros((4, 4))
+    augmented[:2, :2] = [[0.0, 1.0], [-k_per_m, -c_per_m]]
+    augmented[1, 2] = 1.0
+    augmented[2, 3] = 1.0 / dt
+    exact = expm(augmented * dt)
+    a = exact[:2, :2]
+    if hold == ZOH:
+        return HoldMatrices(a, exact[None, :2, 2], 0)
+    if hold == FOH:
+        slope = exact[:2, 3]
+        return HoldMatrices(a, np.stack([exact[:2, 2] - slope, slope]), 0)
+    return HoldMatrices(a, _bandlimited_taps(augmented[:2, :2], dt), 1 - SINC_TAPS)
+
+
+def _lanczos(x: np.ndarray) -> np.ndarray:
+    inside = np.abs(x) < SINC_TAPS
+    return np.where(inside, np.sinc(x) * np.sinc(x / SINC_TAPS), 0.0)
+
+
+def _bandlimited_taps(system: np.ndarray, dt: float) -> np.ndarray:
+    """Return the taps ``(2·SINC_TAPS, 2)`` of ``w[k−1+j]``, ``j = 1−SINC_TAPS … SINC_TAPS``."""
+    nodes, weights = np.polynomial.legendre.leggauss(_QUADRATURE_NODES)
+    tau = 0.5 * (nodes + 1.0)  # on [0, 1]
+    offsets = np.arange(1 - SINC_TAPS, SINC_TAPS + 1)
+    kernel = _lanczos(tau[:, None] - offsets[None, :])  # (nodes, taps)
+    kernel /= kernel.sum(axis=1, keepdims=True)  # a constant input is reproduced exactly
+    transitions = expm(system[None] * (dt * (1.0 - tau))[:, None, None])  # (nodes, 2, 2)
+    columns = transitions[:, :, 1]  # exp(F·dt·(1−τ))·g
+    return 0.5 * dt * np.einsum("n,ni,nj->ji", weights, columns, kernel)
+
+
+def _linear_windows(drive: np.ndarray, x0: np.ndarray, v0: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Positions of windows of the linear plant, each row from its own initial state.
+
+    ``drive`` has shape (n_windows, length, 2): ``d[k−1]`` of each window (:class:`HoldMatrices`);
+    ``x0``, ``v0`` shape (n_windows,). The response is one linear filter per row: the position's
+    transfer from ``d`` is ``C·adj(zI − A)/det(zI − A)``, ``C·adj·e₁ = z − a₂₂``,
+    ``C·adj·e₂ = a₁₂`` (:func:`scipy.signal.lfilter` along axis 1).
+    """
+    den = np.array([1.0, -(a[0, 0] + a[1, 1]), a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]])
+    forcing = lfilter([0.0, 1.0, -a[1, 1]], [1.0], drive[..., 0], axis=1)
+    forcing += lfilter([0.0, 0.0, a[0, 1]], [1.0], drive[..., 1], axis=1)
+    x1_free = a[0, 0] * x0 + a[0, 1] * v0
+    forcing[:, 0] += x0
+    if forcing.shape[1] > 1:
+        forcing[:, 1] += x1_free - (a[0, 0] + a[1, 1]) * x0
+    return lfilter([1.0], den, forcing, axis=1)
+
+
+def _force_loop(drive, x0, v0, a, force_step: HoldMatrices, force: Force, inv_m, out):
+    """Exact steps with a state-dependent force, one predictor-corrector pass per step.
+
+    The input enters through ``drive`` (its own hold); the force, a continuous function of the
+    state whatever holds the input, always enters with the first-order hold (trapezoidal): a
+    force held over the sample (explicit) feeds energy into a lightly damped plant and can
+    diverge.
+    """
+    (a11, a12), (a21, a22) = a.tolist()
+    (q1, q2), (r1, r2) = force_step.taps.tolist()
+    drive_x, drive_v = drive[:, 0].tolist(), drive[:, 1].tolist()
+    x, v = float(x0), float(v0)
+    out[0] = x
+    for j in range(1, len(drive_x)):
+        f_prev = force(x, v) * inv_m
+        x_free = a11 * x + a12 * v + drive_x[j - 1] - q1 * f_prev
+        v_free = a21 * x + a22 * v + drive_v[j - 1] - q2 * f_prev
+        f_next = force(x_free - r1 * f_prev, v_free - r2 * f_prev) * inv_m
+        x, v = x_free - r1 * f_next, v_free - r2 * f_next
+        out[j] = x
+        if not -1e300 < x < 1e300:
+            out[j:] = np.inf
+            return
+
+
+def free_response_basis(step: HoldMatrices, length: int) -> np.ndarray:
+    """Return the position's free response to unit initial states, shape ``(length, 2)``.
+
+    Column 0 starts from ``(x, v) = (1, 0)``, column 1 from ``(0, 1)``: row ``j`` is the first
+    row of ``A^j`` (:class:`HoldMatrices`).
+    """
+    a = step.a
+    den = [1.0, -(a[0, 0] + a[1, 1]), a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]]
+    seeds = np.zeros((2, max(length, 2)))
+    seeds[0, 0], seeds[0, 1] = 1.0, a[0, 0] - (a[0, 0] + a[1, 1])  # x₀ = 1, x₁ = a₁₁
+    seeds[1, 1] = a[0, 1]  # x₀ = 0, x₁ = a₁₂
+    return lfilter([1.0], den, seeds, axis=1)[:, :length].T
+
+
+def exact_plant_response(
+    u: np.ndarray,
+    m: float,
+    c: float,
+    k: float,
+    dt: float,
+    *,
+    windows: Sequence[tuple[int, int]],
+    x_start: np.ndarray,
+    v_start: np.ndarray,
+    hold: str = FOH,
+    force: Force | None = None,
+) -> np.ndarray:
+    """Return the plant's position, exactly discretised, over windows restarted from states.
+
+    Parameters
+    ----------
+    u : array, shape (n_samples,)
+        Force input (input units), already corrected for offset and delay.
+    m, c, k : float
+        Mass, viscous damping, stiffness (input units per position unit and its derivatives);
+        ``k = 0`` is an integrating plant.
+    dt : float
+        Sample period, s.
+    windows : sequence of (start, stop)
+        Each window ``[start, stop)`` is simulated from the state ``(x_start[start],
+        v_start[start])`` (free run: one window over everything). Samples outside every window
+        are 0.
+    x_start, v_start : array, shape (n_samples,)
+        The states windows may start from (the recorded position, the velocity estimated from
+        it), position units and position units/s.
+    hold : {"zoh", "foh", "bandlimited"}, default "foh"
+        The input between samples (:func:`hold_matrices`). The band-limited hold reads the
+        input on both sides of a window's samples (the whole ``u``, not the window only).
+    force : callable, optional
+        The ``force`` hook ``F(x, v)``, input units, opposing the motion.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_samples,)
+        Position; ``inf`` from the sample where a window diverges.
+
+    Notes
+    -----
+    Paper §3.1 M1, ``m·ẍ = u − c·ẋ − k·x − F(x, ẋ)``, discretised exactly for the linear part
+    (:func:`hold_matrices`); the force, a continuous function of the state, always enters with
+    the first-order hold, evaluated at the previous state and at a predicted next state (one
+    predictor-corrector pass, second order in ``dt``). Without a force the whole response is a
+    linear filter, windows side by side.
+    """
+    step = hold_matrices(c / m, k / m, dt, hold)
+    drive = step.drive(np.asarray(u, dtype=float) / m)
+    out = np.zeros(len(drive))
+    if force is not None:
+        force_step = step if hold == FOH else hold_matrices(c / m, k / m, dt, FOH)
+        for start, stop in windows:
+            block = np.zeros(stop - start)
+            _force_loop(
+                drive[start:stop],
+                x_start[start],
+                v_start[start],
+                step.a,
+                force_step,
+                force,
+                1 / m,
+                block,
+            )
+            out[start:stop] = block
+        return out
+    by_length: dict[int, list[int]] = {}
+    for start, stop in windows:
+        by_length.setdefault(stop - start, []).append(start)
+    for length, starts in by_length.items():
+        rows = np.asarray(starts)[:, None] + np.arange(length)
+        out[rows] = _linear_windows(drive[rows], x_start[rows[:, 0]], v_start[rows[:, 0]], step.a)
+    return out
