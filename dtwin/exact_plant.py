@@ -1,6 +1,6 @@
 """The plant (module M1) discretised exactly, for any sample rate: the gap diagnoser's plant.
 
-Specification: docs/gap.md §Calibration (the plant's discretisation).
+Specification: docs/gap.md §Modules (the plant's discretisation).
 
 The paper's simulator steps the plant ``m·ẍ = u − c·ẋ − k·x − F(x, ẋ)`` by explicit Euler
 (:func:`dtwin.modules.plant_response`), right at its ~150 samples per period and wrong at 10.

@@ -1,6 +1,6 @@
 """The diagnoser's exact plant (dtwin.exact_plant) against the continuous solution.
 
-docs/gap.md §Calibration: zero- and first-order hold discretisations must match the continuous
+docs/gap.md §Modules: zero- and first-order hold discretisations must match the continuous
 mass-spring-damper at 3, 10 and 150 samples per period, damping ratios 0.005–1, and k = 0; the
 band-limited hold must match its response to a sinusoid below the Nyquist frequency.
 """

@@ -44,6 +44,7 @@ from dtwin.gap.effects import (
     Scales,
     effects_for_module,
     quantization_variance,
+    quantizer_log_density,
 )
 from dtwin.gap.fit import CandidateFit, calibrate_linear, fit_candidate, linear_typical
 from dtwin.gap.localise import (
@@ -515,6 +516,30 @@ def _fit_candidates(work: _ModuleWork, n_train: int) -> None:
         logger.debug("%s %s: held-out gap %.4g", work.name, effect.name, gap)
 
 
+def _quantizer_floor_and_deviance(work: _ModuleWork, fitted: CandidateFit, held: slice):
+    """Return a quantizer candidate's noise floor and held-out deviance (normalised units).
+
+    A quantizer after noise makes part of the noise unpredictable: its variance is the floor
+    of this candidate (:func:`~dtwin.gap.effects.quantization_variance`). Its deviance is
+    ``−2·mean log p(y)`` of the quantizer's own density
+    (:func:`~dtwin.gap.effects.quantizer_log_density`) less ``log(2π) + 1``, on the scale of a
+    Gaussian candidate's ``log(mse)``: values on a lattice are then evidence for it even when
+    its mean prediction is no better (docs/gap.md §Which). The noise after the quantizer is
+    what the module's noise leaves beyond the noise before it, at least ``q/100``.
+    """
+    step, offset, before = fitted.theta
+    noise = work.floor.rms
+    clean = simulate_module(work.data, fitted.lin)[held]
+    extra = quantization_variance(clean - offset, step, before)
+    floor = math.sqrt(max(noise**2 - before**2, 0.0) + extra) / work.norm
+    if not step > 0:
+        return floor, math.log(max(float(np.mean((work.data.output[held] - clean) ** 2)), 1e-300))
+    after = max(math.sqrt(max(noise**2 - before**2, 0.0)), step / 100.0)
+    log_p = quantizer_log_density(work.data.output[held], clean, step, offset, before, after)
+    deviance = -2.0 * float(np.mean(log_p)) - 2.0 * math.log(work.norm)
+    return floor, deviance - math.log(2 * math.pi) - 1.0
+
+
 def _score_candidates(work: _ModuleWork, n_train: int, settings: GapSettings):
     n_eff = work.n_eff
     floor = work.floor.rms / work.norm
@@ -523,16 +548,10 @@ def _score_candidates(work: _ModuleWork, n_train: int, settings: GapSettings):
     held = slice(n_train, work.data.n_samples)
     for effect, fitted, _, gap in work.candidates:
         floor_c = floor
+        deviance = math.log(max(gap * gap, 1e-300))  # a Gaussian's, less log(2π) + 1
         if effect.name == "sensor_quantization":
-            # a quantizer after noise makes part of the noise unpredictable; its variance is
-            # the floor of this candidate (see dtwin.gap.effects.quantization_variance)
-            step, offset, before = fitted.theta
-            noise = work.floor.rms
-            clean = simulate_module(work.data, fitted.lin)[held] - offset
-            extra = quantization_variance(clean, step, before)
-            floor_c = math.sqrt(max(noise**2 - before**2, 0.0) + extra) / work.norm
-        mse = max(gap * gap, 1e-300)
-        score = n_eff * math.log(mse) + fitted.n_free * math.log(max(n_eff, 2.0))
+            floor_c, deviance = _quantizer_floor_and_deviance(work, fitted, held)
+        score = n_eff * deviance + fitted.n_free * math.log(max(n_eff, 2.0))
         reports.append(
             CandidateReport(
                 module=work.name,

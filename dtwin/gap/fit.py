@@ -31,7 +31,13 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from dtwin.exact_plant import hold_matrices
-from dtwin.gap.effects import MAX_DELAY_SAMPLES, Effect, Scales, find_lattice
+from dtwin.gap.effects import (
+    MAX_DELAY_SAMPLES,
+    Effect,
+    Scales,
+    find_lattice,
+    refine_lattice,
+)
 from dtwin.gap.models import (
     LINEAR_PARAMS,
     ModuleData,
@@ -312,6 +318,8 @@ def _fit_quantization(data, effect, lin_start, n_train, free, lin_bounds) -> Can
     low = max(1e-9 * scales.output_std, 0.25 * scales.noise_std, 1e-3 * scales.output_std)
     q, offset, conc = find_lattice(y, low, 2.0 * scales.output_std)
     after = q * math.sqrt(max(-math.log(max(conc, 1e-12)), 0.0) / (2 * math.pi**2))
+    if after < 0.1 * q:  # values on a lattice: its step, offset and blur by least squares
+        q, offset, after = refine_lattice(y, q, offset)
     before = math.sqrt(max(scales.noise_std**2 - after**2, 0.0))
     fitted = fit_candidate(data, None, lin_start, n_train=n_train, free=free, lin_bounds=lin_bounds)
     lin = fitted.lin
