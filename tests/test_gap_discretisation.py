@@ -151,3 +151,21 @@ def test_bandlimited_hold_matches_the_steady_response_to_a_sinusoid(
 
     assert error(BANDLIMITED) < 1e-3
     assert error(BANDLIMITED) < error(FOH) / 10
+
+
+@pytest.mark.parametrize(("samples_per_period", "seed"), [(5, 3), (500, 9)])
+def test_calibration_recovers_a_rigs_parameters_and_offset(samples_per_period, seed):
+    """A linear rig (open loop, volts-like units, offsets) from scratch: m, c, k, u_offset to 2 %.
+
+    Measured: within 0.4 % at 5 samples per period (band-limited hold chosen) and 500 (first-order).
+    """
+    from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping
+    from dtwin.gap.rigs import generate_rig_case
+
+    case = generate_rig_case("none", seed, samples_per_period=samples_per_period, n_samples=4000)
+    recording = recording_from_frame(case.recording)
+    twin = twin_from_mapping(case.twin, dt=recording.dt)
+    used = diagnose(recording, twin, calibrate=True).modules["M1"].lin_used
+    for name in ("m", "c", "k"):
+        assert used[name] == pytest.approx(case.key["plant"][name], rel=0.02), name
+    assert used["u_offset"] == pytest.approx(case.key["u_offset"], rel=0.02)

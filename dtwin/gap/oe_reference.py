@@ -86,10 +86,12 @@ def output_error_reference(data: ModuleData, delay: int, n_train: int) -> np.nda
     scale = float(np.std(y[:n_train])) or 1.0
 
     def residual(theta):
-        predicted = _simulate(theta, u, y, train, warmup)
-        error = (predicted - y)[~np.isnan(predicted)] / scale
-        return np.nan_to_num(error, nan=1e6, posinf=1e6, neginf=-1e6)
+        with np.errstate(all="ignore"):  # an unstable trial denominator: errors clipped
+            predicted = _simulate(theta, u, y, train, warmup)
+            error = (predicted - y)[~np.isnan(predicted)] / scale
+        return np.clip(np.nan_to_num(error, nan=1e6, posinf=1e6, neginf=-1e6), -1e6, 1e6)
 
     start = _arx_start(u[:n_train], y[:n_train])
     fitted = least_squares(residual, start, method="trf", max_nfev=200, x_scale="jac")
-    return _simulate(fitted.x, u, y, windows, warmup)
+    with np.errstate(all="ignore"):
+        return _simulate(fitted.x, u, y, windows, warmup)

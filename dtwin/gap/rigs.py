@@ -54,16 +54,17 @@ def _log_uniform(rng: np.random.Generator, low: float, high: float) -> float:
     return float(math.exp(rng.uniform(math.log(low), math.log(high))))
 
 
-def _draw_rig(rng: np.random.Generator, effect: str) -> dict:
+def _draw_rig(rng: np.random.Generator, effect: str, samples_per_period: float | None) -> dict:
     """Physical parameters (SI-like units, m = 1) and the experiment of one rig."""
-    samples_per_period = _log_uniform(rng, 3.0, 1000.0)
+    drawn = _log_uniform(rng, 3.0, 1000.0)
+    samples_per_period = drawn if samples_per_period is None else float(samples_per_period)
     rate = _log_uniform(rng, 20.0, 20000.0)  # Hz
     dt = 1.0 / rate
     omega = 2 * math.pi / (samples_per_period * dt)
     integrating = effect != "cubic_stiffness" and rng.uniform() < 0.3
     closed = integrating or (samples_per_period >= 15 and rng.uniform() < 0.35)
     if closed and samples_per_period < 15:  # a digital PD loop needs ≥ 15 samples per period
-        samples_per_period = _log_uniform(rng, 15.0, 1000.0)
+        samples_per_period = max(_log_uniform(rng, 15.0, 1000.0), samples_per_period)
         omega = 2 * math.pi / (samples_per_period * dt)
     zeta = _log_uniform(rng, 0.005, 1.0)
     plant = {"m": 1.0, "c": 2 * zeta * omega, "k": 0.0 if integrating else omega**2}
@@ -195,7 +196,12 @@ def _run(rig, rng_seed: int, effect: str, strength: float, n: int):
 
 
 def generate_rig_case(
-    effect: str, seed: int, *, magnitude: float | None = None, n_samples: int | None = None
+    effect: str,
+    seed: int,
+    *,
+    magnitude: float | None = None,
+    n_samples: int | None = None,
+    samples_per_period: float | None = None,
 ) -> GeneratedCase:
     """Generate one rig recording (``t, u_act, x``) with a withheld plant effect, or none.
 
@@ -209,6 +215,9 @@ def generate_rig_case(
         0 (faint) to 1 (strong); drawn uniformly when None.
     n_samples : int, optional
         Default :data:`RIG_SAMPLES`.
+    samples_per_period : float, optional
+        The resonance's samples per period (drawn in 3–1000 when None; a closed loop needs at
+        least 15 and draws a larger one).
 
     Returns
     -------
@@ -223,7 +232,7 @@ def generate_rig_case(
         )
     rng = np.random.default_rng(seed)
     n = int(n_samples or RIG_SAMPLES)
-    rig = _draw_rig(rng, effect)
+    rig = _draw_rig(rng, effect, samples_per_period)
     magnitude = float(rng.uniform()) if magnitude is None else float(magnitude)
     low, high = _STRENGTH.get(effect, (0.0, 0.0))
     strength = low * (high / low) ** magnitude if high else 0.0
@@ -259,6 +268,9 @@ def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
         "c2": us / xs**2,
     }
     plant = {name: value * per_unit[name] for name, value in rig["plant"].items()}
+    # m·ẍ + c·ẋ + k·x = u − u_offset in recording units: the force offset and, through the
+    # spring, the position offset (an integrating plant's position offset is its start)
+    u_offset = us * (rig["u_offset_phys"] - rig["plant"]["k"] * rig["x_offset_phys"])
     return {
         "family": "rig",
         "effect": effect,
@@ -270,6 +282,7 @@ def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
         "n_samples": n,
         "params": {name: value * per_unit[name] for name, value in params.items()},
         "plant": plant,
+        "u_offset": u_offset,
         "samples_per_period": rig["samples_per_period"],
         "zeta": rig["zeta"],
         "integrating": rig["integrating"],
