@@ -23,6 +23,7 @@ Arrays are time-first, shape ``(n_samples,)``.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -62,15 +63,17 @@ class HoldMatrices(NamedTuple):
     def drive(self, w: np.ndarray) -> np.ndarray:
         """Return ``d`` of shape ``(n, 2)``: ``d[k−1]`` drives step ``k`` (ends repeat ``w``)."""
         w = np.asarray(w, dtype=float)
-        before, after = max(-self.first, 0), self.first + len(self.taps) - 1
-        padded = np.concatenate([np.full(before, w[0]), w, np.full(max(after, 0), w[-1])])
-        out = np.zeros((len(w), 2))
-        for j, tap in enumerate(self.taps):
-            start = before + self.first + j
-            out += np.outer(padded[start : start + len(w)], tap)
-        return out
+        before, after = max(-self.first, 0), max(self.first + len(self.taps) - 1, 0)
+        padded = np.concatenate([np.full(before, w[0]), w, np.full(after, w[-1])])
+        start = before + self.first  # d[i] = Σ_j taps[j]·padded[start + i + j]
+        columns = [
+            np.correlate(padded[start : start + len(w) + len(self.taps) - 1], self.taps[:, i])
+            for i in (0, 1)
+        ]
+        return np.column_stack(columns)
 
 
+@lru_cache(maxsize=512)
 def hold_matrices(c_per_m: float, k_per_m: float, dt: float, hold: str) -> HoldMatrices:
     """Return the exact discretisation of ``ẍ = w − (c/m)·ẋ − (k/m)·x`` over one sample.
 
@@ -86,6 +89,8 @@ def hold_matrices(c_per_m: float, k_per_m: float, dt: float, hold: str) -> HoldM
     Returns
     -------
     HoldMatrices
+        Cached per argument tuple (a fit asks for the same step several times per simulation):
+        treat its arrays as read-only.
 
     Notes
     -----
@@ -125,13 +130,20 @@ def _lanczos(x: np.ndarray) -> np.ndarray:
     return np.where(inside, np.sinc(x) * np.sinc(x / SINC_TAPS), 0.0)
 
 
+@lru_cache(maxsize=1)
+def _quadrature() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return Gauss–Legendre nodes on [0, 1], their weights and the kernel (nodes, taps)."""
+    nodes, weights = np.polynomial.legendre.leggauss(_QUADRATURE_NODES)
+    tau = 0.5 * (nodes + 1.0)
+    offsets = np.arange(1 - SINC_TAPS, SINC_TAPS + 1)
+    kernel = _lanczos(tau[:, None] - offsets[None, :])
+    kernel /= kernel.sum(axis=1, keepdims=True)  # a constant input is reproduced exactly
+    return tau, weights, kernel
+
+
 def _bandlimited_taps(system: np.ndarray, dt: float) -> np.ndarray:
     """Return the taps ``(2·SINC_TAPS, 2)`` of ``w[k−1+j]``, ``j = 1−SINC_TAPS … SINC_TAPS``."""
-    nodes, weights = np.polynomial.legendre.leggauss(_QUADRATURE_NODES)
-    tau = 0.5 * (nodes + 1.0)  # on [0, 1]
-    offsets = np.arange(1 - SINC_TAPS, SINC_TAPS + 1)
-    kernel = _lanczos(tau[:, None] - offsets[None, :])  # (nodes, taps)
-    kernel /= kernel.sum(axis=1, keepdims=True)  # a constant input is reproduced exactly
+    tau, weights, kernel = _quadrature()
     transitions = expm(system[None] * (dt * (1.0 - tau))[:, None, None])  # (nodes, 2, 2)
     columns = transitions[:, :, 1]  # exp(F·dt·(1−τ))·g
     return 0.5 * dt * np.einsum("n,ni,nj->ji", weights, columns, kernel)
@@ -146,8 +158,10 @@ def _linear_windows(drive: np.ndarray, x0: np.ndarray, v0: np.ndarray, a: np.nda
     ``C·adj·e₂ = a₁₂`` (:func:`scipy.signal.lfilter` along axis 1).
     """
     den = np.array([1.0, -(a[0, 0] + a[1, 1]), a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]])
-    forcing = lfilter([0.0, 1.0, -a[1, 1]], [1.0], drive[..., 0], axis=1)
-    forcing += lfilter([0.0, 0.0, a[0, 1]], [1.0], drive[..., 1], axis=1)
+    d_x, d_v = drive[..., 0], drive[..., 1]
+    forcing = np.zeros(d_x.shape)  # the FIR part, by slices (lfilter loops over rows for FIR)
+    forcing[:, 1:] += d_x[:, :-1]
+    forcing[:, 2:] += a[0, 1] * d_v[:, :-2] - a[1, 1] * d_x[:, :-2]
     x1_free = a[0, 0] * x0 + a[0, 1] * v0
     forcing[:, 0] += x0
     if forcing.shape[1] > 1:
@@ -155,29 +169,33 @@ def _linear_windows(drive: np.ndarray, x0: np.ndarray, v0: np.ndarray, a: np.nda
     return lfilter([1.0], den, forcing, axis=1)
 
 
-def _force_loop(drive, x0, v0, a, force_step: HoldMatrices, force: Force, inv_m, out):
-    """Exact steps with a state-dependent force, one predictor-corrector pass per step.
+def _force_windows(drive, x0, v0, a, force_step: HoldMatrices, force: Force, inv_m):
+    """Exact steps with a state-dependent force, all windows of one length in lockstep.
 
-    The input enters through ``drive`` (its own hold); the force, a continuous function of the
-    state whatever holds the input, always enters with the first-order hold (trapezoidal): a
-    force held over the sample (explicit) feeds energy into a lightly damped plant and can
-    diverge.
+    ``drive`` has shape (n_windows, length, 2), ``x0``, ``v0`` shape (n_windows,); returns the
+    positions, shape (n_windows, length), ``inf`` from a window's first non-finite sample. The
+    input enters through ``drive`` (its own hold); the force, a continuous function of the
+    state whatever holds the input, always enters with the first-order hold (trapezoidal), by
+    one predictor-corrector pass: a force held over the sample (explicit) feeds energy into a
+    lightly damped plant and can diverge.
     """
     (a11, a12), (a21, a22) = a.tolist()
     (q1, q2), (r1, r2) = force_step.taps.tolist()
-    drive_x, drive_v = drive[:, 0].tolist(), drive[:, 1].tolist()
-    x, v = float(x0), float(v0)
-    out[0] = x
-    for j in range(1, len(drive_x)):
-        f_prev = force(x, v) * inv_m
-        x_free = a11 * x + a12 * v + drive_x[j - 1] - q1 * f_prev
-        v_free = a21 * x + a22 * v + drive_v[j - 1] - q2 * f_prev
-        f_next = force(x_free - r1 * f_prev, v_free - r2 * f_prev) * inv_m
-        x, v = x_free - r1 * f_next, v_free - r2 * f_next
-        out[j] = x
-        if not -1e300 < x < 1e300:
-            out[j:] = np.inf
-            return
+    drive_x, drive_v = drive[..., 0], drive[..., 1]
+    x, v = np.asarray(x0, dtype=float).copy(), np.asarray(v0, dtype=float).copy()
+    out = np.empty(drive_x.shape)
+    out[:, 0] = x
+    with np.errstate(all="ignore"):
+        for j in range(1, out.shape[1]):
+            f_prev = force(x, v) * inv_m
+            x_free = a11 * x + a12 * v + drive_x[:, j - 1] - q1 * f_prev
+            v_free = a21 * x + a22 * v + drive_v[:, j - 1] - q2 * f_prev
+            f_next = force(x_free - r1 * f_prev, v_free - r2 * f_prev) * inv_m
+            x, v = x_free - r1 * f_next, v_free - r2 * f_next
+            out[:, j] = x
+    broken = ~(np.abs(out) < 1e300)
+    out[np.cumsum(broken, axis=1) > 0] = np.inf
+    return out
 
 
 def free_response_basis(step: HoldMatrices, length: int) -> np.ndarray:
@@ -229,7 +247,8 @@ def exact_plant_response(
         The input between samples (:func:`hold_matrices`). The band-limited hold reads the
         input on both sides of a window's samples (the whole ``u``, not the window only).
     force : callable, optional
-        The ``force`` hook ``F(x, v)``, input units, opposing the motion.
+        The ``force`` hook ``F(x, v)``, input units, opposing the motion; called with arrays of
+        shape (n_windows,).
 
     Returns
     -------
@@ -241,32 +260,22 @@ def exact_plant_response(
     Paper §3.1 M1, ``m·ẍ = u − c·ẋ − k·x − F(x, ẋ)``, discretised exactly for the linear part
     (:func:`hold_matrices`); the force, a continuous function of the state, always enters with
     the first-order hold, evaluated at the previous state and at a predicted next state (one
-    predictor-corrector pass, second order in ``dt``). Without a force the whole response is a
-    linear filter, windows side by side.
+    predictor-corrector pass, second order in ``dt``), windows of one length in lockstep; the
+    force must accept arrays. Without a force the whole response is a linear filter, windows
+    side by side.
     """
     step = hold_matrices(c / m, k / m, dt, hold)
     drive = step.drive(np.asarray(u, dtype=float) / m)
     out = np.zeros(len(drive))
-    if force is not None:
-        force_step = step if hold == FOH else hold_matrices(c / m, k / m, dt, FOH)
-        for start, stop in windows:
-            block = np.zeros(stop - start)
-            _force_loop(
-                drive[start:stop],
-                x_start[start],
-                v_start[start],
-                step.a,
-                force_step,
-                force,
-                1 / m,
-                block,
-            )
-            out[start:stop] = block
-        return out
+    force_step = step if hold == FOH else hold_matrices(c / m, k / m, dt, FOH)
     by_length: dict[int, list[int]] = {}
     for start, stop in windows:
         by_length.setdefault(stop - start, []).append(start)
     for length, starts in by_length.items():
         rows = np.asarray(starts)[:, None] + np.arange(length)
-        out[rows] = _linear_windows(drive[rows], x_start[rows[:, 0]], v_start[rows[:, 0]], step.a)
+        x0, v0 = x_start[rows[:, 0]], v_start[rows[:, 0]]
+        if force is None:
+            out[rows] = _linear_windows(drive[rows], x0, v0, step.a)
+        else:
+            out[rows] = _force_windows(drive[rows], x0, v0, step.a, force_step, force, 1 / m)
     return out

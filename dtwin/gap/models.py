@@ -198,13 +198,14 @@ def _simulate_sensor(data, lin, effect, theta, stop):
     raise ValueError(f"effect {effect.name} cannot act on a sensor")
 
 
-def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float):
+def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float, *, arrays: bool):
+    """Return the candidate's plant force ``F(x, v)``, or None (``arrays``: numpy ufuncs)."""
     if effect is None or effect.stage != "force":
         return None
+    tanh, absolute = (np.tanh, np.abs) if arrays else (math.tanh, abs)
     if effect.name == "coulomb_friction":
         fc = float(theta[0])
         vs = max(FRICTION_SMOOTHING * velocity_std, 1e-300)
-        tanh = math.tanh
         return lambda x, v: fc * tanh(v / vs)
     if effect.name == "cubic_stiffness":
         k3, centre = float(theta[0]), float(theta[1])
@@ -216,7 +217,7 @@ def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float):
         return cubic
     if effect.name == "quadratic_damping":
         c2 = float(theta[0])
-        return lambda x, v: c2 * v * abs(v)
+        return lambda x, v: c2 * v * absolute(v)
     raise ValueError(f"effect {effect.name} cannot act on the plant")
 
 
@@ -395,8 +396,9 @@ def _simulate_plant(data, lin, effect, theta, stop, segments):
     delay = int(lin.get("delay_samples", 0))
     if delay:
         u = fractional_delay(u, delay)
-    force = _force(effect, theta, data.scales.velocity_std if data.scales else 1.0)
-    if data.discretisation != EULER:
+    exact = data.discretisation != EULER
+    force = _force(effect, theta, data.scales.velocity_std if data.scales else 1.0, arrays=exact)
+    if exact:
         return _exact_plant(data, lin, u - lin.get("u_offset", 0.0), force, stop, segments)
     segments = segments or (plant_windows(stop, None, data.restarts) if data.restarts else None)
     u = (u - lin.get("u_offset", 0.0)).tolist()
