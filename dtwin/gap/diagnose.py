@@ -273,10 +273,28 @@ def _module_data(name: str, rec: Recording, t: np.ndarray, layout: _Layout) -> M
     )
 
 
-def _scales(data: ModuleData, n_train: int, noise_std: float, lin: Mapping[str, float]) -> Scales:
+def _scales(
+    data: ModuleData,
+    n_train: int,
+    noise_std: float,
+    lin: Mapping[str, float],
+    simulated: np.ndarray | None = None,
+) -> Scales:
+    """Return the module's data scales; an exact plant's velocity scale from ``simulated``.
+
+    A velocity differentiated from a noisy position sampled hundreds of times per period is
+    mostly noise (its spread was 10× the plant's on rigs at 700 samples per period), which
+    made the friction's smoothing velocity too wide to fit; the calibrated twin's simulated
+    position (noise-free, NaN on unscored warm-up samples) differentiates cleanly.
+    """
     first_input = next(iter(data.inputs.values()))[:n_train]
     output = data.output
     velocity_std = float(np.std(data.velocity)) if data.name == "M1" else 0.0
+    if simulated is not None and data.name == "M1" and data.discretisation != EULER:
+        with np.errstate(invalid="ignore"):
+            speed = np.gradient(simulated[:n_train]) / data.dt
+        if np.isfinite(speed).sum() > 10:
+            velocity_std = float(np.nanstd(speed))
     return Scales(
         input_max=float(np.max(np.abs(first_input))) or 1.0,
         input_std=float(np.std(first_input)) or 1.0,
@@ -465,7 +483,7 @@ def _analyse_module(name, rec, twin, t, n_train, calibrate, settings, layout) ->
         twin_noise_floor(name, twin.noise, lin_base, rec.dt) if twin.noise is not None else None
     )
     floor = floor_twin if floor_twin is not None else floor_data
-    data = replace(data, scales=_scales(data, n_train, floor.rms, lin_base))
+    data = replace(data, scales=_scales(data, n_train, floor.rms, lin_base, sim_before))
     gap_before = normalised_rms(data.output, sim_before, held, norm)
     if calibrated:
         gap_cal = gap_before

@@ -361,6 +361,13 @@ def window_noise_gain(lin: Mapping[str, float], dt: float, hold: str, horizon: i
 
 
 def _exact_plant(data, lin, u, force, stop, segments):
+    """Simulate the exact plant over its windows (NaN on unscored warm-up samples).
+
+    With a force, each window's initial state is estimated twice: from the linear plant, then
+    with the force along that first simulation taken as a known input (the force acts during
+    the warm-up too; ignoring it biased the state so much that a rig's true Coulomb friction
+    fitted worse than none).
+    """
     windows = segments or plant_windows(stop, data.horizon, data.restarts)
     windows = [(a, min(b, stop)) for a, b in windows if a < stop]
     m, c, k = float(lin["m"]), float(lin["c"]), float(lin["k"])
@@ -370,18 +377,26 @@ def _exact_plant(data, lin, u, force, stop, segments):
         warmup = warmup_samples(data.horizon)
         windows = [(a, b) for a, b in windows if b - a > warmup]
         x_start, v_start = _window_states(data, u, m, c, k, windows, warmup)
-    out = exact_plant_response(
-        u,
-        m,
-        c,
-        k,
-        data.dt,
-        windows=windows,
-        x_start=x_start,
-        v_start=v_start,
-        hold=data.discretisation,
-        force=force,
-    )
+
+    def run(x_from, v_from):
+        return exact_plant_response(
+            u,
+            m,
+            c,
+            k,
+            data.dt,
+            windows=windows,
+            x_start=x_from,
+            v_start=v_from,
+            hold=data.discretisation,
+            force=force,
+        )
+
+    out = run(x_start, v_start)
+    if warmup is not None and force is not None:
+        with np.errstate(all="ignore"):
+            felt = np.nan_to_num(force(out, np.gradient(out) / data.dt), posinf=0.0, neginf=0.0)
+        out = run(*_window_states(data, u - felt, m, c, k, windows, warmup))
     if warmup is not None:
         covered = np.zeros(len(out), dtype=bool)
         for a, b in windows:
