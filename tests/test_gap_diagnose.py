@@ -193,3 +193,20 @@ def test_python_m_dtwin_runs(tmp_path):
 
 def test_schema_lists_every_effect_name():
     assert set(SCHEMA["$defs"]["effect_name"]["enum"]) == set(EFFECT_NAMES)
+
+
+@pytest.mark.parametrize("seed", [2, 4, 5, 6])
+def test_quantizer_on_a_sensor_with_coloured_noise_is_named(seed):
+    """Seeds the Gaussian score missed (docs/gap.md §Which): lag-1 noise correlation 0.17–0.55."""
+    case = generate_case("sensor_quantization", seed)
+    module = case.key["module"]
+    assert case.key["noise_ar1_phi"][module[-1].upper()] > 0.15  # coloured, as the issue asks
+    twin = twin_from_mapping(case.twin)
+    result = diagnose(
+        recording_from_frame(case.recording),
+        twin,
+        discretisation=twin_discretisation(case.twin),
+    )
+    assert (result.module, result.effect) == (module, "sensor_quantization")
+    step = result.params["q"]
+    assert step == pytest.approx(case.key["params"]["q"], rel=0.01)
