@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 import subprocess
 import sys
 from pathlib import Path
@@ -126,7 +125,7 @@ def _rig(
         x_start=np.zeros(n),
         v_start=np.zeros(n),
         hold="zoh",
-        force=(lambda x, v: friction * math.tanh(v / 0.005)) if friction else None,
+        force=(lambda x, v: friction * np.tanh(v / 0.005)) if friction else None,
     )
     volts = 2.5 + 1.8 * x + 0.002 * rng.standard_normal(n)
     return pd.DataFrame({"t": np.round(t, 4), "u_act": u, "x": volts})
