@@ -16,6 +16,3 @@ def test_full_gap_benchmark_override_plans_ten_cases_per_effect(tmp_path):
     counts = job_counts(snakemake(workdir, *full, "--set-scatter", "gap=0").stdout)
     assert counts["gap_cases"] == counts["gap_diagnoses"] == 180
     assert counts["gap_benchmark"] == 1
-    # the default: the 180 cases in 4 chunks
-    counts = job_counts(snakemake(workdir, *full).stdout)
-    assert counts["gap_cases"] == counts["gap_diagnoses"] == 4
