@@ -409,6 +409,11 @@ def test_chunked_and_unchunked_batches_give_byte_identical_outputs(workflow_copy
     assert not changed
     assert case_files(workflow_copy, "1-of-1") == cases_before
     # back to the default chunks (still on disk): only the gathers and what reads them rerun
+    for one_chunk in workflow_copy.glob("results/*/*/1-of-1*"):
+        if one_chunk.is_dir():
+            shutil.rmtree(one_chunk)
+        else:
+            one_chunk.unlink()
     assert planned_rules(workflow_copy) == {"fig11_sensitivity", "gap_benchmark", "claims"}
     snakemake(workflow_copy, "--cores", "2")
     assert planned_rules(workflow_copy) == set()
