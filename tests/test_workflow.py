@@ -219,9 +219,14 @@ def test_every_artifact_is_produced_with_passing_validity_checks(workflow_copy):
     crosschecks = {c["id"]: c["passed"] for c in fig11["checks"] if c["kind"] == "crosscheck"}
     assert crosschecks == {"r_inputs_rebuilt_exactly": True}
     assert len(fig11["metrics"]["configurations"]) == 4
-    runs = sorted(p.name for p in (workflow_copy / "results" / "sensitivity").glob("*.json"))
-    assert runs == [
-        f"alpha{a}_mA1.0_mB{b}_rep0.json" for a in ("0.2", "0.8") for b in ("0.5", "1.5")
+    chunks = workflow_copy / "results" / "sensitivity" / "chunks"
+    assert sorted(p.name for p in chunks.glob("*.json")) == [f"{i}-of-4.json" for i in range(1, 5)]
+    points = [p for c in sorted(chunks.glob("*.json")) for p in json.loads(c.read_text())["points"]]
+    assert sorted((p["alpha"], p["m_B"]) for p in points) == [
+        (0.2, 0.5),
+        (0.2, 1.5),
+        (0.8, 0.5),
+        (0.8, 1.5),
     ]
 
 
