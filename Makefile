@@ -10,7 +10,7 @@ STAMP := $(VENV)/.dtwin-installed
 PIP_VERSION := 26.3
 PIP_TOOLS_VERSION := 7.6.2
 
-.PHONY: figures test test-fast fuzz lint report bench clean-results venv lock emps
+.PHONY: figures test test-fast check fuzz lint report bench clean-results venv lock emps
 
 venv: $(STAMP)
 
@@ -30,15 +30,19 @@ figures: $(STAMP)
 test: lint
 	$(BIN)/python -m pytest
 
-# For daily work: `make lint` and the tests without the slow workflow tests.
+# For daily work (target: under a minute): `make lint` and the tests without the slow workflow
+# tests. `make check` is the same. CI runs `make test`.
 test-fast: lint
 	$(BIN)/python -m pytest -m "not slow"
+
+check: test-fast
 
 report: figures
 	$(BIN)/snakemake --report paper_figures/report.html
 
+# Every benchmark section, or some: `make bench SECTIONS="dag imports"` (benchmarks/run.py).
 bench: $(STAMP)
-	$(BIN)/python benchmarks/run.py
+	$(BIN)/python benchmarks/run.py $(SECTIONS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

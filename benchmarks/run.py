@@ -1,23 +1,33 @@
-"""`make bench`: timings of the DAG, the HMM engine and the gap diagnoser → benchmarks/results.json.
+"""`make bench`: timings of the DAG, imports, the HMM engine and the gap diagnoser → results.json.
 
-Benchmarks, not tests: one run each on whatever this machine is doing, medians where repeated.
-1. the paper DAG (every paper figure, without the gap benchmark) cold with --cores 2 and
-   --cores 1 on a copy in a temporary folder, then a no-op rerun;
-2. per-rule wall time and peak memory from the rules' `benchmark:` files of the cold run;
-3. one HMM fit (K 4, D 10, 10 restarts) at T = 1e3 … 1e6 through dtwin and through plain
-   hmmlearn with its defaults, each in a fresh process: seconds per EM iteration, peak memory
-   (for T >= 1e5 the iterations are capped at 3 per restart so the run ends in minutes;
-   seconds per iteration exclude start-up, random starts and the final posteriors);
-4. `dtwin diagnose` on a 2,000-sample six-module recording and a 100,000-sample one.
+Benchmarks, not tests: one run each on whatever this machine is doing (each section records the
+load average before and after it), medians where repeated. Sections (`python benchmarks/run.py
+[section ...]` runs only those and keeps the others of benchmarks/results.json):
+
+- ``dag``: the paper DAG (every paper figure, without the gap benchmark and the draws) cold with
+  --cores 2 and --cores 1 on a copy in a temporary folder, then a no-op rerun; per-rule wall
+  time, CPU time and peak memory from the rules' `benchmark:` files of the cold --cores 2 run,
+  and per rule their sum (``by_rule``: jobs, wall s, CPU s);
+- ``figures``: `snakemake --cores 2 all` cold after set-up (every artifact incl. the gap
+  benchmark and the claims across draws);
+- ``imports``: per script in scripts/, the CPU seconds of a fresh interpreter that runs only its
+  imports (median of 3) and which heavy libraries they load;
+- ``hmm``: one HMM fit (K 4, D 10, 10 restarts) at T = 1e3 … 1e6 through dtwin and through plain
+  hmmlearn with its defaults, each in a fresh process: seconds per EM iteration, peak memory
+  (for T >= 1e5 the iterations are capped at 3 per restart so the run ends in minutes;
+  seconds per iteration exclude start-up, random starts and the final posteriors);
+- ``gap``: `dtwin diagnose` on a 2,000-sample six-module recording and a 100,000-sample one.
 """
 
 from __future__ import annotations
 
+import ast
 import csv
 import json
 import os
 import platform
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -58,7 +68,7 @@ PAPER_TARGETS = [
 
 def dag_benchmarks() -> dict:
     results = {}
-    env = {**os.environ, "PYTHONPATH": ""}
+    env = {**os.environ, "PYTHONPATH": "", "MPLBACKEND": "Agg"}
     for cores in (2, 1):
         with tempfile.TemporaryDirectory() as folder:
             workdir = Path(folder) / "repo"
@@ -73,6 +83,7 @@ def dag_benchmarks() -> dict:
                     run([PY, "-m", "snakemake", "--cores", "2", *targets], workdir, env), 2
                 )
                 results["rules"] = rule_benchmarks(workdir / "benchmarks" / "rules")
+                results["by_rule"] = by_rule(results["rules"])
     return results
 
 
@@ -82,8 +93,73 @@ def rule_benchmarks(folder: Path) -> dict:
         with path.open() as handle:
             row = next(csv.DictReader(handle, delimiter="\t"))
         name = str(path.relative_to(folder).with_suffix(""))
-        rules[name] = {"wall_s": float(row["s"]), "max_rss_mb": float(row["max_rss"])}
+        rules[name] = {
+            "wall_s": float(row["s"]),
+            "cpu_s": float(row["cpu_time"]),
+            "max_rss_mb": float(row["max_rss"]),
+        }
     return rules
+
+
+def by_rule(rules: dict) -> dict:
+    """Jobs, summed wall seconds and summed CPU seconds per rule (chunks and cases together)."""
+    totals: dict[str, dict] = {}
+    for name, row in rules.items():
+        total = totals.setdefault(name.split("/")[0], {"jobs": 0, "wall_s": 0.0, "cpu_s": 0.0})
+        total["jobs"] += 1
+        total["wall_s"] = round(total["wall_s"] + row["wall_s"], 2)
+        total["cpu_s"] = round(total["cpu_s"] + row["cpu_s"], 2)
+    return dict(sorted(totals.items(), key=lambda item: -item[1]["cpu_s"]))
+
+
+def figures_benchmark() -> dict:
+    """`snakemake --cores 2` (rule all) cold on a fresh copy, then a no-op rerun."""
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    with tempfile.TemporaryDirectory() as folder:
+        workdir = Path(folder) / "repo"
+        shutil.copytree(REPO, workdir, ignore=IGNORE)
+        env["PYTHONPATH"] = str(workdir)
+        cold = run([PY, "-m", "snakemake", "--cores", "2"], workdir, env)
+        noop = run([PY, "-m", "snakemake", "--cores", "2"], workdir, env)
+        rules = rule_benchmarks(workdir / "benchmarks" / "rules")
+    return {
+        "cold_cores2_s": round(cold, 2),
+        "noop_rerun_s": round(noop, 2),
+        "by_rule": by_rule(rules),
+    }
+
+
+#: Libraries whose import a light rule should not pay (see tests/test_import_budget.py).
+HEAVY = ("sklearn", "hmmlearn", "scipy.signal", "scipy.stats", "statsmodels", "matplotlib.pyplot")
+
+
+def import_benchmarks(repeats: int = 3) -> dict:
+    """Per script: CPU seconds of its imports in a fresh interpreter, and the heavy ones loaded."""
+    results = {}
+    env = {**os.environ, "PYTHONPATH": str(REPO), "MPLBACKEND": "Agg"}
+    probe = (
+        "\nimport json, resource, sys\n"
+        "u = resource.getrusage(resource.RUSAGE_SELF)\n"
+        "print(json.dumps([u.ru_utime + u.ru_stime, sorted(sys.modules)]))"
+    )
+    for script in sorted((REPO / "scripts").glob("*.py")):
+        tree = ast.parse(script.read_text())
+        imports = [ast.unparse(n) for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))]
+        samples = []
+        for _ in range(repeats):
+            done = subprocess.run(
+                [PY, "-c", "\n".join(imports) + probe],
+                cwd=REPO,
+                env=env,
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            cpu, modules = json.loads(done.stdout.splitlines()[-1])
+            samples.append(cpu)
+        loaded = [h for h in HEAVY if any(m == h or m.startswith(h + ".") for m in modules)]
+        results[script.stem] = {"cpu_s": round(statistics.median(samples), 3), "heavy": loaded}
+    return results
 
 
 def hmm_benchmarks() -> list[dict]:
@@ -143,22 +219,35 @@ def gap_benchmarks() -> dict:
     return results
 
 
-def main() -> None:
-    results = {
-        "date": date.today().isoformat(),
-        "machine": {
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-        },
-        "dag": dag_benchmarks(),
-        "gap": gap_benchmarks(),
-        "hmm": hmm_benchmarks(),
+SECTIONS = {
+    "dag": dag_benchmarks,
+    "figures": figures_benchmark,
+    "imports": import_benchmarks,
+    "gap": gap_benchmarks,
+    "hmm": hmm_benchmarks,
+}
+
+
+def main(sections: list[str]) -> None:
+    path = REPO / "benchmarks" / "results.json"
+    results = json.loads(path.read_text()) if path.exists() else {}
+    old_date = results.pop("date", None)  # results.json before sections carried their own date
+    for name in SECTIONS:
+        if name in results and "results" not in results[name]:
+            results[name] = {"date": old_date, "results": results[name]}
+    results["machine"] = {
+        "cpus": os.cpu_count(),
+        "platform": platform.platform(),
+        "python": platform.python_version(),
     }
-    (REPO / "benchmarks" / "results.json").write_text(json.dumps(results, indent=2) + "\n")
-    print(json.dumps({k: v for k, v in results.items() if k != "dag"}, indent=2))
-    print({k: v for k, v in results["dag"].items() if k != "rules"})
+    for name in sections or list(SECTIONS):
+        load_before = os.getloadavg()[0]
+        value = SECTIONS[name]()
+        load = {"load_1min_before": load_before, "load_1min_after": os.getloadavg()[0]}
+        results[name] = {"date": date.today().isoformat(), **load, "results": value}
+        path.write_text(json.dumps(results, indent=2) + "\n")
+        print(name, json.dumps(load), flush=True)
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

@@ -1,6 +1,8 @@
 """gap_benchmark: score every diagnosis against its withheld truth.
 
-Inputs: ``diagnoses`` (diagnosis.json per case), ``truths`` (key.json per case, same order).
+Inputs: ``diagnoses``, ``truths``: the chunk folders of gap_diagnoses and gap_cases; params
+``diagnoses`` (diagnosis.json per case) and ``truths`` (key.json per case, same order) name the
+files in them.
 Outputs: ``paper_figures/gap_benchmark.{png,pdf}`` (drawn by
 :mod:`dtwin.figures.gap_benchmark`), ``gap_benchmark.json`` ({artifact, files, figure, metrics,
 checks}; the targets of docs/gap.md §Targets are claims), ``results/gap/benchmark.csv`` (one
@@ -23,7 +25,7 @@ from dtwin.gap.effects import NONE
 
 triples = [
     (Path(key).parent.name, json.loads(Path(key).read_text()), json.loads(Path(diag).read_text()))
-    for key, diag in zip(snakemake.input.truths, snakemake.input.diagnoses, strict=True)
+    for key, diag in zip(snakemake.params.truths, snakemake.params.diagnoses, strict=True)
 ]
 table = score_cases(triples)
 metrics = benchmark_metrics(table)

@@ -69,13 +69,13 @@ AFTER_RESIDUALS = AFTER_FAULTS | {
     "nominal_regimes",
     "fig04_hmm_posteriors",
 }
-SWEEP = {"sweep_point", "fig11_sensitivity"}
+SWEEP = {"sweep_chunk", "fig11_sensitivity"}
 #: The claims across random draws (they rerun the whole single-draw pipeline).
 DRAWS = {"claims_draws", "fig12_claims_across_draws"}
 
 
 def small_sweep(config: dict) -> None:
-    """A 2 x 1 x 2 sweep grid (4 jobs) with 2 EM starts, for workflow tests."""
+    """A 2 x 1 x 2 sweep grid (4 points: 4 chunks of one) with 2 EM starts, for workflow tests."""
     sweep = config["sensitivity"]
     sweep.update(alphas=[0.2, 0.8], sensor_A_mults=[1.0], sensor_B_mults=[0.5, 1.5])
     sweep["hmm"]["n_restarts"] = 2
@@ -219,9 +219,14 @@ def test_every_artifact_is_produced_with_passing_validity_checks(workflow_copy):
     crosschecks = {c["id"]: c["passed"] for c in fig11["checks"] if c["kind"] == "crosscheck"}
     assert crosschecks == {"r_inputs_rebuilt_exactly": True}
     assert len(fig11["metrics"]["configurations"]) == 4
-    runs = sorted(p.name for p in (workflow_copy / "results" / "sensitivity").glob("*.json"))
-    assert runs == [
-        f"alpha{a}_mA1.0_mB{b}_rep0.json" for a in ("0.2", "0.8") for b in ("0.5", "1.5")
+    chunks = workflow_copy / "results" / "sensitivity" / "chunks"
+    assert sorted(p.name for p in chunks.glob("*.json")) == [f"{i}-of-4.json" for i in range(1, 5)]
+    points = [p for c in sorted(chunks.glob("*.json")) for p in json.loads(c.read_text())["points"]]
+    assert sorted((p["alpha"], p["m_B"]) for p in points) == [
+        (0.2, 0.5),
+        (0.2, 1.5),
+        (0.8, 0.5),
+        (0.8, 1.5),
     ]
 
 
@@ -295,10 +300,12 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     assert planned_rules(workflow_copy) == set()
 
 
-def test_growing_the_sweep_grid_plans_only_the_new_configurations(workflow_copy):
+def test_growing_the_sweep_grid_reruns_only_the_chunks_whose_points_change(workflow_copy):
+    # 4 points in 4 chunks -> 6 points in 4 chunks: [p1] [p2 new] [p3] [p4 new]; chunks 1 and 3
+    # keep their points (and their files), chunks 2 and 4 rerun
     edit_config(workflow_copy, lambda c: c["sensitivity"]["alphas"].append(0.5))
     assert planned_jobs(workflow_copy) == {
-        "sweep_point": 2,
+        "sweep_chunk": 2,
         "fig11_sensitivity": 1,
         "claims": 1,
     }
@@ -362,6 +369,61 @@ def test_rerun_gives_byte_identical_tables_and_figures(workflow_copy):
     assert not changed
 
 
+#: What the sweep and the gap benchmark publish (their chunk files aside).
+BATCH_OUTPUTS = (
+    "results/sensitivity/runs.csv",
+    "results/sensitivity/summary.csv",
+    "results/gap/benchmark.csv",
+    *(
+        f"paper_figures/{name}.{ext}"
+        for name in ("fig11_sensitivity", "gap_benchmark")
+        for ext in ("png", "pdf", "json")
+    ),
+)
+
+
+def case_files(workdir: Path, chunks: str) -> dict[str, bytes]:
+    """The gap benchmark's per-case files in the chunk folders ``chunks`` (a glob), by
+    kind/case/name."""
+    gap = workdir / "results" / "gap"
+    return {
+        f"{p.relative_to(gap).parts[0]}/{p.parent.name}/{p.name}": p.read_bytes()
+        for p in sorted(gap.glob(f"*/{chunks}/*/*"))
+    }
+
+
+def test_chunked_and_unchunked_batches_give_byte_identical_outputs(workflow_copy):
+    """One chunk instead of the default (4 sweep chunks, 2 gap chunks): same bytes everywhere.
+
+    A changed chunk count plans only the chunk jobs and the rules that gather them.
+    """
+    before = {name: (workflow_copy / name).read_bytes() for name in BATCH_OUTPUTS}
+    cases_before = case_files(workflow_copy, "*-of-2")
+    assert len(cases_before) == 2 * 6
+    targets = ["fig11_sensitivity", "gap_benchmark", "--set-scatter", "sweep=1", "gap=1"]
+    assert planned_jobs(workflow_copy, *targets) == {
+        "sweep_chunk": 1,
+        "fig11_sensitivity": 1,
+        "gap_cases": 1,
+        "gap_diagnoses": 1,
+        "gap_benchmark": 1,
+    }
+    snakemake(workflow_copy, "--cores", "2", *targets)
+    assert (workflow_copy / "results" / "sensitivity" / "chunks" / "1-of-1.json").exists()
+    changed = [name for name, data in before.items() if (workflow_copy / name).read_bytes() != data]
+    assert not changed
+    assert case_files(workflow_copy, "1-of-1") == cases_before
+    # back to the default chunks (still on disk): only the gathers and what reads them rerun
+    for one_chunk in workflow_copy.glob("results/*/*/1-of-1*"):
+        if one_chunk.is_dir():
+            shutil.rmtree(one_chunk)
+        else:
+            one_chunk.unlink()
+    assert planned_rules(workflow_copy) == {"fig11_sensitivity", "gap_benchmark", "claims"}
+    snakemake(workflow_copy, "--cores", "2")
+    assert planned_rules(workflow_copy) == set()
+
+
 def csv_bytes(table) -> bytes:
     """The bytes `write_csv` would write for ``table`` (every table of the pipeline goes so)."""
     return table.to_csv(index=False, float_format="%.12g").encode()
@@ -417,20 +479,23 @@ def test_lint_is_clean(workflow_copy):
     assert "Congratulations" in result.stdout + result.stderr
 
 
-def test_sweep_dry_run_plans_one_job_per_configuration_and_replicate(tmp_path):
+def test_sweep_dry_run_plans_the_requested_number_of_chunks(tmp_path):
     workdir = tmp_path / "repo"
     shutil.copytree(REPO, workdir, ignore=IGNORED)
 
     def grid(config):
         config["sensitivity"].update(
-            alphas=[0.2, 0.8], sensor_A_mults=[1.5], sensor_B_mults=[0.5], n_replicates=2
+            alphas=[0.2, 0.8], sensor_A_mults=[1.5], sensor_B_mults=[0.5], n_replicates=3
         )
 
     edit_config(workdir, grid)
-    assert planned_jobs(workdir, "fig11_sensitivity") == {
-        "sweep_point": 4,
-        "fig11_sensitivity": 1,
-    }
+    # 6 points: the default 4 chunks, 2 when asked, at most one per point, 0 = one per point
+    for scatter, chunks in (([], 4), (["sweep=2"], 2), (["sweep=50"], 6), (["sweep=0"], 6)):
+        options = ["--set-scatter", *scatter] if scatter else []
+        assert planned_jobs(workdir, "fig11_sensitivity", *options) == {
+            "sweep_chunk": chunks,
+            "fig11_sensitivity": 1,
+        }
 
 
 @pytest.mark.parametrize(
@@ -583,7 +648,7 @@ def test_a_run_interrupted_during_the_sweep_resumes_to_identical_outputs(workflo
     """SIGINT to Snakemake mid-sweep, then the same command again: complete, equal, no debris."""
     sweep_dir = workflow_copy / "results" / "sensitivity"
     figure_files = sorted((workflow_copy / "paper_figures").glob("fig11_sensitivity.*"))
-    reference = {p: p.read_bytes() for p in [*sorted(sweep_dir.glob("*.*")), *figure_files]}
+    reference = {p: p.read_bytes() for p in [*sorted(sweep_dir.rglob("*.*")), *figure_files]}
     for path in reference:
         path.unlink()
     env = {**os.environ, "PYTHONPATH": str(workflow_copy), "MPLBACKEND": "Agg"}
@@ -592,12 +657,12 @@ def test_a_run_interrupted_during_the_sweep_resumes_to_identical_outputs(workflo
         command, cwd=workflow_copy, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
     )
     deadline = time.monotonic() + 300
-    while not list(sweep_dir.glob("alpha*.json")) and time.monotonic() < deadline:
+    while not list(sweep_dir.glob("chunks/*.json")) and time.monotonic() < deadline:
         time.sleep(0.05)
     process.send_signal(signal.SIGINT)
     assert process.wait(timeout=120) != 0
-    finished = len(list(sweep_dir.glob("alpha*.json")))
-    assert 1 <= finished < 4, f"{finished} of 4 sweep jobs had finished when interrupted"
+    finished = len(list(sweep_dir.glob("chunks/*.json")))
+    assert 1 <= finished < 4, f"{finished} of 4 sweep chunks had finished when interrupted"
     debris = [p.name for p in workflow_copy.rglob(".*.tmp*")]
     assert not debris, debris
     snakemake(workflow_copy, "--cores", "2")
@@ -615,9 +680,9 @@ echo "$!"
 
 
 def test_sweep_jobs_run_unchanged_under_a_cluster_executor(workflow_copy):
-    """The four sweep configurations through cluster-generic give the local run's bytes."""
+    """The four sweep chunks through cluster-generic give the local run's bytes."""
     sweep_dir = workflow_copy / "results" / "sensitivity"
-    local = {p: p.read_bytes() for p in sorted(sweep_dir.glob("alpha*.json"))}
+    local = {p: p.read_bytes() for p in sorted(sweep_dir.glob("chunks/*.json"))}
     assert len(local) == 4
     for path in local:
         path.unlink()

@@ -31,7 +31,7 @@ from dtwin.figures.fig08_feature_separability import (
 )
 from dtwin.figures.fig10_mcda_actions import _mostly
 from dtwin.figures.fig12_claims_across_draws import dynamics_off_window
-from dtwin.hmm import zscore
+from dtwin.hmm_basics import zscore
 from dtwin.residual_stats import acf_table, ljung_box_table
 from dtwin.wiring import RESIDUALS
 

@@ -13,7 +13,7 @@ from matplotlib.patches import Patch
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.fault_injection import FEATURES, REGIMES, regime_features
 from dtwin.figures._style import REGIME_COLORS, new_figure, panel_title, tex
-from dtwin.hmm import zscore
+from dtwin.hmm_basics import zscore
 
 __all__ = ["fig08_feature_separability", "plot_feature_separability", "feature_stats"]
 

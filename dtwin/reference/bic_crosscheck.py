@@ -11,7 +11,7 @@ from collections.abc import Mapping
 import pandas as pd
 
 from dtwin.artifacts import Check
-from dtwin.hmm import n_hmm_params
+from dtwin.hmm_basics import n_hmm_params
 from dtwin.reference.crosscheck_result import CrosscheckResult
 
 __all__ = ["crosscheck_bic_formula"]

@@ -1,8 +1,8 @@
 """Helpers shared by the stage files (config validation, library inputs, target lists)."""
 
-import ast
 import functools
 import os
+import re
 
 import jsonschema
 import yaml
@@ -35,27 +35,40 @@ REFERENCE_DIR = "config/reference"
 FIGURE_FORMATS = ("png", "pdf")
 
 
+# `from dtwin.x import a, b` (also parenthesised over several lines) and `import dtwin.x`, at any
+# indentation (imports inside functions count). A regular expression, not ast.parse: the scan
+# runs on every Snakemake start, and parsing ~100 files cost ~0.8 s of a 3 s no-op run.
+_FROM_IMPORT = re.compile(r"^[ \t]*from[ \t]+(dtwin[\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n]*)", re.M)
+_PLAIN_IMPORT = re.compile(r"^[ \t]*import[ \t]+(dtwin[\w.]*(?:[ \t]*,[ \t]*[\w.]+)*)", re.M)
+
+
+def _imported_names(source):
+    """Dotted names of the dtwin modules (and imported members) a source file imports."""
+    names = []
+    for module, members in _FROM_IMPORT.findall(source):
+        members = re.sub(r"#[^\n]*", "", members).strip("() \t\n")
+        names.append(module)
+        names += [f"{module}.{m.split()[0]}" for m in members.split(",") if m.strip()]
+    for group in _PLAIN_IMPORT.findall(source):
+        names += [name.split()[0] for name in group.split(",") if name.strip()]
+    return names
+
+
 @functools.lru_cache(maxsize=None)
 def _direct_dtwin_imports(path):
     """Files of the dtwin modules that ``path`` imports directly (package __init__s included)."""
     with open(os.path.join(workflow.basedir, path)) as handle:
-        tree = ast.parse(handle.read(), filename=path)
+        source = handle.read()
     found = []
-    for node in ast.walk(tree):
-        names = []
-        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
-        elif isinstance(node, ast.Import):
-            names = [a.name for a in node.names]
-        for name in names:
-            parts = name.split(".")
-            if parts[0] != "dtwin":
-                continue
-            for depth in range(1, len(parts) + 1):
-                stem = os.path.join(*parts[:depth])
-                for candidate in (f"{stem}.py", os.path.join(stem, "__init__.py")):
-                    if os.path.exists(os.path.join(workflow.basedir, candidate)):
-                        found.append(candidate)
+    for name in _imported_names(source):
+        parts = name.split(".")
+        if parts[0] != "dtwin":
+            continue
+        for depth in range(1, len(parts) + 1):
+            stem = os.path.join(*parts[:depth])
+            for candidate in (f"{stem}.py", os.path.join(stem, "__init__.py")):
+                if os.path.exists(os.path.join(workflow.basedir, candidate)):
+                    found.append(candidate)
     return tuple(found)
 
 
@@ -85,11 +98,6 @@ with open(os.path.join(workflow.basedir, "workflow", "artifacts.yaml")) as _hand
     ARTIFACTS = yaml.safe_load(_handle)
 PAPER_ARTIFACTS = ARTIFACTS["paper"]
 
-GAP_CASES = [
-    f"{effect}_{number:02d}"
-    for effect in config["gap"]["benchmark"]["effects"]
-    for number in range(config["gap"]["benchmark"]["cases_per_effect"])
-]
 
 ALL_TARGETS = [
     *(path for artifact in PAPER_ARTIFACTS for path in figure_outputs(artifact)),
@@ -99,47 +107,68 @@ ALL_TARGETS = [
 ]
 
 
-# --- the sensitivity sweep (paper §5, Fig. 11): one job per configuration and replicate ------
-
-SWEEP_POINT = "alpha{alpha}_mA{ma}_mB{mb}_rep{rep}"
-
-
-wildcard_constraints:
-    alpha=r"[0-9.eE+-]+",
-    ma=r"[0-9.eE+-]+",
-    mb=r"[0-9.eE+-]+",
-    rep=r"[0-9]+",
-    chunk=r"[0-9]+",
+# --- batches: the sweep and the gap benchmark run as chunks (Snakemake scattergather) ---------
+# One job per chunk pays the interpreter start-up (~1.5 s of imports) once for many items.
+# `--set-scatter sweep=N gap=N` sets the number of chunks (at most one per item; 0 = one item
+# per chunk, as profiles/slurm does). Chunk i-of-n holds the i-th of n contiguous, near-equal
+# slices of the item list; every item runs from its own seed, so outputs do not depend on n.
 
 
-def sweep_value(value):
-    """A grid value as it appears in file names: repr of the float, which round-trips exactly."""
-    return repr(float(value))
+scattergather:
+    sweep=4,
+    gap=4,
 
 
-def sensitivity_run_files(sensitivity):
-    """The result file of every (alpha, m_A, m_B, replicate) of the configured grid."""
+def chunk_names(name, n_items):
+    """The scatter items ("1-of-n" …) of process ``name`` for ``n_items`` items."""
+    requested = len(getattr(scatter, name)("{scatteritem}"))
+    n = n_items if requested == 0 else min(requested, n_items)
+    return [f"{i}-of-{n}" for i in range(1, n + 1)]
+
+
+def chunk_of(items, scatteritem):
+    """The items of chunk ``scatteritem`` ("i-of-n"): the i-th of n contiguous slices."""
+    index, n = (int(part) for part in scatteritem.split("-of-"))
+    return items[(index - 1) * len(items) // n : index * len(items) // n]
+
+
+# --- the sensitivity sweep (paper §5, Fig. 11): chunks of (alpha, m_A, m_B, replicate) points --
+
+
+def sweep_points(sensitivity):
+    """Every grid point as a dict, in dtwin.sensitivity_sweep.sweep_grid order (α fastest)."""
+    return [
+        {"alpha": float(alpha), "m_A": float(m_a), "m_B": float(m_b), "replicate": rep}
+        for rep in range(sensitivity["n_replicates"])
+        for m_b in sensitivity["sensor_B_mults"]
+        for m_a in sensitivity["sensor_A_mults"]
+        for alpha in sensitivity["alphas"]
+    ]
+
+
+SWEEP_POINTS = sweep_points(config["sensitivity"])
+
+
+def sweep_chunk_files():
+    """The result file of every chunk of the configured grid."""
     return expand(
-        f"results/sensitivity/{SWEEP_POINT}.json",
-        alpha=[sweep_value(v) for v in sensitivity["alphas"]],
-        ma=[sweep_value(v) for v in sensitivity["sensor_A_mults"]],
-        mb=[sweep_value(v) for v in sensitivity["sensor_B_mults"]],
-        rep=range(sensitivity["n_replicates"]),
+        "results/sensitivity/chunks/{scatteritem}.json",
+        scatteritem=chunk_names("sweep", len(SWEEP_POINTS)),
     )
 
 
-def sweep_point_of(wildcards):
-    """The grid point of one sweep job, from its wildcards (params of sweep_point)."""
-    return {
-        "alpha": float(wildcards.alpha),
-        "m_A": float(wildcards.ma),
-        "m_B": float(wildcards.mb),
-        "replicate": int(wildcards.rep),
-    }
+def points_of_chunk(wildcards):
+    """The grid points of one sweep chunk (params of sweep_chunk)."""
+    return chunk_of(SWEEP_POINTS, wildcards.scatteritem)
 
 
-# What one sweep job depends on: not the grid lists (adding an alpha must not rerun the others),
-# not correction.method or interval (they only choose what the figure shows).
+def sweep_chunk_runtime(wildcards):
+    """Minutes a sweep chunk may take: 5 per point (one point takes ~2 s)."""
+    return 5 * len(points_of_chunk(wildcards))
+
+
+# What a sweep point depends on besides its own values: not correction.method or interval (they
+# only choose what the figure shows).
 SENSITIVITY_JOB_PARAMS = {
     "seed": config["sensitivity"]["seed"],
     "hmm": config["sensitivity"]["hmm"],
@@ -148,7 +177,44 @@ SENSITIVITY_JOB_PARAMS = {
 }
 
 
+# --- the gap benchmark (docs/gap.md §Cases and rules): chunks of generated cases ---------------
+
+GAP_CASES = [
+    f"{effect}_{number:02d}"
+    for effect in config["gap"]["benchmark"]["effects"]
+    for number in range(config["gap"]["benchmark"]["cases_per_effect"])
+]
+
+
+def gap_chunks():
+    """The scatter items of the gap benchmark's chunks."""
+    return chunk_names("gap", len(GAP_CASES))
+
+
+def gap_cases_of_chunk(wildcards):
+    """The case names of one gap chunk (params of gap_cases and gap_diagnoses)."""
+    return chunk_of(GAP_CASES, wildcards.scatteritem)
+
+
+def gap_chunk_runtime(wildcards):
+    """Minutes a gap chunk may take: 2 per case (one case takes seconds)."""
+    return 2 * len(gap_cases_of_chunk(wildcards))
+
+
+def gap_case_files(kind, name):
+    """``results/gap/<kind>/<chunk>/<case>/<name>`` of every case, in GAP_CASES order."""
+    return [
+        f"results/gap/{kind}/{item}/{case}/{name}"
+        for item in gap_chunks()
+        for case in chunk_of(GAP_CASES, item)
+    ]
+
+
 # --- claims across random draws (issue 12, Fig. 12): one job per chunk of draws ----------------
+
+
+wildcard_constraints:
+    chunk=r"[0-9]+",
 
 
 def draw_chunks(draws):

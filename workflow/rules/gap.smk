@@ -1,65 +1,63 @@
 # Sim-to-real gap diagnosis (docs/gap.md), checked on generated recordings with a withheld effect.
-# gap_case (one job per case) -> gap_diagnose (one job per case) -> gap_benchmark (aggregate).
+# gap_cases (one job per chunk of cases) -> gap_diagnoses (one job per chunk) -> gap_benchmark
+# (aggregate). Chunks: Snakemake scattergather "gap" (`--set-scatter gap=N`, see common.smk).
 # Config: config["gap"] (docs/gap.md §Settings, §Cases and rules); the case list GAP_CASES is
 # built in common.smk.
 
-rule gap_case:
+rule gap_cases:
     input:
-        lib=dtwin_sources("scripts/gap_case.py"),
+        lib=dtwin_sources("scripts/gap_cases.py"),
     output:
-        recording="results/gap/cases/{case}/recording.csv",
-        twin="results/gap/cases/{case}/twin.yaml",
-        key="results/gap/cases/{case}/key.json",
+        folder=directory("results/gap/cases/{scatteritem}"),
     params:
+        cases=gap_cases_of_chunk,
         benchmark=config["gap"]["benchmark"],
     log:
-        "logs/gap_case/{case}.log",
+        "logs/gap_cases/{scatteritem}.log",
     benchmark:
-        "benchmarks/rules/gap_case/{case}.tsv"
+        "benchmarks/rules/gap_cases/{scatteritem}.tsv"
     message:
-        "gap: generate the withheld-effect recording {wildcards.case}"
+        "gap: generate the withheld-effect recordings of chunk {wildcards.scatteritem}"
     threads: 1
     resources:
         mem_mb=500,
-        runtime=5,
+        runtime=gap_chunk_runtime,
     conda:
         "../envs/dtwin.yaml"
     script:
-        "../../scripts/gap_case.py"
+        "../../scripts/gap_cases.py"
 
 
-rule gap_diagnose:
+rule gap_diagnoses:
     input:
-        recording=rules.gap_case.output.recording,
-        twin=rules.gap_case.output.twin,
-        lib=dtwin_sources("scripts/gap_diagnose.py"),
+        cases=rules.gap_cases.output.folder,
+        lib=dtwin_sources("scripts/gap_diagnoses.py"),
     output:
-        diagnosis="results/gap/diagnoses/{case}/diagnosis.json",
-        report="results/gap/diagnoses/{case}/report.md",
-        figure="results/gap/diagnoses/{case}/gap.png",
+        folder=directory("results/gap/diagnoses/{scatteritem}"),
     params:
+        cases=gap_cases_of_chunk,
         diagnose=config["gap"]["diagnose"],
     log:
-        "logs/gap_diagnose/{case}.log",
+        "logs/gap_diagnoses/{scatteritem}.log",
     benchmark:
-        "benchmarks/rules/gap_diagnose/{case}.tsv"
+        "benchmarks/rules/gap_diagnoses/{scatteritem}.tsv"
     message:
-        "gap: diagnose {wildcards.case} (the key stays unread)"
+        "gap: diagnose the recordings of chunk {wildcards.scatteritem} (the keys stay unread)"
     threads: 1
     resources:
         mem_mb=1000,
-        runtime=10,
+        runtime=gap_chunk_runtime,
     conda:
         "../envs/dtwin.yaml"
     script:
-        "../../scripts/gap_diagnose.py"
+        "../../scripts/gap_diagnoses.py"
 
 
 rule gap_benchmark:
     input:
         lib=dtwin_sources("scripts/gap_benchmark.py"),
-        diagnoses=expand(rules.gap_diagnose.output.diagnosis, case=GAP_CASES),
-        truths=expand(rules.gap_case.output.key, case=GAP_CASES),
+        diagnoses=expand(rules.gap_diagnoses.output.folder, scatteritem=gap_chunks()),
+        truths=expand(rules.gap_cases.output.folder, scatteritem=gap_chunks()),
     output:
         png=report(
             "paper_figures/gap_benchmark.png",
@@ -69,6 +67,9 @@ rule gap_benchmark:
         pdf="paper_figures/gap_benchmark.pdf",
         json="paper_figures/gap_benchmark.json",
         table="results/gap/benchmark.csv",
+    params:
+        diagnoses=gap_case_files("diagnoses", "diagnosis.json"),
+        truths=gap_case_files("cases", "key.json"),
     log:
         "logs/gap_benchmark.log",
     benchmark:

@@ -1,39 +1,39 @@
-"""Stage "sensitivity" (paper §5, Fig. 11): one job per (alpha, m_A, m_B, replicate), one figure.
+"""Stage "sensitivity" (paper §5, Fig. 11): the grid in chunks of points, one figure.
 
-The grid and the replicates come from config["sensitivity"]; the target list is built by
-sensitivity_run_files() in common.smk. Jobs are independent (no shared inputs but the config
-and R's reference signals), so a cluster executor can spread them out.
+The grid and the replicates come from config["sensitivity"]; sweep_chunk runs one chunk of
+points per job (Snakemake scattergather "sweep": `--set-scatter sweep=N`, see common.smk) and
+fig11_sensitivity gathers them. Chunks are independent (no shared inputs but the config and
+R's reference signals), so a cluster executor can spread them out.
 """
 
 
-rule sweep_point:
+rule sweep_chunk:
     message:
-        "Sensitivity sweep: alpha {wildcards.alpha}, m_A {wildcards.ma}, m_B {wildcards.mb}, "
-        "replicate {wildcards.rep}"
+        "Sensitivity sweep: grid points of chunk {wildcards.scatteritem}, one after another"
     input:
-        lib=dtwin_sources("scripts/sweep_point.py"),
+        lib=dtwin_sources("scripts/sweep_chunk.py"),
         r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
     output:
-        json=f"results/sensitivity/{SWEEP_POINT}.json",
+        json="results/sensitivity/chunks/{scatteritem}.json",
     params:
-        point=sweep_point_of,
+        points=points_of_chunk,
         simulation=config["simulation"],
         command=config["command"],
         twin=config["twin"],
         arx=config["arx"],
         sensitivity=SENSITIVITY_JOB_PARAMS,
     log:
-        f"logs/sweep_point/{SWEEP_POINT}.log",
+        "logs/sweep_chunk/{scatteritem}.log",
     benchmark:
-        f"benchmarks/rules/sweep_point/{SWEEP_POINT}.tsv"
+        "benchmarks/rules/sweep_chunk/{scatteritem}.tsv"
     threads: 1
     resources:
         mem_mb=500,
-        runtime=5,
+        runtime=sweep_chunk_runtime,
     conda:
         "../envs/dtwin.yaml"
     script:
-        "../../scripts/sweep_point.py"
+        "../../scripts/sweep_chunk.py"
 
 
 rule fig11_sensitivity:
@@ -41,7 +41,7 @@ rule fig11_sensitivity:
         "Drawing paper Fig. 11 from {params.n_runs} sweep runs, beside R's re-run"
     input:
         lib=dtwin_sources("scripts/fig11_sensitivity.py"),
-        runs=sensitivity_run_files(config["sensitivity"]),
+        runs=sweep_chunk_files(),
         r_sweep=f"{REFERENCE_DIR}/sensitivity_36_rerun.csv",
     output:
         png=report(
@@ -55,7 +55,7 @@ rule fig11_sensitivity:
         runs="results/sensitivity/runs.csv",
     params:
         sensitivity=config["sensitivity"],
-        n_runs=len(sensitivity_run_files(config["sensitivity"])),
+        n_runs=len(SWEEP_POINTS),
     log:
         "logs/fig11_sensitivity.log",
     benchmark:

@@ -1,0 +1,102 @@
+"""Import budgets of the rules' scripts: a light rule does not load the heavy libraries.
+
+Each Snakemake job is a fresh Python process, so what a script imports is paid once per job
+(cold: scikit-learn + hmmlearn ~1.8 s, scipy.signal ~1.5 s, statsmodels ~1 s, matplotlib.pyplot
+~0.9 s). The budget is a set of modules, not seconds: the script's top-level imports run in a
+fresh interpreter and ``sys.modules`` must not hold any module the budget forbids.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from tests.conftest import REPO
+
+#: Modules no figure needs: EM engines and signal processing belong to the stage rules.
+MODEL_FITTING = ("sklearn", "hmmlearn", "scipy.signal", "statsmodels")
+#: Plotting, which a table rule never needs.
+PLOTTING = ("matplotlib",)
+
+#: script -> modules it must not load (representative figure, table, sweep and gap rules).
+BUDGETS = {
+    "fig01_pipeline": (*MODEL_FITTING, "scipy.stats"),
+    "fig07_fault_posteriors": (*MODEL_FITTING, "scipy.stats"),
+    "fig08_feature_separability": MODEL_FITTING,
+    "fig09_bic": (*MODEL_FITTING, "scipy.stats"),
+    "fig11_sensitivity": (*MODEL_FITTING, "scipy"),
+    "mcda_actions": (*MODEL_FITTING, *PLOTTING, "scipy"),
+    "sweep_chunk": ("statsmodels", *PLOTTING),
+    "gap_cases": ("sklearn", "hmmlearn", "statsmodels", *PLOTTING),
+}
+#: fig09's imports plus the HMM fitting: what the meta-test adds to a light script.
+HEAVIER_FIG09 = "\nfrom dtwin.hmm import fit_hmm\n"
+
+
+def top_level_imports(source: str) -> str:
+    """The import statements at the top level of a script, as code to run elsewhere."""
+    tree = ast.parse(source)
+    return "\n".join(
+        ast.unparse(node) for node in tree.body if isinstance(node, (ast.Import, ast.ImportFrom))
+    )
+
+
+def start(source: str) -> subprocess.Popen:
+    """A fresh interpreter that runs the script's imports and prints ``sorted(sys.modules)``."""
+    code = top_level_imports(source) + "\nimport json, sys\nprint(json.dumps(sorted(sys.modules)))"
+    env = {**os.environ, "PYTHONPATH": str(REPO), "MPLBACKEND": "Agg"}
+    return subprocess.Popen(
+        [sys.executable, "-c", code],
+        cwd=REPO,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def modules_of(process: subprocess.Popen) -> set[str]:
+    """The modules a started interpreter reported."""
+    out, err = process.communicate(timeout=300)
+    assert process.returncode == 0, err
+    return set(json.loads(out.splitlines()[-1]))
+
+
+@pytest.fixture(scope="module")
+def loaded() -> dict[str, set[str]]:
+    """Modules loaded by each budgeted script (and fig09 made heavier), run side by side."""
+    sources = {name: (REPO / "scripts" / f"{name}.py").read_text() for name in BUDGETS}
+    sources["fig09_bic+fit_hmm"] = sources["fig09_bic"] + HEAVIER_FIG09
+    processes = {name: start(source) for name, source in sources.items()}
+    return {name: modules_of(process) for name, process in processes.items()}
+
+
+def over_budget(modules: set[str], forbidden: tuple[str, ...]) -> list[str]:
+    """The forbidden packages (or sub-packages) found among ``modules``."""
+    return sorted(
+        name for name in forbidden if any(m == name or m.startswith(f"{name}.") for m in modules)
+    )
+
+
+@pytest.mark.parametrize("script", sorted(BUDGETS))
+def test_script_stays_within_its_import_budget(loaded, script):
+    assert not over_budget(loaded[script], BUDGETS[script])
+
+
+def test_a_heavy_import_added_to_a_light_script_breaks_its_budget(loaded):
+    """The check sees a heavy import however deep: here scikit-learn through dtwin.hmm."""
+    assert over_budget(loaded["fig09_bic+fit_hmm"], BUDGETS["fig09_bic"]) == [
+        "hmmlearn",
+        "scipy.stats",
+        "sklearn",
+    ]
+
+
+def test_every_budgeted_script_exists():
+    missing = [name for name in BUDGETS if not (REPO / "scripts" / f"{name}.py").exists()]
+    assert not missing
