@@ -59,6 +59,8 @@ AFTER_FAULTS = {
     "fig09_bic",
     "mcda_actions",
     "fig10_mcda_actions",
+    "ar_hmm_sweep",
+    "fig13_ar_hmm",
     "claims",
 }
 #: Every rule downstream of `residuals` (its surrogate and residual tables).
@@ -172,6 +174,7 @@ def shorten(config: dict) -> None:
     config["gap"]["benchmark"].update(effects=["none", "coulomb_friction"], cases_per_effect=1)
     config["draws"].update(n_draws=2, chunk_size=2)
     config["bic"].update(n_restarts=4, k_max=10)
+    config["ar_hmm"].update(n_restarts=2, k_max=10)
 
 
 @pytest.fixture(scope="module")
