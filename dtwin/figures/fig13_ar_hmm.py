@@ -43,7 +43,7 @@ def _bic_panel(ax, curves: list[tuple[str, pd.DataFrame, str, str]]) -> None:
     ax.axvline(N_REGIMES, color=R_COLOR, ls=":", lw=1.0)
     ax.annotate(
         f"{N_REGIMES} injected\nregimes",
-        (N_REGIMES, 0.55 * top),
+        (N_REGIMES, 0.1 * top),
         xytext=(4, 0),
         textcoords="offset points",
         color=R_COLOR,
