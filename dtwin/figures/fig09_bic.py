@@ -266,10 +266,7 @@ def fig09_bic(
         "fig09_bic",
         figure,
         metrics,
-        [
-            _with_optimiser_note(_with_edge_note(check, falling, max_k), table, max_k)
-            for check in checks
-        ],
+        _noted(checks, falling, max_k, table),
         paper_figure="Fig. 9",
         caption=_caption(falling, max_k),
         provenance="results/bic_sweep.csv (bic_sweep rule); R's BIC_vs_K.R and "
@@ -300,6 +297,16 @@ def _with_edge_note(check: Check, falling: Mapping[str, bool], max_k: int) -> Ch
         "sweep finds no minimum; the observed K is the sweep's edge, not a minimum"
     )
     return replace(check, note=note)
+
+
+def _noted(
+    checks: list[Check], falling: Mapping[str, bool], max_k: int, table: pd.DataFrame
+) -> list[Check]:
+    """Return ``checks`` with a one-line cause on every failed claim."""
+    return [
+        _with_optimiser_note(_with_edge_note(check, falling, max_k), table, max_k)
+        for check in checks
+    ]
 
 
 def _with_optimiser_note(check: Check, table: pd.DataFrame, max_k: int) -> Check:
