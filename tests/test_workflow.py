@@ -290,7 +290,7 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     }
     edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.8))
     edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=3))
-    assert planned_rules(workflow_copy) == {"bic_sweep", "fig09_bic", "claims"}
+    assert planned_rules(workflow_copy) == {"bic_sweep", "fig09_bic", "fig13_ar_hmm", "claims"}
     edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=4))
     edit_config(workflow_copy, lambda c: c["faults"].update(drift_origin="regime_start"))
     assert planned_rules(workflow_copy) == AFTER_FAULTS | DRAWS
