@@ -14,6 +14,7 @@ include: "workflow/rules/common.smk"
 include: "workflow/rules/twin.smk"
 include: "workflow/rules/faults.smk"  # before regimes.smk: bic_sweep reads the fault residuals
 include: "workflow/rules/regimes.smk"
+include: "workflow/rules/ar_hmm.smk"  # after regimes.smk: fig13 reads the BIC sweep
 include: "workflow/rules/correction.smk"
 include: "workflow/rules/decisions.smk"
 include: "workflow/rules/sensitivity.smk"

@@ -259,6 +259,36 @@ def _random_start(
     return means, np.maximum(variances, var_floor), occupancy
 
 
+def _kmeanspp_start(
+    X: np.ndarray, n_states: int, rng: np.random.Generator, var_floor: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """k-means++ seeding: K samples drawn far apart, every sample to its nearest, ML emissions.
+
+    Unlike the Dirichlet start, whose near-random assignment puts every state's mean close to
+    the global mean, the states start apart (issue 12 item 4: the sweep's low optimum).
+    """
+    centres = [X[rng.integers(len(X))]]
+    distance = ((X - centres[0]) ** 2).sum(axis=1)
+    for _ in range(n_states - 1):
+        total = distance.sum()
+        pick = rng.choice(len(X), p=distance / total) if total > 0 else rng.integers(len(X))
+        centres.append(X[pick])
+        distance = np.minimum(distance, ((X - X[pick]) ** 2).sum(axis=1))
+    nearest = np.argmin([((X - c) ** 2).sum(axis=1) for c in centres], axis=0)
+    weights = np.eye(n_states)[nearest]
+    occupancy = weights.sum(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        means = (weights.T @ X) / occupancy[:, None]
+        variances = np.stack(
+            [(weights[:, k] @ (X - means[k]) ** 2) / occupancy[k] for k in range(n_states)]
+        )
+    return means, np.maximum(variances, var_floor), occupancy
+
+
+#: Random starts of :func:`fit_hmm`: depmixS4's (the paper's default) and k-means++.
+START_METHODS = {"dirichlet": _random_start, "kmeans++": _kmeanspp_start}
+
+
 class _DepmixMonitor(ConvergenceMonitor):
     """hmmlearn convergence monitor with depmixS4's rule and a variance floor.
 
@@ -350,6 +380,7 @@ def _fit_one_start(
     max_iter: int,
     tol: float,
     var_floor: float,
+    start: str = "dirichlet",
 ) -> tuple[dict[str, Any], GaussianHMM | None]:
     row: dict[str, Any] = {
         "seed": seed,
@@ -361,7 +392,9 @@ def _fit_one_start(
         "min_occupancy": math.nan,
         "message": "",
     }
-    means, variances, occupancy = _random_start(X, n_states, np.random.default_rng(seed), var_floor)
+    means, variances, occupancy = START_METHODS[start](
+        X, n_states, np.random.default_rng(seed), var_floor
+    )
     if not np.all(occupancy >= MIN_OCCUPANCY) or not np.isfinite(means).all():
         row.update(status="degenerate", min_occupancy=float(np.min(occupancy)))
         row["message"] = f"random start left a state with < {MIN_OCCUPANCY} samples of weight"
@@ -419,6 +452,7 @@ def _fit_starts(
     max_iter: int,
     tol: float,
     var_floor: float,
+    start: str = "dirichlet",
 ) -> tuple[pd.DataFrame, dict[int, GaussianHMM]]:
     """Run every EM start; return the table of starts and the usable models by start number.
 
@@ -428,7 +462,7 @@ def _fit_starts(
     rows = []
     models: dict[int, GaussianHMM] = {}
     for restart, start_seed in enumerate(_restart_seeds(seed, n_restarts), start=1):
-        row, model = _fit_one_start(X, n_states, start_seed, max_iter, tol, var_floor)
+        row, model = _fit_one_start(X, n_states, start_seed, max_iter, tol, var_floor, start)
         rows.append({"restart": restart, **row})
         logger.info(
             "fit_hmm K=%d restart %d/%d: status=%s logL=%.4f n_iter=%d",
@@ -453,6 +487,7 @@ def fit_hmm(
     max_iter: int = 500,
     tol: float = 1e-8,
     var_floor: float = 1e-3,
+    start: str = "dirichlet",
 ) -> HmmFit:
     """Fit a diagonal Gaussian HMM by EM from several random starts and return the best.
 
@@ -474,6 +509,9 @@ def fit_hmm(
         ``crit="relative"``).
     var_floor : float, default 1e-3
         Lower bound on every emission variance, z-units²; applied after each M-step.
+    start : {"dirichlet", "kmeans++"}, default "dirichlet"
+        Random start of each EM run: depmixS4's Dirichlet(0.01) sample weights (the paper's),
+        or k-means++ seeding (states start apart; see :data:`START_METHODS`).
 
     Returns
     -------
@@ -511,11 +549,15 @@ def fit_hmm(
     max_iter = _require_count("max_iter", max_iter, 1)
     tol = require_positive("tol", tol)
     var_floor = require_positive("var_floor", var_floor)
+    if start not in START_METHODS:
+        raise DtwinValueError(f"start must be one of {', '.join(START_METHODS)} (got {start!r})")
     if len(X) <= n_states:
         raise DtwinValueError(f"X must have more rows than n_states={n_states} (got {len(X)})")
 
     with threadpool_limits(limits=1):
-        restarts, models = _fit_starts(X, n_states, seed, n_restarts, max_iter, tol, var_floor)
+        restarts, models = _fit_starts(
+            X, n_states, seed, n_restarts, max_iter, tol, var_floor, start
+        )
         if not models:
             raise HmmFitError(
                 f"fit_hmm: all {n_restarts} starts failed or degenerated (K={n_states}); "

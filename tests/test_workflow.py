@@ -59,6 +59,8 @@ AFTER_FAULTS = {
     "fig09_bic",
     "mcda_actions",
     "fig10_mcda_actions",
+    "ar_hmm_sweep",
+    "fig13_ar_hmm",
     "claims",
 }
 #: Every rule downstream of `residuals` (its surrogate and residual tables).
@@ -172,6 +174,7 @@ def shorten(config: dict) -> None:
     config["gap"]["benchmark"].update(effects=["none", "coulomb_friction"], cases_per_effect=1)
     config["draws"].update(n_draws=2, chunk_size=2)
     config["bic"].update(n_restarts=4, k_max=10)
+    config["ar_hmm"].update(n_restarts=2, k_max=10)
 
 
 @pytest.fixture(scope="module")
@@ -292,7 +295,7 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     }
     edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.8))
     edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=3))
-    assert planned_rules(workflow_copy) == {"bic_sweep", "fig09_bic", "claims"}
+    assert planned_rules(workflow_copy) == {"bic_sweep", "fig09_bic", "fig13_ar_hmm", "claims"}
     edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=4))
     edit_config(workflow_copy, lambda c: c["faults"].update(drift_origin="regime_start"))
     assert planned_rules(workflow_copy) == AFTER_FAULTS | DRAWS

@@ -319,7 +319,9 @@ def fig11_sensitivity(
         "r_signals_crosscheck": crosscheck_metrics,
     }
     mode = _modes(summary[(summary["source"] == "ours") & (summary["method"] == method)])
-    checks = _with_notes(checks, mode, int(sensitivity["hmm"]["n_restarts"]))
+    checks = _with_notes(
+        checks, mode, int(sensitivity["hmm"]["n_restarts"]), sensitivity["hmm"].get("start")
+    )
     return FigureArtifact(
         "fig11_sensitivity",
         figure,
@@ -347,13 +349,16 @@ def _caption(mode: str, n_replicates: int) -> str:
     )
 
 
-def _with_notes(checks: list[Check], mode: str, n_restarts: int) -> list[Check]:
+def _with_notes(
+    checks: list[Check], mode: str, n_restarts: int, start: str | None = None
+) -> list[Check]:
     """Give each failed claim of the sweep a one-line cause (``mode``: where ours sit)."""
     notes = {
         "range_23_40": f"method: {mode}; the paper's band is drawn in every facet",
         "one_mode_with_restarts": (
-            f"optimiser: {mode}, with {n_restarts} EM starts, so the best-likelihood "
-            "segmentation is sometimes the worse one for e1"
+            f"optimiser: {mode}, with {n_restarts} EM starts from the {start or 'dirichlet'} "
+            "start: low-mode fits are local optima of lower likelihood (issue 12 item 4: with "
+            "depmixS4's Dirichlet start 6 of 36 stayed there; sensitivity.hmm.start: kmeans++)"
         ),
     }
     generic = f"{mode}; e1 before correction is identical in every configuration"

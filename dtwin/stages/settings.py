@@ -16,6 +16,10 @@ from dtwin._validation import DtwinValueError, require_mapping, require_positive
 
 __all__ = ["EmSettings", "HmmSettings"]
 
+#: Names of the EM random starts (the keys of :data:`dtwin.hmm.START_METHODS`; kept here so
+#: reading a config does not import hmmlearn).
+_STARTS = ("dirichlet", "kmeans++")
+
 
 def _count(section: str, raw: Mapping[str, Any], key: str, minimum: int) -> int:
     value = raw[key]
@@ -36,11 +40,15 @@ class EmSettings:
         Relative stopping tolerance of EM.
     var_floor : float, default 1e-3
         Lower bound on every emission variance, z-units².
+    start : str, default "dirichlet"
+        Random start of every EM run (:data:`dtwin.hmm.START_METHODS`): depmixS4's
+        ``dirichlet`` or ``kmeans++``.
     """
 
     max_iter: int = 500
     tol: float = 1e-8
     var_floor: float = 1e-3
+    start: str = "dirichlet"
 
     @classmethod
     def from_mapping(cls, raw: Any, section: str = "hmm") -> EmSettings:
@@ -58,6 +66,12 @@ class EmSettings:
         for key in ("tol", "var_floor"):
             if key in raw:
                 values[key] = require_positive(f"{section}.{key}", raw[key])
+        if "start" in raw:
+            if raw["start"] not in _STARTS:
+                raise DtwinValueError(
+                    f"{section}.start must be one of {', '.join(_STARTS)} (got {raw['start']!r})"
+                )
+            values["start"] = raw["start"]
         return cls(**values)
 
     def options(self) -> dict[str, Any]:

@@ -1,0 +1,656 @@
+"""Switching autoregressive HMM: a Gaussian AR(1) emission per state (paper §5, future work).
+
+The paper's regime HMM (:mod:`dtwin.hmm`) treats the residual features as i.i.d. Gaussian
+given the state, although their lag-1 autocorrelation is 0.999 (§4.1); §5 names a switching
+autoregressive emission as the natural extension. Here every state ``k`` and feature ``d``
+has its own AR(1) law
+
+    ``x_t,d | S_t = k, x_t−1 ~ N(c_kd + φ_kd · x_t−1,d,  σ²_kd)``            (diagonal)
+
+so a state is a level *and* a dynamic. Parameters per state and feature: the intercept
+``c`` (equivalently the stationary mean ``c/(1 − φ)``), the AR coefficient ``φ`` and the
+innovation variance ``σ²``; with K states and D features the model has
+``(K−1) + K(K−1) + 3DK`` free parameters (:func:`n_ar_hmm_params`).
+
+The likelihood is conditional on the first sample: hmmlearn sees the ``T − 1`` pairs
+``(x_t, x_t−1)`` as one row each (with their squares and product, shape ``(T − 1, 5D)``),
+and every state sequence, posterior and Viterbi path refers to samples ``1 … T−1``; sample 0
+is given the state of sample 1.
+
+EM extends :class:`hmmlearn.base.BaseHMM` through the emission hooks its own model classes
+implement (``_compute_log_likelihood``, ``_initialize_sufficient_statistics``,
+``_accumulate_sufficient_statistics``, ``_do_mstep``); the forward-backward recursion,
+Baum-Welch's π and A updates and Viterbi are hmmlearn's. The M-step is per state and feature
+a weighted least-squares regression of ``x_t`` on ``(1, x_t−1)`` with weights γ_t(k), and its
+residual variance floored at ``var_floor`` (the exact constrained maximiser, so EM stays
+monotone). Random starts, the stopping rule and the start table follow :func:`dtwin.hmm.fit_hmm`
+(depmixS4's Dirichlet(0.01) start, relative tolerance). ``tests/test_hmm_ar.py`` checks the
+log-likelihood against a forward recursion written out by hand, and recovery of known AR
+coefficients and states.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from hmmlearn.base import BaseHMM, ConvergenceMonitor
+from threadpoolctl import threadpool_limits
+
+from dtwin._validation import DtwinValueError, require_finite_array, require_positive
+from dtwin.hmm import (
+    DIRICHLET_ALPHA,
+    MIN_OCCUPANCY,
+    HmmFitError,
+    _monotone,
+    _require_count,
+    _restart_seeds,
+    bic_minimum_bracketed,
+    bic_row,
+)
+
+__all__ = [
+    "ArHmmFit",
+    "ArBicSweep",
+    "n_ar_hmm_params",
+    "sample_ar_hmm",
+    "fit_ar_hmm",
+    "score_ar_hmm",
+    "ar_bic_by_k",
+]
+
+logger = logging.getLogger(__name__)
+
+#: Letter of the emission parameters (c, φ, σ²) in hmmlearn's ``params`` string.
+_EMISSION = "e"
+
+_RESTART_COLUMNS = (
+    "restart",
+    "seed",
+    "log_likelihood",
+    "n_iter",
+    "converged",
+    "status",
+    "implementation",
+    "min_occupancy",
+    "message",
+)
+
+
+def n_ar_hmm_params(n_states: int, n_features: int) -> int:
+    """Return the free-parameter count ``(K−1) + K(K−1) + 3·D·K`` of the diagonal AR(1)-HMM.
+
+    π has K−1 free values, A K(K−1); each state and feature has an intercept, an AR
+    coefficient and an innovation variance.
+
+    Examples
+    --------
+    >>> n_ar_hmm_params(4, 10)
+    135
+    """
+    return (n_states - 1) + n_states * (n_states - 1) + 3 * n_features * n_states
+
+
+# --- the emission model ---------------------------------------------------------------------
+
+
+def _design(X: np.ndarray) -> np.ndarray:
+    """Return the rows ``(y, x, y², y·x, x²)`` of the pairs ``y = x_t``, ``x = x_t−1``: (T−1, 5D).
+
+    Both the emission log-density and the M-step's weighted sums are linear in these
+    columns, so each is one matrix product per EM iteration.
+    """
+    y, x = X[1:], X[:-1]
+    return np.hstack([y, x, y * y, y * x, x * x])
+
+
+def _ar_log_emission(
+    design: np.ndarray, intercepts: np.ndarray, coefs: np.ndarray, variances: np.ndarray
+) -> np.ndarray:
+    """``log N(y_t | c_k + φ_k x_t, diag σ_k²)``, shape (T, K), from :func:`_design` rows.
+
+    ``Σ_d (y − c − φx)²/σ²`` expanded: the weights of ``(y, x, y², yx, x²)`` are
+    ``(−2c, 2cφ, 1, −2φ, φ²)/σ²``, plus the constant ``Σ_d c²/σ²``.
+    """
+    w = 1.0 / variances  # (K, D)
+    weights = np.hstack(
+        [-2.0 * intercepts * w, 2.0 * intercepts * coefs * w, w, -2.0 * coefs * w, coefs**2 * w]
+    )
+    constant = (intercepts**2 * w).sum(axis=1) + np.log(2.0 * np.pi * variances).sum(axis=1)
+    return -0.5 * (design @ weights.T + constant)
+
+
+def _moments(weights: np.ndarray, design: np.ndarray) -> dict[str, np.ndarray]:
+    """Weighted sums per state and feature: ``n`` (K, 1) and ``y, x, yy, xy, xx`` (K, D)."""
+    sums = np.split(weights.T @ design, 5, axis=1)
+    return {
+        "n": weights.sum(axis=0)[:, None],
+        **dict(zip(("y", "x", "yy", "xy", "xx"), sums, strict=True)),
+    }
+
+
+def _ar_mstep(
+    moments: Mapping[str, np.ndarray], var_floor: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted least squares of y on (1, x) per state and feature; returns (c, φ, σ²).
+
+    ``φ = cov_w(x, y)/var_w(x)``, ``c = ȳ − φ x̄``, ``σ² = max(var_w(y) − φ·cov_w(x, y),
+    var_floor)``. A state whose lagged values do not vary (var_w(x) ≈ 0) gets ``φ = 0``.
+    """
+    n = np.maximum(moments["n"], np.finfo(float).tiny)
+    mean_x, mean_y = moments["x"] / n, moments["y"] / n
+    var_x = moments["xx"] / n - mean_x**2
+    var_y = moments["yy"] / n - mean_y**2
+    cov = moments["xy"] / n - mean_x * mean_y
+    varies = var_x > 1e-12 * np.maximum(1.0, moments["xx"] / n)
+    coefs = np.where(varies, cov / np.where(varies, var_x, 1.0), 0.0)
+    intercepts = mean_y - coefs * mean_x
+    variances = np.maximum(var_y - coefs * cov, var_floor)
+    return intercepts, coefs, variances
+
+
+class _ArGaussianHMM(BaseHMM):
+    """hmmlearn HMM with a diagonal Gaussian AR(1) emission per state.
+
+    Fitted on :func:`_design` rows; attributes ``intercepts_``, ``coefs_``, ``variances_``
+    (K, D). ``params`` letters: ``s`` (π), ``t`` (A), ``e`` (the emission).
+    """
+
+    def __init__(
+        self,
+        n_components: int = 1,
+        var_floor: float = 1e-6,
+        algorithm: str = "viterbi",
+        random_state: Any = None,
+        n_iter: int = 10,
+        tol: float = 0.0,
+        verbose: bool = False,
+        params: str = "ste",
+        init_params: str = "",
+        implementation: str = "scaling",
+    ):
+        super().__init__(
+            n_components=n_components,
+            startprob_prior=1.0,
+            transmat_prior=1.0,
+            algorithm=algorithm,
+            random_state=random_state,
+            n_iter=n_iter,
+            tol=tol,
+            verbose=verbose,
+            params=params,
+            init_params=init_params,
+            implementation=implementation,
+        )
+        self.var_floor = var_floor
+
+    def _get_n_fit_scalars_per_param(self) -> dict[str, int]:
+        k, d = self.n_components, self.n_features // 5
+        return {"s": k - 1, "t": k * (k - 1), _EMISSION: 3 * k * d}
+
+    def _compute_log_likelihood(self, X: np.ndarray) -> np.ndarray:
+        return _ar_log_emission(X, self.intercepts_, self.coefs_, self.variances_)
+
+    def _initialize_sufficient_statistics(self) -> dict[str, Any]:
+        stats = super()._initialize_sufficient_statistics()
+        stats["moments"] = None
+        return stats
+
+    def _accumulate_sufficient_statistics(
+        self, stats, X, lattice, posteriors, fwdlattice, bwdlattice
+    ) -> None:
+        super()._accumulate_sufficient_statistics(
+            stats, X, lattice, posteriors, fwdlattice, bwdlattice
+        )
+        if _EMISSION in self.params:
+            moments = _moments(posteriors, X)
+            if stats["moments"] is not None:
+                moments = {key: stats["moments"][key] + value for key, value in moments.items()}
+            stats["moments"] = moments
+
+    def _do_mstep(self, stats: dict[str, Any]) -> None:
+        super()._do_mstep(stats)
+        if _EMISSION in self.params and stats["moments"] is not None:
+            self.intercepts_, self.coefs_, self.variances_ = _ar_mstep(
+                stats["moments"], self.var_floor
+            )
+
+
+def _new_model(
+    startprob: np.ndarray,
+    transmat: np.ndarray,
+    emission: tuple[np.ndarray, np.ndarray, np.ndarray],
+    implementation: str,
+    max_iter: int = 1,
+    var_floor: float = 1e-6,
+) -> _ArGaussianHMM:
+    model = _ArGaussianHMM(
+        n_components=len(startprob),
+        var_floor=var_floor,
+        n_iter=max_iter,
+        implementation=implementation,
+    )
+    model.n_features = 5 * emission[0].shape[1]
+    model.startprob_ = np.array(startprob, dtype=float)
+    model.transmat_ = np.array(transmat, dtype=float)
+    model.intercepts_, model.coefs_, model.variances_ = (np.array(a, dtype=float) for a in emission)
+    return model
+
+
+# --- the fitted model -----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ArHmmFit:
+    """A fitted AR(1)-HMM and its decoding of the training sequence.
+
+    Attributes
+    ----------
+    startprob : ndarray, shape (K,)
+        π, the state distribution of sample 1 (the first sample with a predecessor).
+    transmat : ndarray, shape (K, K)
+        ``transmat[i, j] = P(S_t = j | S_t−1 = i)``.
+    intercepts, coefs, sds : ndarray, shape (K, D)
+        ``c``, ``φ`` and the innovation standard deviation ``σ`` per state and feature
+        (z-units of the training features).
+    log_likelihood : float
+        ``log p(x_1 … x_T−1 | x_0)`` at the returned parameters.
+    n_params : int
+        :func:`n_ar_hmm_params`.
+    bic : float
+        ``−2·log_likelihood + n_params·log(T − 1)`` (``T − 1`` modelled samples).
+    n_iter : int
+        EM iterations of the best start.
+    converged : bool
+        The best start stopped by the tolerance with finite, monotone log-likelihoods.
+    restarts : DataFrame
+        One row per start, the columns of :attr:`dtwin.hmm.HmmFit.restarts`.
+    best_restart : int
+        ``restart`` number of the returned start.
+    smoothed : ndarray, shape (T, K)
+        Smoothed posteriors (row 0 repeats row 1: sample 0 only conditions).
+    viterbi : ndarray of int, shape (T,)
+        Viterbi path, states 0 … K−1 (sample 0 takes the state of sample 1).
+    """
+
+    startprob: np.ndarray
+    transmat: np.ndarray
+    intercepts: np.ndarray
+    coefs: np.ndarray
+    sds: np.ndarray
+    log_likelihood: float
+    n_params: int
+    bic: float
+    n_iter: int
+    converged: bool
+    restarts: pd.DataFrame
+    best_restart: int
+    smoothed: np.ndarray
+    viterbi: np.ndarray
+
+    @property
+    def n_states(self) -> int:
+        """Number of hidden states K."""
+        return len(self.startprob)
+
+    @property
+    def n_features(self) -> int:
+        """Number of features D."""
+        return self.coefs.shape[1]
+
+    @property
+    def means(self) -> np.ndarray:
+        """Stationary means ``c/(1 − φ)`` per state and feature, NaN where ``|φ| ≥ 1``."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(np.abs(self.coefs) < 1.0, self.intercepts / (1.0 - self.coefs), np.nan)
+
+
+def sample_ar_hmm(
+    startprob: Any,
+    transmat: Any,
+    intercepts: Any,
+    coefs: Any,
+    sds: Any,
+    n_steps: int,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Draw a sequence from an AR(1)-HMM; return ``(X (T, D), states (T,))``.
+
+    Sample 0 has state ``~ startprob`` and value ``c/(1 − φ)`` of that state plus one
+    innovation (the stationary mean, or ``c`` where ``|φ| ≥ 1``); sample t follows
+    ``x_t = c_k + φ_k x_t−1 + σ_k ε_t`` with ``k = S_t``.
+
+    Examples
+    --------
+    >>> X, s = sample_ar_hmm([1.0], [[1.0]], [[0.0]], [[0.5]], [[1.0]], 5,
+    ...                      np.random.default_rng(0))
+    >>> X.shape, s.tolist()
+    ((5, 1), [0, 0, 0, 0, 0])
+    """
+    n_steps = _require_count("n_steps", n_steps, 1)
+    startprob, transmat = np.asarray(startprob, float), np.asarray(transmat, float)
+    c, phi, sd = (np.atleast_2d(np.asarray(a, float)) for a in (intercepts, coefs, sds))
+    n_states = len(startprob)
+    states = np.empty(n_steps, dtype=int)
+    states[0] = rng.choice(n_states, p=startprob)
+    for t in range(1, n_steps):
+        states[t] = rng.choice(n_states, p=transmat[states[t - 1]])
+    noise = rng.standard_normal((n_steps, c.shape[1])) * sd[states]
+    X = np.empty_like(noise)
+    k = states[0]
+    stationary = np.where(np.abs(phi[k]) < 1.0, c[k] / (1.0 - np.clip(phi[k], -0.999, 0.999)), c[k])
+    X[0] = stationary + noise[0]
+    for t in range(1, n_steps):
+        k = states[t]
+        X[t] = c[k] + phi[k] * X[t - 1] + noise[t]
+    return X, states
+
+
+# --- EM from random starts ------------------------------------------------------------------
+
+
+class _RelativeMonitor(ConvergenceMonitor):
+    """depmixS4's stopping rule ``(LL − LL_old)/|LL_old| < tol``; records the history."""
+
+    def __init__(self, tol: float, n_iter: int):
+        super().__init__(tol, n_iter, verbose=False)
+        self.log_likelihoods: list[float] = []
+        self.stopped_by_tol = False
+        self.non_finite = False
+
+    def report(self, log_prob: float) -> None:
+        super().report(log_prob)
+        self.log_likelihoods.append(float(log_prob))
+        if not np.isfinite(log_prob):
+            self.non_finite = True
+
+    @property
+    def converged(self) -> bool:
+        history = self.log_likelihoods
+        if self.non_finite or self.iter >= self.n_iter:
+            return True
+        if len(history) >= 2 and (history[-1] - history[-2]) < self.tol * abs(history[-2]):
+            self.stopped_by_tol = True
+            return True
+        return False
+
+
+def _random_emission(
+    design: np.ndarray, n_states: int, rng: np.random.Generator, var_floor: float
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """depmixS4's random start: Dirichlet(0.01) pair weights, the weighted M-step on them."""
+    weights = rng.dirichlet(np.full(n_states, DIRICHLET_ALPHA), size=len(design))
+    return _ar_mstep(_moments(weights, design), var_floor), weights.sum(axis=0)
+
+
+def _run_em(
+    design: np.ndarray,
+    emission: tuple[np.ndarray, np.ndarray, np.ndarray],
+    implementation: str,
+    max_iter: int,
+    tol: float,
+    var_floor: float,
+) -> tuple[_ArGaussianHMM, list[float], bool]:
+    """One hmmlearn ``fit`` from the given emission start (π and A uniform)."""
+    n_states = emission[0].shape[0]
+    uniform = np.full(n_states, 1.0 / n_states)
+    model = _new_model(
+        uniform, np.tile(uniform, (n_states, 1)), emission, implementation, max_iter, var_floor
+    )
+    monitor = _RelativeMonitor(tol, max_iter)
+    model.monitor_ = monitor
+    with np.errstate(under="ignore"):
+        model.fit(design)
+        final, posteriors = model.score_samples(design)
+    parameters = (model.intercepts_, model.coefs_, model.variances_, model.transmat_)
+    if (
+        monitor.non_finite
+        or not np.isfinite(final)
+        or not all(np.isfinite(p).all() for p in parameters)
+    ):
+        raise FloatingPointError(f"non-finite log-likelihood or parameters ({implementation})")
+    model.occupancy_ = posteriors.sum(axis=0)
+    return model, [*monitor.log_likelihoods, float(final)], monitor.stopped_by_tol
+
+
+def _fit_one_start(
+    design: np.ndarray, n_states: int, seed: int, max_iter: int, tol: float, var_floor: float
+) -> tuple[dict[str, Any], _ArGaussianHMM | None]:
+    row: dict[str, Any] = {
+        "seed": seed,
+        "log_likelihood": math.nan,
+        "n_iter": 0,
+        "converged": False,
+        "status": "failed",
+        "implementation": "",
+        "min_occupancy": math.nan,
+        "message": "",
+    }
+    emission, occupancy = _random_emission(design, n_states, np.random.default_rng(seed), var_floor)
+    if occupancy.min() < MIN_OCCUPANCY:
+        row.update(status="degenerate", min_occupancy=float(occupancy.min()))
+        row["message"] = f"random start left a state with < {MIN_OCCUPANCY} samples of weight"
+        return row, None
+    messages = []
+    for implementation in ("scaling", "log"):
+        try:
+            model, history, stopped = _run_em(
+                design, emission, implementation, max_iter, tol, var_floor
+            )
+        except (FloatingPointError, ValueError, RuntimeError) as error:
+            messages.append(f"{implementation}: {error}")
+            continue
+        break
+    else:
+        row["message"] = "; ".join(messages)
+        return row, None
+    row.update(
+        log_likelihood=history[-1],
+        n_iter=len(history) - 1,
+        implementation=implementation,
+        min_occupancy=float(model.occupancy_.min()),
+        message="; ".join(messages),
+    )
+    if model.occupancy_.min() < MIN_OCCUPANCY:
+        row["status"] = "degenerate"
+    elif not _monotone(history):
+        row["status"] = "not_monotone"
+    elif not stopped:
+        row["status"] = "max_iter"
+    else:
+        row.update(status="ok", converged=True)
+    return row, (None if row["status"] == "degenerate" else model)
+
+
+def _freeze(array: np.ndarray) -> np.ndarray:
+    array = np.array(array)
+    array.setflags(write=False)
+    return array
+
+
+def _decoded(model: _ArGaussianHMM, design: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Smoothed posteriors and Viterbi path of all T samples (sample 0 copies sample 1)."""
+    with np.errstate(under="ignore"):
+        smoothed = model.predict_proba(design)
+        viterbi = model.decode(design, algorithm="viterbi")[1].astype(int)
+    return np.vstack([smoothed[:1], smoothed]), np.concatenate([viterbi[:1], viterbi])
+
+
+def fit_ar_hmm(
+    X: Any,
+    n_states: int,
+    *,
+    n_restarts: int = 10,
+    seed: int | Sequence[int] = 0,
+    max_iter: int = 500,
+    tol: float = 1e-8,
+    var_floor: float = 1e-6,
+) -> ArHmmFit:
+    """Fit a diagonal Gaussian AR(1)-HMM by EM from several random starts; return the best.
+
+    Parameters
+    ----------
+    X : array-like, shape (T, D)
+        Features (z-scored, :func:`dtwin.hmm.zscore`); at least ``n_states + 2`` rows.
+    n_states : int
+        Number of hidden states K.
+    n_restarts : int, default 10
+        Random starts; start ``i`` uses the ``i``-th child of ``SeedSequence(seed)``.
+    seed : int or sequence of int, default 0
+        Entropy of the seed sequence.
+    max_iter : int, default 500
+        EM iteration cap per start.
+    tol : float, default 1e-8
+        Relative tolerance: stop when ``(LL − LL_old)/|LL_old| < tol``.
+    var_floor : float, default 1e-6
+        Lower bound on every innovation variance σ², z-units² (innovations of a series with
+        lag-1 ACF 0.999 have variance ~2e-3 of the series', so the Gaussian HMM's floor of
+        1e-3 would be far too high).
+
+    Returns
+    -------
+    ArHmmFit
+
+    Raises
+    ------
+    HmmFitError
+        If every start failed or ended with an empty state.
+
+    Notes
+    -----
+    E-step: hmmlearn's forward-backward on the emission densities
+    ``N(x_t | c_k + φ_k x_t−1, diag σ_k²)`` (the forward recursion of Eq. (4) with this
+    ``b_k``). M-step: π and A as in Eqs. (7)–(8); per state and feature the γ-weighted
+    regression of ``x_t`` on ``(1, x_t−1)``.
+
+    Examples
+    --------
+    >>> X, _ = sample_ar_hmm([0.5, 0.5], [[0.98, 0.02], [0.02, 0.98]], [[0.0], [2.0]],
+    ...                      [[0.9], [0.0]], [[0.1], [0.1]], 400, np.random.default_rng(0))
+    >>> fit = fit_ar_hmm(X, 2, n_restarts=3, seed=0)
+    >>> sorted((np.round(fit.coefs[:, 0], 1) + 0.0).tolist())
+    [0.0, 0.9]
+    """
+    X = require_finite_array("X", X, ndim=2)
+    n_states = _require_count("n_states", n_states, 1)
+    n_restarts = _require_count("n_restarts", n_restarts, 1)
+    max_iter = _require_count("max_iter", max_iter, 1)
+    tol = require_positive("tol", tol)
+    var_floor = require_positive("var_floor", var_floor)
+    if len(X) < n_states + 2:
+        raise DtwinValueError(
+            f"X must have at least n_states + 2 = {n_states + 2} rows (got {len(X)})"
+        )
+    design = _design(X)
+    rows, models = [], {}
+    with threadpool_limits(limits=1):
+        for restart, start_seed in enumerate(_restart_seeds(seed, n_restarts), start=1):
+            row, model = _fit_one_start(design, n_states, start_seed, max_iter, tol, var_floor)
+            rows.append({"restart": restart, **row})
+            if model is not None:
+                models[restart] = model
+        restarts = pd.DataFrame(rows, columns=list(_RESTART_COLUMNS))
+        if not models:
+            raise HmmFitError(
+                f"fit_ar_hmm: all {n_restarts} starts failed or degenerated (K={n_states}); "
+                f"statuses: {', '.join(restarts['status'])}"
+            )
+        usable = restarts[restarts["restart"].isin(models)]
+        best = int(usable.loc[usable["log_likelihood"].idxmax(), "restart"])
+        model = models[best]
+        smoothed, viterbi = _decoded(model, design)
+    best_row = restarts.loc[restarts["restart"] == best].iloc[0]
+    n_params = n_ar_hmm_params(n_states, X.shape[1])
+    log_likelihood = float(best_row["log_likelihood"])
+    logger.info(
+        "fit_ar_hmm K=%d: best logL=%.4f (start %d of %d)",
+        n_states,
+        log_likelihood,
+        best,
+        n_restarts,
+    )
+    return ArHmmFit(
+        startprob=_freeze(model.startprob_),
+        transmat=_freeze(model.transmat_),
+        intercepts=_freeze(model.intercepts_),
+        coefs=_freeze(model.coefs_),
+        sds=_freeze(np.sqrt(model.variances_)),
+        log_likelihood=log_likelihood,
+        n_params=n_params,
+        bic=-2.0 * log_likelihood + n_params * math.log(len(design)),
+        n_iter=int(best_row["n_iter"]),
+        converged=bool(best_row["converged"]),
+        restarts=restarts,
+        best_restart=best,
+        smoothed=_freeze(smoothed),
+        viterbi=_freeze(viterbi),
+    )
+
+
+def score_ar_hmm(fit: ArHmmFit, X: Any) -> float:
+    """Return ``log p(x_1 … x_T−1 | x_0)`` of ``X`` (shape (T, D), T ≥ 2) under ``fit``."""
+    X = require_finite_array("X", X, ndim=2)
+    if X.shape[1] != fit.n_features or len(X) < 2:
+        raise DtwinValueError(f"X must have shape (T >= 2, {fit.n_features}) (got {X.shape})")
+    emission = (fit.intercepts, fit.coefs, fit.sds**2)
+    model = _new_model(fit.startprob, fit.transmat, emission, "log")
+    return float(model.score(_design(X)))
+
+
+# --- model order ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ArBicSweep:
+    """Result of :func:`ar_bic_by_k`.
+
+    Attributes
+    ----------
+    table : DataFrame
+        One row per K, the columns of :func:`dtwin.hmm.bic_row` (``K``, ``log_likelihood``,
+        ``n_params``, ``bic``, ``converged``, ``n_usable``, ``log_likelihood_half``,
+        ``n_starts``, ``source``).
+    fits : dict of int to ArHmmFit
+        The best fit at every K of the table.
+    """
+
+    table: pd.DataFrame
+    fits: dict[int, ArHmmFit]
+
+
+def ar_bic_by_k(
+    X: Any,
+    ks: Sequence[int],
+    *,
+    n_restarts: int = 5,
+    seed: int | Sequence[int] = 0,
+    k_max: int | None = None,
+    stop_after_rises: int = 2,
+    **fit_options: Any,
+) -> ArBicSweep:
+    """Fit one AR(1)-HMM per K and tabulate its BIC, as :func:`dtwin.hmm.bic_by_k` does.
+
+    K's starts derive from ``SeedSequence([*seed, K])``; past ``max(ks)`` K grows until the
+    BIC rose ``stop_after_rises`` times in a row or ``K = k_max``. ``fit_options`` go to
+    :func:`fit_ar_hmm` (``max_iter``, ``tol``, ``var_floor``).
+    """
+    X = require_finite_array("X", X, ndim=2)
+    ks = sorted(_require_count("ks[]", k, 1) for k in ks)
+    if not ks:
+        raise DtwinValueError("ks must list at least one number of states (got none)")
+    entropy = [int(seed)] if isinstance(seed, (int, np.integer)) else [int(s) for s in seed]
+    k_last = max(ks) if k_max is None else max(max(ks), _require_count("k_max", k_max, 1))
+    rows, fits = [], {}
+    for k in [*ks, *range(max(ks) + 1, k_last + 1)]:
+        if k > max(ks) and bic_minimum_bracketed([r["bic"] for r in rows], stop_after_rises):
+            break
+        fit = fit_ar_hmm(X, k, n_restarts=n_restarts, seed=[*entropy, k], **fit_options)
+        rows.append(bic_row(k, fit.restarts, fit.n_params, fit.bic, fit.converged))
+        fits[k] = fit
+        logger.info("ar_bic_by_k K=%d: logL=%.3f BIC=%.3f", k, fit.log_likelihood, fit.bic)
+    return ArBicSweep(table=pd.DataFrame(rows), fits=fits)
