@@ -128,6 +128,8 @@ def test_a_numeric_axis_without_label_or_unit_is_named():
         "A Short title x: no label",
         "A Short title y: 'position' has no unit",
     ]
+    ax.set_ylabel(r"$\gamma_t(k)$")  # an argument in mathtext is not a unit
+    assert unlabelled_axes(figure)[1] == "A Short title y: '$\\gamma_t(k)$' has no unit"
     unitless(ax, "y")
     ax.set_xlabel("time [s]")
     assert unlabelled_axes(figure) == []

@@ -175,6 +175,11 @@ _NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 _UNIT = re.compile(r"[(\[][^()\[\]]*\S[^()\[\]]*[)\]]")
 
 
+def _has_unit(label: str) -> bool:
+    """Whether ``label`` has a unit in parentheses outside mathtext ("$x$ (m)", not "$f(k)$")."""
+    return bool(_UNIT.search(re.sub(r"\$[^$]*\$", "", label)))
+
+
 def _is_number(text: str) -> bool:
     plain = re.sub(r"\\mathdefault|\\times|[${}^\s,%]", "", text).replace("\u2212", "-")
     return bool(_NUMBER.fullmatch(plain))
@@ -231,8 +236,8 @@ def unlabelled_axes(figure: Figure) -> list[str]:
             label = _covering_label(ax, name, figure)
             if label is None:
                 problems.append(f"{panel} {name}: no label")
-            elif label.get_gid() != UNITLESS_GID and not _UNIT.search(label.get_text()):
-                problems.append(f"{panel} {name}: {label.get_text()!r} has no unit")
+            elif label.get_gid() != UNITLESS_GID and not _has_unit(label.get_text()):
+                problems.append(f"{panel} {name}: '{label.get_text()}' has no unit")
     return problems
 
 

@@ -11,7 +11,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
-from dtwin.figures._style import OURS_COLOR, R_COLOR, new_figure, panel_title
+from dtwin.figures._style import OURS_COLOR, R_COLOR, new_figure, panel_title, unitless
 from dtwin.reference.crosscheck_result import CrosscheckResult
 
 __all__ = ["fig09_bic", "plot_bic", "bracket_checks", "start_stability"]
@@ -96,6 +96,7 @@ def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restar
         panel_title(ax, chr(ord("A") + index), TITLES.get(name, name))
         ax.set_xlabel("number of states K")
         ax.set_ylabel("BIC − min BIC")
+        unitless(ax, "xy")
         ax.legend(loc="upper right")
     return figure
 

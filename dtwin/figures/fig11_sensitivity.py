@@ -33,6 +33,7 @@ from dtwin.figures._style import (
     R_COLOR,
     R_SIGNALS_COLOR,
     new_figure,
+    unitless,
 )
 from dtwin.reference.sweep_crosscheck import crosscheck_r_sweep_inputs
 from dtwin.sensitivity_sweep import alpha_trends
@@ -143,6 +144,7 @@ def _label_facet(ax: Any, i: int, j: int, shape: tuple[int, int], m_a: float, m_
         ax.set_ylabel(r"$\Delta\mathrm{RMSE}_{e_1}$ (%)")
     if i == n_rows - 1:
         ax.set_xlabel("fusion weight α")
+        unitless(ax, "x")
 
 
 def _y_limits(summary: pd.DataFrame, r_sweep: pd.DataFrame | None) -> tuple[float, float]:
