@@ -35,6 +35,7 @@ IGNORED = shutil.ignore_patterns(
     "*.png",
     "*.pdf",
     "*.json",
+    "*.html",
     "__pycache__",
     ".pytest_cache",
     ".ruff_cache",
