@@ -64,7 +64,10 @@ def test_the_sheet_shows_every_figure_its_finding_and_the_claims_summary():
     cards = re.findall(r'<a class="card".*?</a>', html)
     assert len(cards) == 2
     assert "app.showResultInfo('paper_figures/fig05.png')" in cards[0]
-    assert "e1 unchanged: a draw with a zero-mean window.</div>" in cards[0]  # first sentence
+    assert f"{finding}</div>" in cards[0]  # a short caption whole
+    long = "A first sentence that says what the figure finds. " * 4
+    card = contact_sheet_html([payload("fig01", long, [])], {"fig01": png(4, 4)}, CLAIMS)
+    assert "figure finds. A first sentence that says what the figure finds.</div>" in card
     assert '<span class="fails">1/2 claims hold</span>' in cards[0]
     assert "no claim to check" in cards[1]
     uri = re.search(r'src="data:image/png;base64,([^"]+)"', cards[0]).group(1)

@@ -4,7 +4,7 @@
 (``workflow/report/workflow.rst``), which inserts the HTML fragment :func:`contact_sheet_html`
 returns: the claims summary of ``CLAIMS.md`` (counts per kind and the paper's claims that fail,
 each with its cause) above one card per artifact (thumbnail, paper figure number, the first
-sentence of the JSON's ``figure.caption`` and how many of its claims hold). A reader sees the
+sentences of the JSON's ``figure.caption`` and how many of its claims hold). A reader sees the
 whole reproduction on one screen and clicks a card to open the figure in the report.
 
 The fragment is self-contained (thumbnails are data URIs, the style is inline) and
@@ -29,7 +29,7 @@ THUMBNAIL_WIDTH_PX = 480
 #: sheet is on one screen).
 SHEET_END_COLOR = "#0b2545"
 #: A finding is cut to this many characters (the full caption is the card's tooltip).
-FINDING_CHARS = 150
+FINDING_CHARS = 140
 
 _STYLE = f"""
 <style>
@@ -78,11 +78,13 @@ def thumbnail_png(png: bytes, width_px: int = THUMBNAIL_WIDTH_PX) -> bytes:
     return buffer.getvalue()
 
 
-def _first_sentence(caption: str) -> str:
+def _finding(caption: str) -> str:
+    """Return the caption's whole sentences that fit :data:`FINDING_CHARS`, else its cut start."""
     text = " ".join(caption.split())
-    end = text.find(". ")
-    sentence = text if end < 0 else text[: end + 1]
-    return sentence if len(sentence) <= FINDING_CHARS else sentence[: FINDING_CHARS - 1] + "…"
+    if len(text) <= FINDING_CHARS:
+        return text
+    end = text.rfind(". ", 0, FINDING_CHARS)
+    return text[: end + 1] if end >= FINDING_CHARS // 2 else text[: FINDING_CHARS - 1] + "…"
 
 
 def _claim_rows(rows: Sequence[Mapping[str, Any]], artifact: str) -> list[Mapping[str, Any]]:
@@ -111,7 +113,7 @@ def _card(payload: Mapping[str, Any], thumbnail: bytes, rows: Sequence[Mapping[s
         f'<img src="{uri}" alt="{html.escape(artifact)}">'
         f'<span class="name">{html.escape(str(label))} · {html.escape(artifact)}</span> '
         f"{_badge(_claim_rows(rows, artifact))}"
-        f'<div class="finding">{html.escape(_first_sentence(caption))}</div></a>'
+        f'<div class="finding">{html.escape(_finding(caption))}</div></a>'
     )
 
 
@@ -139,7 +141,7 @@ def contact_sheet_html(
     payloads: Sequence[Mapping[str, Any]],
     thumbnails: Mapping[str, bytes],
     claims: Mapping[str, Any],
-    n_failed_shown: int = 8,
+    n_failed_shown: int = 6,
 ) -> str:
     """Return the landing page's HTML fragment: the claims summary, then one card per figure.
 
@@ -152,7 +154,7 @@ def contact_sheet_html(
         Artifact name → thumbnail PNG bytes (:func:`thumbnail_png`).
     claims : mapping
         The content of ``claims.json`` (``counts`` per kind, ``checks`` rows).
-    n_failed_shown : int, default 8
+    n_failed_shown : int, default 6
         Failed paper claims listed with their cause (the rest are counted).
 
     Raises
