@@ -42,6 +42,7 @@ from dtwin.figures._style import (
 )
 from dtwin.figures.fig01_pipeline import fig01_pipeline
 from dtwin.figures.fig06_correction_distributions import bw_nrd0
+from dtwin.figures.fig09_bic import _figure_causes, _interior_caption, _with_interior_note
 from dtwin.figures.fig10_mcda_actions import single_step_lock_ins
 from dtwin.figures.gap_benchmark import gap_benchmark, wilson_interval
 from tests.conftest import REPO
@@ -318,3 +319,26 @@ def test_gap_benchmark_draws_the_paper_family_only():
     rows = [label.get_text() for label in artifact.figure.axes[0].get_yticklabels()]
     assert "rig_only_effect" not in rows
     assert artifact.caption.endswith("2 cases of other families are in the JSON only.")
+
+
+def test_a_bic_minimum_inside_the_sweep_away_from_k8_gets_its_cause():
+    from dtwin.artifacts import Check
+
+    claim = Check(
+        id="bic_minimum_at_k8_nominal_residuals",
+        kind="claim",
+        statement="paper: minimum at K = 8",
+        expected=8,
+        observed=11,
+        passed=False,
+    )
+    stable = {"nominal_residuals": {"max_gain": 0.2, "at_k": 12}}
+    noted = _with_interior_note(claim, {"nominal_residuals": 8}, stable)
+    assert noted.note.startswith("minimum at K = 11 inside the sweep, on our draw; R's K = 8")
+    assert "not the optimiser" in noted.note
+    assert _figure_causes([noted]) == {"nominal_residuals": "min K=11, not 8: our draw"}
+    assert _interior_caption([noted]).startswith("Minimum at K = 11 (nominal residuals)")
+    unstable = {"nominal_residuals": {"max_gain": 14.0, "at_k": 12}}
+    noted = _with_interior_note(claim, {"nominal_residuals": 8}, unstable)
+    assert "still gains 14.0 log-likelihood at K = 12" in noted.note
+    assert _figure_causes([noted])["nominal_residuals"].endswith("draw or optimiser")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -67,7 +67,12 @@ def _draw(ax, curves) -> None:
     ax.set_ylim(-0.16 * top, 1.08 * top)
 
 
-def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restarts: int) -> Figure:
+def plot_bic(
+    table: pd.DataFrame,
+    r_tables: Mapping[str, pd.DataFrame],
+    n_restarts: int,
+    causes: Mapping[str, str] | None = None,
+) -> Figure:
     """Draw BIC − min(BIC) against K for each data set: ours and R's, each on its own data.
 
     Parameters
@@ -78,6 +83,8 @@ def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restar
         :func:`dtwin.reference.loaders.load_r_bic`.
     n_restarts : int
         Starts per K of our sweep (for the legend).
+    causes : mapping, optional
+        Data set → a short line under its panel title (why its minimum is not the paper's).
     """
     datasets = list(dict.fromkeys(table["dataset"]))
     figure = new_figure(3.0)
@@ -93,7 +100,9 @@ def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restar
         if r is not None:
             curves.append(("R", r, R_COLOR, r_label.get(name, "R")))
         _draw(ax, curves)
-        panel_title(ax, chr(ord("A") + index), TITLES.get(name, name))
+        cause = (causes or {}).get(name)
+        title = TITLES.get(name, name) + (f"\n{cause}" if cause else "")
+        panel_title(ax, chr(ord("A") + index), title)
         ax.set_xlabel("number of states K")
         ax.set_ylabel("BIC − min BIC")
         unitless(ax, "xy")
@@ -201,7 +210,6 @@ def fig09_bic(
     bic : mapping
         The ``bic`` config section (``n_restarts`` is reported).
     """
-    figure = plot_bic(table, r_tables, bic["n_restarts"])
     minima = {
         name: int(group.loc[group["bic"].idxmin(), "K"])
         for name, group in table.groupby("dataset", sort=False)
@@ -263,13 +271,17 @@ def fig09_bic(
     }
     falling = metrics["still_decreasing_at_max_k"]
     max_k = max(metrics["ks"])
+    stability = next((c.observed for c in checks if c.id == "best_loglik_stable_in_starts"), {})
+    checks = [_with_edge_note(check, falling, max_k) for check in checks]
+    checks = [_with_interior_note(check, r_minima, stability) for check in checks]
+    figure = plot_bic(table, r_tables, bic["n_restarts"], _figure_causes(checks))
     return FigureArtifact(
         "fig09_bic",
         figure,
         metrics,
-        [_with_edge_note(check, falling, max_k) for check in checks],
+        checks,
         paper_figure="Fig. 9",
-        caption=_caption(falling, max_k),
+        caption=_interior_caption(checks) + _caption(falling, max_k),
         provenance="results/bic_sweep.csv (bic_sweep rule); R's BIC_vs_K.R and "
         "CovarianceAnalysis tables",
     )
@@ -298,3 +310,67 @@ def _with_edge_note(check: Check, falling: Mapping[str, bool], max_k: int) -> Ch
         "sweep finds no minimum; the observed K is the sweep's edge, not a minimum"
     )
     return replace(check, note=note)
+
+
+def _interior_cause(gain: Mapping[str, Any] | None) -> str:
+    """Return the cause of an interior minimum away from K = 8, from the start-stability check."""
+    if gain and gain["max_gain"] < STABLE_LOGLIK:
+        return "draw (doubling the EM starts moves no best fit up to K* + 2: not the optimiser)"
+    if gain:
+        return (
+            f"draw or optimiser (doubling the EM starts still gains {gain['max_gain']:.1f} "
+            f"log-likelihood at K = {gain['at_k']})"
+        )
+    return "draw or optimiser"
+
+
+def _with_interior_note(
+    check: Check, r_minima: Mapping[str, int], stability: Mapping[str, Any]
+) -> Check:
+    """Give a failed K-minimum claim its cause when the sweep found a minimum at another K."""
+    if check.kind != "claim" or check.passed or check.note is not None:
+        return check
+    if not check.id.startswith("bic_minimum_at_k8_"):
+        return check
+    name = check.id.removeprefix("bic_minimum_at_k8_")
+    note = (
+        f"minimum at K = {check.observed} inside the sweep, on our draw; R's K = "
+        f"{r_minima.get(name)} is on R's own draw. Cause: {_interior_cause(stability.get(name))}"
+    )
+    return replace(check, note=note)
+
+
+def _moved(checks: Sequence[Check]) -> list[Check]:
+    """Return the failed K-minimum claims whose minimum sits inside the sweep (not its edge)."""
+    return [
+        c
+        for c in checks
+        if c.id.startswith("bic_minimum_at_k8_") and not c.passed and "inside" in (c.note or "")
+    ]
+
+
+def _short_cause(check: Check) -> str:
+    return "our draw" if "not the optimiser" in (check.note or "") else "draw or optimiser"
+
+
+def _figure_causes(checks: Sequence[Check]) -> dict[str, str]:
+    """Return data set → the short line its panel prints (``min K=11, not 8: our draw``)."""
+    return {
+        c.id.removeprefix("bic_minimum_at_k8_"): (
+            f"min K={c.observed}, not {PAPER_K_MIN}: {_short_cause(c)}"
+        )
+        for c in _moved(checks)
+    }
+
+
+def _interior_caption(checks: Sequence[Check]) -> str:
+    """Return the caption's first sentence when a minimum sits inside the sweep away from K = 8."""
+    moved = _moved(checks)
+    if not moved:
+        return ""
+    where = " and ".join(
+        f"K = {c.observed} ({c.id.removeprefix('bic_minimum_at_k8_').replace('_', ' ')})"
+        for c in moved
+    )
+    causes = sorted({_short_cause(c) for c in moved})
+    return f"Minimum at {where}, not the paper's K = {PAPER_K_MIN}: {', '.join(causes)}. "
