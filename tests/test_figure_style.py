@@ -42,8 +42,14 @@ from dtwin.figures._style import (
 )
 from dtwin.figures.fig01_pipeline import fig01_pipeline
 from dtwin.figures.fig06_correction_distributions import bw_nrd0
-from dtwin.figures.fig09_bic import _figure_causes, _interior_caption, _with_interior_note
+from dtwin.figures.fig09_bic import (
+    _figure_causes,
+    _interior_caption,
+    _with_interior_note,
+    _with_target_note,
+)
 from dtwin.figures.fig10_mcda_actions import single_step_lock_ins
+from dtwin.figures.fig11_sensitivity import _with_notes
 from dtwin.figures.gap_benchmark import gap_benchmark, wilson_interval
 from tests.conftest import REPO
 
@@ -342,3 +348,26 @@ def test_a_bic_minimum_inside_the_sweep_away_from_k8_gets_its_cause():
     noted = _with_interior_note(claim, {"nominal_residuals": 8}, unstable)
     assert "still gains 14.0 log-likelihood at K = 12" in noted.note
     assert _figure_causes([noted])["nominal_residuals"].endswith("draw or optimiser")
+
+
+def test_the_sweeps_failed_targets_and_fig11_balanced_claim_get_causes():
+    from dtwin.artifacts import Check
+
+    def failed(check_id, observed, kind="claim"):
+        return Check(check_id, kind, "s", None, observed, False)
+
+    bracket = failed("bic_minimum_bracketed", {"fault_features": {"k_min": 15, "k_last": 16}})
+    assert _with_target_note(bracket, {"k_max": 16}).note.startswith(
+        "sweep range: the minimum (fault features K = 15) sits at the last two K fitted"
+    )
+    gains = {"a": {"max_gain": 3.0, "at_k": 5}, "b": {"max_gain": 836.0, "at_k": 2}}
+    stable = _with_target_note(failed("best_loglik_stable_in_starts", gains), {})
+    assert "still gains 836.0 log-likelihood (b, K = 2)" in stable.note
+    balanced = failed(
+        "balanced_noise_mid_to_high_20s", {"ours": 36.4, "r_signals": 39.7, "r_rerun": 24.9}
+    )
+    (noted,) = _with_notes([balanced], "ours 36 %", n_restarts=10)
+    assert noted.note.startswith(
+        "optimiser: medians over m_A = m_B ours 36.4 %, our HMM on R's exact signals 39.7 %, "
+        "R's re-run 24.9 %; with 10 EM starts"
+    )

@@ -274,6 +274,7 @@ def fig09_bic(
     stability = next((c.observed for c in checks if c.id == "best_loglik_stable_in_starts"), {})
     checks = [_with_edge_note(check, falling, max_k) for check in checks]
     checks = [_with_interior_note(check, r_minima, stability) for check in checks]
+    checks = [_with_target_note(check, bic) for check in checks]
     figure = plot_bic(table, r_tables, bic["n_restarts"], _figure_causes(checks))
     return FigureArtifact(
         "fig09_bic",
@@ -374,3 +375,26 @@ def _interior_caption(checks: Sequence[Check]) -> str:
     )
     causes = sorted({_short_cause(c) for c in moved})
     return f"Minimum at {where}, not the paper's K = {PAPER_K_MIN}: {', '.join(causes)}. "
+
+
+def _with_target_note(check: Check, bic: Mapping[str, Any]) -> Check:
+    """Give the sweep's failed project targets (bracket, start stability) their cause."""
+    if check.passed or check.note is not None or not isinstance(check.observed, Mapping):
+        return check
+    if check.id == "bic_minimum_bracketed":
+        edge = {n: o for n, o in check.observed.items() if o["k_min"] >= o["k_last"] - 1}
+        where = ", ".join(f"{n.replace('_', ' ')} K = {o['k_min']}" for n, o in edge.items())
+        note = (
+            f"sweep range: the minimum ({where}) sits at the last two K fitted, so the BIC "
+            f"could not rise twice after it before bic.k_max = {bic.get('k_max')}"
+        )
+    elif check.id == "best_loglik_stable_in_starts":
+        worst = max(check.observed.items(), key=lambda item: item[1]["max_gain"])
+        note = (
+            f"optimiser: the second half of the EM starts still gains "
+            f"{worst[1]['max_gain']:.1f} log-likelihood ({worst[0].replace('_', ' ')}, K = "
+            f"{worst[1]['at_k']}), so the best fits and the K of the minimum are not settled"
+        )
+    else:
+        return check
+    return replace(check, note=note)
