@@ -68,6 +68,11 @@ def test_the_sheet_shows_every_figure_its_finding_and_the_claims_summary():
     long = "A first sentence that says what the figure finds. " * 4
     card = contact_sheet_html([payload("fig01", long, [])], {"fig01": png(4, 4)}, CLAIMS)
     assert "figure finds. A first sentence that says what the figure finds.</div>" in card
+    long = "The published Fig. 10 used RMCDA 0.3, whose weights scale the alternatives. " * 3
+    card = contact_sheet_html([payload("fig10", long, [])], {"fig10": png(4, 4)}, CLAIMS)
+    assert (
+        "The published Fig. 10 used RMCDA 0.3, whose weights scale the alternatives.</div>" in card
+    )
     assert '<span class="fails">1/2 claims hold</span>' in cards[0]
     assert "no claim to check" in cards[1]
     uri = re.search(r'src="data:image/png;base64,([^"]+)"', cards[0]).group(1)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -29,12 +30,14 @@ THUMBNAIL_WIDTH_PX = 480
 #: sheet is on one screen).
 SHEET_END_COLOR = "#0b2545"
 #: A finding is cut to this many characters (the full caption is the card's tooltip).
-FINDING_CHARS = 140
+FINDING_CHARS = 120
+
+_SENTENCE_END = re.compile(r"\.\s(?=[A-Z])")
 
 _STYLE = f"""
 <style>
-.prose:has(.dtwin-sheet) {{ max-width: none; width: min(1180px, 92vw); }}
-.h-screen:has(.dtwin-sheet) {{ align-items: flex-start; }}
+.prose:has(.dtwin-sheet) {{ max-width: none; width: min(1180px, calc(100vw - 390px)); }}
+.h-screen:has(.dtwin-sheet) {{ align-items: flex-start; justify-content: flex-start; }}
 .dtwin-sheet {{ font: 12px/1.3 "DejaVu Sans", sans-serif; color: #222; }}
 .dtwin-sheet h2 {{ font-size: 16px; margin: 0 0 4px 0; }}
 .dtwin-sheet p {{ margin: 2px 0; }}
@@ -43,7 +46,7 @@ _STYLE = f"""
 .dtwin-sheet a.card {{ display: block; border: 1px solid #ddd; border-radius: 4px;
   padding: 4px; color: inherit; text-decoration: none; background: #fff; }}
 .dtwin-sheet a.card:hover {{ border-color: #0072B2; }}
-.dtwin-sheet img {{ display: block; width: 100%; height: 118px; object-fit: contain;
+.dtwin-sheet img {{ display: block; width: 100%; height: 104px; object-fit: contain;
   margin: 0 0 3px 0; }}
 .dtwin-sheet .name {{ font-weight: bold; }}
 .dtwin-sheet .held {{ color: #009E73; font-weight: bold; }}
@@ -83,7 +86,9 @@ def _finding(caption: str) -> str:
     text = " ".join(caption.split())
     if len(text) <= FINDING_CHARS:
         return text
-    end = text.rfind(". ", 0, FINDING_CHARS)
+    # a sentence ends at ". " before a capital ("Fig. 10 used" does not end one)
+    ends = [m.start() for m in _SENTENCE_END.finditer(text, 0, FINDING_CHARS + 1)]
+    end = ends[-1] if ends else -1
     return text[: end + 1] if end >= FINDING_CHARS // 2 else text[: FINDING_CHARS - 1] + "…"
 
 
@@ -127,7 +132,7 @@ def _failed_claims(rows: Sequence[Mapping[str, Any]], n_shown: int) -> str:
     items = []
     for row in failed[:n_shown]:
         cause = str(row.get("note") or "no cause recorded")
-        cause = cause if len(cause) <= 110 else cause[:109] + "…"
+        cause = cause if len(cause) <= 90 else cause[:89] + "…"
         items.append(
             f"<li><b>{html.escape(row['artifact'])}:{html.escape(row['id'])}</b> — "
             f"{html.escape(cause)}</li>"
@@ -141,7 +146,7 @@ def contact_sheet_html(
     payloads: Sequence[Mapping[str, Any]],
     thumbnails: Mapping[str, bytes],
     claims: Mapping[str, Any],
-    n_failed_shown: int = 6,
+    n_failed_shown: int = 5,
 ) -> str:
     """Return the landing page's HTML fragment: the claims summary, then one card per figure.
 
@@ -154,7 +159,7 @@ def contact_sheet_html(
         Artifact name → thumbnail PNG bytes (:func:`thumbnail_png`).
     claims : mapping
         The content of ``claims.json`` (``counts`` per kind, ``checks`` rows).
-    n_failed_shown : int, default 6
+    n_failed_shown : int, default 5
         Failed paper claims listed with their cause (the rest are counted).
 
     Raises
