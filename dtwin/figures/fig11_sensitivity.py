@@ -352,10 +352,7 @@ def _caption(mode: str, n_replicates: int) -> str:
 def _with_notes(checks: list[Check], mode: str, n_restarts: int) -> list[Check]:
     """Give each failed claim of the sweep a one-line cause (``mode``: where ours sit)."""
     notes = {
-        "range_23_40": (
-            f"optimiser: {mode}; the low mode is another HMM solution of the same data, and the "
-            "paper's band is drawn in every facet"
-        ),
+        "range_23_40": f"optimiser: {mode}; the paper's band is drawn in every facet",
         "one_mode_with_restarts": (
             f"optimiser: {mode}, with {n_restarts} EM starts, so the best-likelihood "
             "segmentation is sometimes the worse one for e1"
