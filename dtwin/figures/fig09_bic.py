@@ -271,10 +271,7 @@ def fig09_bic(
     }
     falling = metrics["still_decreasing_at_max_k"]
     max_k = max(metrics["ks"])
-    stability = next((c.observed for c in checks if c.id == "best_loglik_stable_in_starts"), {})
-    checks = [_with_edge_note(check, falling, max_k) for check in checks]
-    checks = [_with_interior_note(check, r_minima, stability) for check in checks]
-    checks = [_with_target_note(check, bic) for check in checks]
+    checks = _with_causes(checks, falling, max_k, r_minima, bic)
     figure = plot_bic(table, r_tables, bic["n_restarts"], _figure_causes(checks))
     return FigureArtifact(
         "fig09_bic",
@@ -311,6 +308,20 @@ def _with_edge_note(check: Check, falling: Mapping[str, bool], max_k: int) -> Ch
         "sweep finds no minimum; the observed K is the sweep's edge, not a minimum"
     )
     return replace(check, note=note)
+
+
+def _with_causes(
+    checks: list[Check],
+    falling: Mapping[str, bool],
+    max_k: int,
+    r_minima: Mapping[str, int],
+    bic: Mapping[str, Any],
+) -> list[Check]:
+    """Give every failed claim and target of the sweep its cause (edge, interior, targets)."""
+    stability = next((c.observed for c in checks if c.id == "best_loglik_stable_in_starts"), {})
+    checks = [_with_edge_note(check, falling, max_k) for check in checks]
+    checks = [_with_interior_note(check, r_minima, stability) for check in checks]
+    return [_with_target_note(check, bic) for check in checks]
 
 
 def _interior_cause(gain: Mapping[str, Any] | None) -> str:
