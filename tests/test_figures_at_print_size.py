@@ -15,6 +15,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import pytest
@@ -268,5 +269,7 @@ def test_every_published_figure_has_a_fast_reader_test():
 @pytest.mark.parametrize("name", sorted(FIGURES))
 def test_figure_passes_the_reader_checks(name):
     figure = FIGURES[name]()
-    for check in reader_checks(figure):
+    checks = reader_checks(figure)
+    plt.close(figure)
+    for check in checks:
         assert check.passed, (check.id, check.observed)
