@@ -367,6 +367,8 @@ def test_the_sweeps_failed_targets_and_fig11_balanced_claim_get_causes():
         "balanced_noise_mid_to_high_20s", {"ours": 36.4, "r_signals": 39.7, "r_rerun": 24.9}
     )
     (noted,) = _with_notes([balanced], "ours 36 %", n_restarts=10)
+    partial = failed("balanced_noise_mid_to_high_20s", {"ours": 36.4, "r_rerun": None})
+    assert "ours 36.4 %; with 10" in _with_notes([partial], "m", n_restarts=10)[0].note
     assert noted.note.startswith(
         "optimiser: medians over m_A = m_B ours 36.4 %, our HMM on R's exact signals 39.7 %, "
         "R's re-run 24.9 %; with 10 EM starts"

@@ -373,7 +373,9 @@ def _balanced_note(check: Check, n_restarts: int) -> str | None:
     if check.id != "balanced_noise_mid_to_high_20s" or "ours" not in observed:
         return None
     words = {"ours": "ours", "r_signals": "our HMM on R's exact signals", "r_rerun": "R's re-run"}
-    values = ", ".join(f"{words[k]} {observed[k]:.1f} %" for k in words if k in observed)
+    values = ", ".join(
+        f"{words[k]} {observed[k]:.1f} %" for k in words if observed.get(k) is not None
+    )  # a small grid may have no balanced configuration for a source (None)
     return (
         f"optimiser: medians over m_A = m_B {values}; with {n_restarts} EM starts our HMM "
         "lands in the higher segmentation even on R's exact signals, R's single start in the "
