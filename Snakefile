@@ -10,6 +10,9 @@ min_version("9.0")
 configfile: "config/config.yaml"
 
 
+report: "workflow/report/workflow.rst"  # the landing page of `make report`: the contact sheet
+
+
 include: "workflow/rules/common.smk"
 include: "workflow/rules/twin.smk"
 include: "workflow/rules/faults.smk"  # before regimes.smk: bic_sweep reads the fault residuals

@@ -18,8 +18,17 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
-from dtwin.figures._print_check import drawn_texts, print_check
+from dtwin.figures._print_check import (
+    axes_and_legends_check,
+    drawn_texts,
+    legend_mismatches,
+    print_check,
+    reader_checks,
+    unlabelled_axes,
+)
 from dtwin.figures._style import (
     COLUMN_WIDTH,
     FULL_WIDTH,
@@ -29,10 +38,18 @@ from dtwin.figures._style import (
     panel_title,
     save_figure,
     tex,
+    unitless,
 )
 from dtwin.figures.fig01_pipeline import fig01_pipeline
 from dtwin.figures.fig06_correction_distributions import bw_nrd0
+from dtwin.figures.fig09_bic import (
+    _figure_causes,
+    _interior_caption,
+    _with_interior_note,
+    _with_target_note,
+)
 from dtwin.figures.fig10_mcda_actions import single_step_lock_ins
+from dtwin.figures.fig11_sensitivity import _with_notes
 from dtwin.figures.gap_benchmark import gap_benchmark, wilson_interval
 from tests.conftest import REPO
 
@@ -101,6 +118,85 @@ def test_hidden_text_is_not_counted():
     figure.axes[0].text(0.5, 0.5, "hidden", fontsize=4, visible=False)
     assert "hidden" not in {t.text for t in drawn_texts(figure)}
     assert print_check(figure).passed
+
+
+def test_a_clean_figure_passes_every_reader_check():
+    checks = reader_checks(clean_figure())
+    assert [c.id for c in checks] == ["print_size_and_text", "axes_and_legends"]
+    assert all(c.passed for c in checks), [c.observed for c in checks]
+
+
+def test_a_numeric_axis_without_label_or_unit_is_named():
+    figure = clean_figure()
+    ax = figure.axes[0]
+    ax.set_xlabel("")
+    ax.set_ylabel("position")
+    assert unlabelled_axes(figure) == [
+        "A Short title x: no label",
+        "A Short title y: 'position' has no unit",
+    ]
+    ax.set_ylabel(r"$\gamma_t(k)$")  # an argument in mathtext is not a unit
+    assert unlabelled_axes(figure)[1] == "A Short title y: '$\\gamma_t(k)$' has no unit"
+    unitless(ax, "y")
+    ax.set_xlabel("time [s]")
+    assert unlabelled_axes(figure) == []
+
+
+def test_categorical_hidden_and_shared_axes_need_no_own_label():
+    figure = new_figure(3.0)
+    top, bottom = figure.subplots(2, 1, sharex=True)
+    for ax in (top, bottom):
+        ax.bar(["Nominal", "Drift"], [1.0, 2.0])
+        ax.set_ylabel("RMSE (m)")
+    top.tick_params(labelbottom=True)  # shared with the bottom axis: its label covers both
+    assert unlabelled_axes(figure) == []
+    figure = new_figure(3.0)
+    left, right = figure.subplots(1, 2)
+    for ax in (left, right):
+        ax.plot([0, 1], [0, 1])
+    figure.supxlabel("time (s)")
+    figure.supylabel("share of draws").set_gid("dtwin-unitless")
+    assert unlabelled_axes(figure) == []
+
+
+def test_a_legend_glyph_that_nothing_drawn_looks_like_is_named():
+    figure = clean_figure()
+    ax = figure.axes[0]
+    ax.fill_between([0, 1], 0, 0.5, color="#009E73", alpha=0.3)
+    handles = [
+        Line2D([], [], color="C0", label="a line"),  # drawn (the clean figure's line)
+        Patch(facecolor="#009E73", alpha=0.3, label="a band"),  # drawn
+        Line2D([], [], color="C0", ls="--", label="dashed, never drawn"),
+        Line2D([], [], color="red", marker="o", ls="none", label="red dots, never drawn"),
+        Patch(facecolor="#123456", label="a patch of no drawn colour"),
+    ]
+    ax.legend(handles=handles)
+    assert legend_mismatches(figure) == [
+        "legend 'dashed, never drawn': no drawn artist looks like it",
+        "legend 'red dots, never drawn': no drawn artist looks like it",
+        "legend 'a patch of no drawn colour': no drawn artist looks like it",
+    ]
+    check = axes_and_legends_check(figure)
+    assert not check.passed and check.observed["n_legend_entries"] == 5
+
+
+def test_a_figure_legend_matches_artists_in_any_panel_and_repeats_are_named():
+    figure = new_figure(2.5)
+    left, right = figure.subplots(1, 2)
+    left.plot([0, 1], [0, 1], color="C1", ls=":")
+    right.scatter([0, 1], [1, 0], color="C2")
+    right.errorbar([0.5], [0.5], yerr=[0.1], fmt="none", ecolor="C3")
+    figure.legend(
+        [
+            Line2D([], [], color="C1", ls=":"),
+            Line2D([], [], color="C2", marker="o", ls="none"),
+            Line2D([], [], color="C3"),
+            Line2D([], [], color="C2", marker="o", ls="none"),
+        ],
+        ["dotted", "dots", "error bars", "dots"],
+        loc="outside upper center",
+    )
+    assert legend_mismatches(figure) == ["repeated legend label 'dots'"]
 
 
 def test_png_is_300_dpi_at_print_size_and_reruns_byte_identical(tmp_path):
@@ -229,3 +325,51 @@ def test_gap_benchmark_draws_the_paper_family_only():
     rows = [label.get_text() for label in artifact.figure.axes[0].get_yticklabels()]
     assert "rig_only_effect" not in rows
     assert artifact.caption.endswith("2 cases of other families are in the JSON only.")
+
+
+def test_a_bic_minimum_inside_the_sweep_away_from_k8_gets_its_cause():
+    from dtwin.artifacts import Check
+
+    claim = Check(
+        id="bic_minimum_at_k8_nominal_residuals",
+        kind="claim",
+        statement="paper: minimum at K = 8",
+        expected=8,
+        observed=11,
+        passed=False,
+    )
+    stable = {"nominal_residuals": {"max_gain": 0.2, "at_k": 12}}
+    noted = _with_interior_note(claim, {"nominal_residuals": 8}, stable)
+    assert noted.note.startswith("minimum at K = 11 inside the sweep, on our draw; R's K = 8")
+    assert "not the optimiser" in noted.note
+    assert _figure_causes([noted]) == {"nominal_residuals": "min K=11, not 8: our draw"}
+    assert _interior_caption([noted]).startswith("Minimum at K = 11 (nominal residuals)")
+    unstable = {"nominal_residuals": {"max_gain": 14.0, "at_k": 12}}
+    noted = _with_interior_note(claim, {"nominal_residuals": 8}, unstable)
+    assert "still gains 14.0 log-likelihood at K = 12" in noted.note
+    assert _figure_causes([noted])["nominal_residuals"].endswith("draw or optimiser")
+
+
+def test_the_sweeps_failed_targets_and_fig11_balanced_claim_get_causes():
+    from dtwin.artifacts import Check
+
+    def failed(check_id, observed, kind="claim"):
+        return Check(check_id, kind, "s", None, observed, False)
+
+    bracket = failed("bic_minimum_bracketed", {"fault_features": {"k_min": 15, "k_last": 16}})
+    assert _with_target_note(bracket, {"k_max": 16}).note.startswith(
+        "sweep range: the minimum (fault features K = 15) sits at the last two K fitted"
+    )
+    gains = {"a": {"max_gain": 3.0, "at_k": 5}, "b": {"max_gain": 836.0, "at_k": 2}}
+    stable = _with_target_note(failed("best_loglik_stable_in_starts", gains), {})
+    assert "still gains 836.0 log-likelihood (b, K = 2)" in stable.note
+    balanced = failed(
+        "balanced_noise_mid_to_high_20s", {"ours": 36.4, "r_signals": 39.7, "r_rerun": 24.9}
+    )
+    (noted,) = _with_notes([balanced], "ours 36 %", n_restarts=10)
+    partial = failed("balanced_noise_mid_to_high_20s", {"ours": 36.4, "r_rerun": None})
+    assert "ours 36.4 %; with 10" in _with_notes([partial], "m", n_restarts=10)[0].note
+    assert noted.note.startswith(
+        "optimiser: medians over m_A = m_B ours 36.4 %, our HMM on R's exact signals 39.7 %, "
+        "R's re-run 24.9 %; with 10 EM starts"
+    )

@@ -35,6 +35,7 @@ IGNORED = shutil.ignore_patterns(
     "*.png",
     "*.pdf",
     "*.json",
+    "*.html",
     "__pycache__",
     ".pytest_cache",
     ".ruff_cache",
@@ -245,6 +246,8 @@ def test_every_figure_is_print_ready_with_its_caption(workflow_copy):
         assert payload["figure"]["caption"], artifact
         check = next(c for c in payload["checks"] if c["id"] == "print_size_and_text")
         assert check["passed"] and check["observed"]["min_font_pt"] >= 7, artifact
+        check = next(c for c in payload["checks"] if c["id"] == "axes_and_legends")
+        assert check["passed"], (artifact, check["observed"])
         width, height, dpi = png_size_and_dpi(folder / f"{artifact}.png")
         assert round(dpi) == 300
         assert (width, height) == (round(300 * width_in), round(300 * height_in)), artifact
@@ -638,13 +641,35 @@ def test_html_report_is_self_contained_with_every_figure(report_html):
 def test_html_report_renders_in_a_browser(report_html, tmp_path):
     """Optional extra: headless Chromium runs the report's JavaScript and draws its figures."""
     landing = screenshot(report_html.as_uri(), tmp_path / "landing.png", tmp_path / "profile")
-    assert non_white_fraction(landing) > 0.05  # the app ran: menu and rule graph are drawn
+    assert non_white_fraction(landing) > 0.05  # the app ran: menu and contact sheet are drawn
+    assert_landing_is_the_contact_sheet(report_html, landing, tmp_path)
     results = report_variable(report_html.read_text(), "results")
     uris = {f"{a}.png": results[f"paper_figures/{a}.png"]["data_uri"] for a in ARTIFACTS}
     page = tmp_path / "figures.html"
     page.write_text("".join(f'<img src="{uris[f"{a}.png"]}" width="600">' for a in ARTIFACTS))
     figures = screenshot(page.as_uri(), tmp_path / "figures.png", tmp_path / "profile2")
     assert non_white_fraction(figures) > 0.05  # the embedded figures decode and draw
+
+
+def assert_landing_is_the_contact_sheet(report_html: Path, landing: np.ndarray, tmp_path: Path):
+    """The report opens on the contact sheet: a card per figure in the DOM the app rendered,
+    and the sheet's closing rule drawn inside the 1400 x 1000 screenshot (the whole sheet is
+    on one screen; the rule spans the sheet, about 1100 px, no thumbnail card is 300 px wide)."""
+    from dtwin.figures._contact_sheet import SHEET_END_COLOR
+
+    dom = subprocess.run(
+        [CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path}/profile-dom", "--dump-dom",
+         report_html.as_uri()],
+        capture_output=True, text=True, timeout=120, check=True,
+    ).stdout  # fmt: skip
+    assert 'class="dtwin-sheet"' in dom, "the landing page does not show the contact sheet"
+    sheet = dom[dom.index('class="dtwin-sheet"') :]
+    assert len(re.findall(r'<a class="card"', sheet)) == len(ARTIFACTS)
+    for artifact in ARTIFACTS:
+        assert f"app.showResultInfo('paper_figures/{artifact}.png')" in sheet, artifact
+    rgb = np.array([int(SHEET_END_COLOR[i : i + 2], 16) / 255 for i in (1, 3, 5)])
+    rule = np.all(np.abs(landing[..., :3] - rgb) < 0.04, axis=-1).sum(axis=1)
+    assert rule.max() > 600, f"the sheet's closing rule is not on screen (longest run {rule.max()})"
 
 
 def test_a_run_interrupted_during_the_sweep_resumes_to_identical_outputs(workflow_copy):

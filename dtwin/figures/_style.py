@@ -55,8 +55,10 @@ __all__ = [
     "AFTER_COLOR",
     "SIGNAL_UNITS",
     "RESIDUAL_UNITS",
+    "UNITLESS_GID",
     "tex",
     "axis_label",
+    "unitless",
     "apply_style",
     "new_figure",
     "panel_title",
@@ -146,6 +148,9 @@ RESIDUAL_UNITS = {
     "e4": "KPI units",
 }
 
+#: gid of an axis label whose quantity has no unit (read by the figures' axes check).
+UNITLESS_GID = "dtwin-unitless"
+
 _TEX = {
     "u_cmd": r"$u_\mathrm{cmd}$",
     "u_act": r"$u_\mathrm{act}$",
@@ -195,6 +200,17 @@ def axis_label(name: str, units: Mapping[str, str] | None = None) -> str:
     table = {**SIGNAL_UNITS, **RESIDUAL_UNITS, **(units or {})}
     unit = table.get(name)
     return f"{tex(name)} ({unit})" if unit else tex(name)
+
+
+def unitless(ax: Axes, which: str = "y") -> None:
+    """Declare that the quantity on ``ax``'s ``which`` axes ("x", "y" or "xy") has no unit.
+
+    A probability, an autocorrelation, a lag count, a number of states, a BIC or a z-score is
+    labelled without a unit; the declaration tells the axes check
+    (:func:`dtwin.figures._print_check.unlabelled_axes`) that the missing unit is intended.
+    """
+    for name in which:
+        getattr(ax, f"{name}axis").label.set_gid(UNITLESS_GID)
 
 
 def apply_style() -> None:
@@ -272,24 +288,25 @@ def save_figure(
 def publish_artifact(
     artifact: FigureArtifact, paths: Sequence[str | os.PathLike], json_path: str | os.PathLike
 ):
-    """Check the print rules, save the figure at print size to ``paths`` and write its JSON.
+    """Check what a reader relies on, save the figure at print size to ``paths``, write its JSON.
 
-    The print check (:func:`dtwin.figures._print_check.print_check`: size, smallest font,
-    text overlaps, text inside the page) is appended to the artifact's checks, and the
-    figure's caption and paper number are written under ``"figure"``. Raises
+    The reader checks (:func:`dtwin.figures._print_check.reader_checks`: size, smallest font,
+    text overlaps, text inside the page; every numeric axis labelled with its unit; every
+    legend entry drawn) are appended to the artifact's checks, and the figure's caption and
+    paper number are written under ``"figure"``. Raises
     :class:`dtwin.artifacts.ArtifactValidityError` (after writing the JSON) when a validity
     check failed, so the rule fails and Snakemake removes its outputs.
     """
-    from dtwin.figures._print_check import print_check
+    from dtwin.figures._print_check import reader_checks
 
-    check = print_check(artifact.figure)
+    checks = reader_checks(artifact.figure)
     save_figure(artifact.figure, paths, tight=False, dpi=PNG_DPI)
     return write_artifact(
         json_path,
         artifact.name,
         paths,
         artifact.metrics,
-        [*artifact.checks, check],
+        [*artifact.checks, *checks],
         figure=artifact.figure_info(),
     )
 

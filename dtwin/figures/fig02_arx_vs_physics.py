@@ -15,6 +15,7 @@ from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.figures._style import (
     BAND_COLOR,
     PHYSICS_COLOR,
+    RESIDUAL_UNITS,
     SURROGATE_COLOR,
     axis_label,
     new_figure,
@@ -53,7 +54,8 @@ def _module_panel(
     limit = float(np.max(np.abs(difference))) or 1.0
     bottom.set_ylim(-1.15 * limit, 1.15 * limit)
     bottom.locator_params(axis="y", nbins=2)
-    bottom.set_ylabel(tex(module.residual), rotation=0, ha="right", va="center")
+    unit = RESIDUAL_UNITS[module.residual]
+    bottom.set_ylabel(f"{tex(module.residual)}\n({unit})", rotation=0, ha="right", va="center")
     return top, bottom
 
 
@@ -83,6 +85,8 @@ def plot_arx_vs_physics(
         panel_title(top, chr(ord("A") + index), f"{module.name} {module.title}")
         if index // 2 == n_rows - 1:
             bottom.set_xlabel("time (s)")
+        else:  # the same time axis as the bottom row, whose label reads for every row
+            bottom.tick_params(labelbottom=False)
         if index == 0:
             handles, labels = top.get_legend_handles_labels()
     handles.append(Line2D([], [], color=BAND_COLOR, lw=0.6))

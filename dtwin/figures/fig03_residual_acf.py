@@ -18,6 +18,7 @@ from dtwin.figures._style import (
     new_figure,
     panel_title,
     tex,
+    unitless,
 )
 from dtwin.residual_stats import acf_table, ljung_box_table, white_noise_band
 from dtwin.wiring import MODULES, RESIDUALS
@@ -73,6 +74,7 @@ def plot_residual_acf(
     ax_b = figure.add_subplot(outer[0, 1])
     _acf_bars(ax_b, white_acf["lag"].to_numpy(), white_acf["white"].to_numpy(), band)
     ax_b.set(xlabel="lag (samples)", ylabel="ACF")
+    unitless(ax_b)
     panel_title(ax_b, "B", "Its ACF (shaded: ±1.96/√n)")
     left = outer[1, 0].subgridspec(len(channels), 1, hspace=0.1)
     right = outer[1, 1].subgridspec(len(channels), 1, hspace=0.1)
@@ -86,6 +88,7 @@ def plot_residual_acf(
         _acf_bars(ax_d, residual_acf["lag"].to_numpy(), residual_acf[name].to_numpy(), band)
         ax_d.set_yticks([0, 1])
         ax_d.set_ylabel(tex(name), rotation=0, ha="right", va="center")
+        unitless(ax_d)  # an autocorrelation
         if row == 0:
             panel_title(ax_c, "C", "Module residuals, twin − physics")
             panel_title(ax_d, "D", "Their ACFs")

@@ -12,7 +12,7 @@ from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite, validity_probabilities
-from dtwin.figures._style import STATE_COLORS, new_figure, panel_title, tex
+from dtwin.figures._style import STATE_COLORS, new_figure, panel_title, tex, unitless
 from dtwin.reference.crosscheck_result import CrosscheckResult
 from dtwin.state_tables import posterior_matrix
 
@@ -43,6 +43,7 @@ def _stack(ax: Axes, t: np.ndarray, posteriors: np.ndarray, labels: list[str]) -
     ax.set_ylim(0, 1)
     ax.set_xlim(t[0], t[-1])
     ax.set_ylabel(r"$\gamma_t(k)$")
+    unitless(ax)  # a probability
     ax.grid(False)
 
 

@@ -21,6 +21,7 @@ from dtwin.figures._style import (
     new_figure,
     panel_title,
     regime_spans,
+    unitless,
 )
 from dtwin.reference.columns import R_RESTART_AGREEMENT_COLUMN
 from dtwin.reference.crosscheck_result import CrosscheckResult
@@ -71,7 +72,8 @@ def _draw_posteriors(figure: Figure, grid: Any, posteriors: pd.DataFrame) -> Non
             axis.axvline(start, color="black", lw=0.8, ls="--")
     ax.set_ylim(0, 1)
     ax.set_xlim(t[0], t[-1] + (t[1] - t[0]))
-    ax.set_ylabel(r"$\gamma_t$(regime)")
+    ax.set_ylabel(r"$\gamma_t(\mathrm{regime})$")
+    unitless(ax, "y")  # a probability
     ax.set_xlabel("time (s)")
     ax.grid(False)
     figure.legend(*ax.get_legend_handles_labels(), ncol=4, loc="outside upper right")
@@ -147,6 +149,7 @@ def _draw_restarts(ax: Any, restart_records: list, r_accuracy: float) -> None:
     ax.set_ylim(low - 0.05, 1.0)
     ax.set_xlabel("log-likelihood of the start")
     ax.set_ylabel("accuracy")
+    unitless(ax, "xy")
     panel_title(ax, "C", f"Every EM start, scored ({len(restarts)} usable)")
 
 

@@ -12,7 +12,14 @@ from matplotlib.patches import Patch
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.fault_injection import FEATURES, REGIMES, regime_features
-from dtwin.figures._style import REGIME_COLORS, new_figure, panel_title, tex
+from dtwin.figures._style import (
+    BASE_FONT_PT,
+    REGIME_COLORS,
+    UNITLESS_GID,
+    new_figure,
+    panel_title,
+    tex,
+)
 from dtwin.hmm_basics import zscore
 
 __all__ = ["fig08_feature_separability", "plot_feature_separability", "feature_stats"]
@@ -214,8 +221,8 @@ def plot_feature_separability(features: pd.DataFrame, regimes: np.ndarray) -> Fi
         ax.axhline(0, color="#333333", lw=0.4)
         ax.set_xticks([])
         _mark_clipped(ax, data)
-    for ax in axes[:, 0]:
-        ax.set_ylabel("z-score")
+    # every panel is in z-units of its own feature (one label for all, no unit: a z-score)
+    figure.supylabel("z-score", fontsize=BASE_FONT_PT).set_gid(UNITLESS_GID)
     handles = [Patch(facecolor=REGIME_COLORS[r], alpha=0.8) for r in present]
     figure.legend(handles, present, loc="outside upper center", ncol=len(present))
     return figure

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -11,7 +11,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
-from dtwin.figures._style import OURS_COLOR, R_COLOR, new_figure, panel_title
+from dtwin.figures._style import OURS_COLOR, R_COLOR, new_figure, panel_title, unitless
 from dtwin.reference.crosscheck_result import CrosscheckResult
 
 __all__ = ["fig09_bic", "plot_bic", "bracket_checks", "start_stability"]
@@ -67,7 +67,12 @@ def _draw(ax, curves) -> None:
     ax.set_ylim(-0.16 * top, 1.08 * top)
 
 
-def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restarts: int) -> Figure:
+def plot_bic(
+    table: pd.DataFrame,
+    r_tables: Mapping[str, pd.DataFrame],
+    n_restarts: int,
+    causes: Mapping[str, str] | None = None,
+) -> Figure:
     """Draw BIC − min(BIC) against K for each data set: ours and R's, each on its own data.
 
     Parameters
@@ -78,6 +83,8 @@ def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restar
         :func:`dtwin.reference.loaders.load_r_bic`.
     n_restarts : int
         Starts per K of our sweep (for the legend).
+    causes : mapping, optional
+        Data set → a short line under its panel title (why its minimum is not the paper's).
     """
     datasets = list(dict.fromkeys(table["dataset"]))
     figure = new_figure(3.0)
@@ -93,9 +100,12 @@ def plot_bic(table: pd.DataFrame, r_tables: Mapping[str, pd.DataFrame], n_restar
         if r is not None:
             curves.append(("R", r, R_COLOR, r_label.get(name, "R")))
         _draw(ax, curves)
-        panel_title(ax, chr(ord("A") + index), TITLES.get(name, name))
+        cause = (causes or {}).get(name)
+        title = TITLES.get(name, name) + (f"\n{cause}" if cause else "")
+        panel_title(ax, chr(ord("A") + index), title)
         ax.set_xlabel("number of states K")
         ax.set_ylabel("BIC − min BIC")
+        unitless(ax, "xy")
         ax.legend(loc="upper right")
     return figure
 
@@ -200,7 +210,6 @@ def fig09_bic(
     bic : mapping
         The ``bic`` config section (``n_restarts`` is reported).
     """
-    figure = plot_bic(table, r_tables, bic["n_restarts"])
     minima = {
         name: int(group.loc[group["bic"].idxmin(), "K"])
         for name, group in table.groupby("dataset", sort=False)
@@ -262,13 +271,15 @@ def fig09_bic(
     }
     falling = metrics["still_decreasing_at_max_k"]
     max_k = max(metrics["ks"])
+    checks = _with_causes(checks, falling, max_k, r_minima, bic)
+    figure = plot_bic(table, r_tables, bic["n_restarts"], _figure_causes(checks))
     return FigureArtifact(
         "fig09_bic",
         figure,
         metrics,
-        _noted(checks, falling, max_k, table),
+        checks,
         paper_figure="Fig. 9",
-        caption=_caption(falling, max_k),
+        caption=_interior_caption(checks) + _caption(falling, max_k),
         provenance="results/bic_sweep.csv (bic_sweep rule); R's BIC_vs_K.R and "
         "CovarianceAnalysis tables",
     )
@@ -299,50 +310,102 @@ def _with_edge_note(check: Check, falling: Mapping[str, bool], max_k: int) -> Ch
     return replace(check, note=note)
 
 
-def _noted(
-    checks: list[Check], falling: Mapping[str, bool], max_k: int, table: pd.DataFrame
+def _with_causes(
+    checks: list[Check],
+    falling: Mapping[str, bool],
+    max_k: int,
+    r_minima: Mapping[str, int],
+    bic: Mapping[str, Any],
 ) -> list[Check]:
-    """Return ``checks`` with a one-line cause on every failed claim."""
+    """Give every failed claim and target of the sweep its cause (edge, interior, targets)."""
+    stability = next((c.observed for c in checks if c.id == "best_loglik_stable_in_starts"), {})
+    checks = [_with_edge_note(check, falling, max_k) for check in checks]
+    checks = [_with_interior_note(check, r_minima, stability) for check in checks]
+    return [_with_target_note(check, bic) for check in checks]
+
+
+def _interior_cause(gain: Mapping[str, Any] | None) -> str:
+    """Return the cause of an interior minimum away from K = 8, from the start-stability check."""
+    if gain and gain["max_gain"] < STABLE_LOGLIK:
+        return "draw (doubling the EM starts moves no best fit up to K* + 2: not the optimiser)"
+    if gain:
+        return (
+            f"draw or optimiser (doubling the EM starts still gains {gain['max_gain']:.1f} "
+            f"log-likelihood at K = {gain['at_k']})"
+        )
+    return "draw or optimiser"
+
+
+def _with_interior_note(
+    check: Check, r_minima: Mapping[str, int], stability: Mapping[str, Any]
+) -> Check:
+    """Give a failed K-minimum claim its cause when the sweep found a minimum at another K."""
+    if check.kind != "claim" or check.passed or check.note is not None:
+        return check
+    if not check.id.startswith("bic_minimum_at_k8_"):
+        return check
+    name = check.id.removeprefix("bic_minimum_at_k8_")
+    note = (
+        f"minimum at K = {check.observed} inside the sweep, on our draw; R's K = "
+        f"{r_minima.get(name)} is on R's own draw. Cause: {_interior_cause(stability.get(name))}"
+    )
+    return replace(check, note=note)
+
+
+def _moved(checks: Sequence[Check]) -> list[Check]:
+    """Return the failed K-minimum claims whose minimum sits inside the sweep (not its edge)."""
     return [
-        _with_optimiser_note(_with_edge_note(check, falling, max_k), table, max_k)
-        for check in checks
+        c
+        for c in checks
+        if c.id.startswith("bic_minimum_at_k8_") and not c.passed and "inside" in (c.note or "")
     ]
 
 
-def _with_optimiser_note(check: Check, table: pd.DataFrame, max_k: int) -> Check:
-    """Give a failed claim still without a note its cause from the sweep's own numbers.
+def _short_cause(check: Check) -> str:
+    return "our draw" if "not the optimiser" in (check.note or "") else "draw or optimiser"
 
-    The cause is the optimiser when doubling the EM starts still moved the best
-    log-likelihood by more than :data:`STABLE_LOGLIK` (issue 12 item 5: every failed claim
-    carries a one-line note).
-    """
-    if check.kind != "claim" or check.passed or check.note is not None:
+
+def _figure_causes(checks: Sequence[Check]) -> dict[str, str]:
+    """Return data set → the short line its panel prints (``min K=11, not 8: our draw``)."""
+    return {
+        c.id.removeprefix("bic_minimum_at_k8_"): (
+            f"min K={c.observed}, not {PAPER_K_MIN}: {_short_cause(c)}"
+        )
+        for c in _moved(checks)
+    }
+
+
+def _interior_caption(checks: Sequence[Check]) -> str:
+    """Return the caption's first sentence when a minimum sits inside the sweep away from K = 8."""
+    moved = _moved(checks)
+    if not moved:
+        return ""
+    where = " and ".join(
+        f"K = {c.observed} ({c.id.removeprefix('bic_minimum_at_k8_').replace('_', ' ')})"
+        for c in moved
+    )
+    causes = sorted({_short_cause(c) for c in moved})
+    return f"Minimum at {where}, not the paper's K = {PAPER_K_MIN}: {', '.join(causes)}. "
+
+
+def _with_target_note(check: Check, bic: Mapping[str, Any]) -> Check:
+    """Give the sweep's failed project targets (bracket, start stability) their cause."""
+    if check.passed or check.note is not None or not isinstance(check.observed, Mapping):
         return check
-    stability = start_stability(table)
     if check.id == "bic_minimum_bracketed":
+        edge = {n: o for n, o in check.observed.items() if o["k_min"] >= o["k_last"] - 1}
+        where = ", ".join(f"{n.replace('_', ' ')} K = {o['k_min']}" for n, o in edge.items())
         note = (
-            f"sweep: the minimum lies within the last two K before the cap bic.k_max = {max_k}, "
-            "so no rise twice in a row past it could be seen"
+            f"sweep range: the minimum ({where}) sits at the last two K fitted, so the BIC "
+            f"could not rise twice after it before bic.k_max = {bic.get('k_max')}"
         )
     elif check.id == "best_loglik_stable_in_starts":
+        worst = max(check.observed.items(), key=lambda item: item[1]["max_gain"])
         note = (
-            "optimiser: doubling the EM starts still finds better optima (the Dirichlet start "
-            "rarely reaches the best one): "
-            + ", ".join(f"{n} +{v['max_gain']:.0f}" for n, v in stability.items())
+            f"optimiser: the second half of the EM starts still gains "
+            f"{worst[1]['max_gain']:.1f} log-likelihood ({worst[0].replace('_', ' ')}, K = "
+            f"{worst[1]['at_k']}), so the best fits and the K of the minimum are not settled"
         )
     else:
-        name = check.id.removeprefix("bic_minimum_at_k8_")
-        gain = stability.get(name, {}).get("max_gain", 0.0)
-        curve = table[table["dataset"] == name].set_index("K")["bic"]
-        below = float(curve.get(PAPER_K_MIN, np.nan) - curve.min())
-        numbers = (
-            f"BIC {below:.0f} lower at K = {check.observed} than at K = {PAPER_K_MIN}; "
-            f"doubling the EM starts still moves it by up to {2 * gain:.0f}"
-        )
-        note = (
-            f"optimiser: {numbers}, so the minimum's place is not settled"
-            if 2 * gain >= 0.5 * below
-            else f"method: {numbers}, less than the gap: the i.i.d. Gaussian emission wants "
-            "more states on our draw"
-        )
+        return check
     return replace(check, note=note)

@@ -18,6 +18,7 @@ from dtwin.figures._style import (
     panel_title,
     regime_spans,
     shade_regimes,
+    unitless,
 )
 from dtwin.mcda import ACTIONS, NO_ACTION
 from dtwin.reference.columns import R_MCDA_VERSION
@@ -76,6 +77,7 @@ def plot_mcda_actions(timeline: pd.DataFrame, warm_up_s: float) -> Figure:
     panel_title(ax_action, "A")
     ax_conf.plot(t, timeline["confidence"], color=PHYSICS_COLOR, lw=0.6)
     ax_conf.set_ylabel("TOPSIS\ncloseness gap")
+    unitless(ax_conf)
     ax_conf.set_xlabel("time (s)")
     ax_conf.set_xlim(t[0], t[-1])
     panel_title(ax_conf, "B")

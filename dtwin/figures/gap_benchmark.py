@@ -19,7 +19,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact
-from dtwin.figures._style import OURS_COLOR, R_COLOR, new_figure, panel_title
+from dtwin.figures._style import OURS_COLOR, R_COLOR, new_figure, panel_title, unitless
 
 __all__ = [
     "MAGNITUDE_BINS",
@@ -146,6 +146,7 @@ def draw_accuracy(ax: Axes, table: pd.DataFrame, no_effect: str = "none") -> Non
     ax.set_xticks(MAGNITUDE_BINS)
     ax.set_xlabel("effect magnitude\n(0 noise level, 1 strong)")
     ax.set_ylabel("effect accuracy")
+    unitless(ax)
     panel_title(ax, "C", "By magnitude")
 
 

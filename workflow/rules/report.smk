@@ -3,14 +3,16 @@
 
 rule claims:
     message:
-        "Gathering every artifact's claims, crosschecks and validity checks into CLAIMS.md"
+        "Gathering every artifact's claims, crosschecks and validity checks into CLAIMS.md and the report's contact sheet"
     input:
         lib=dtwin_sources("scripts/claims.py"),
         artifacts=[f"paper_figures/{a}.json" for a in (*PAPER_ARTIFACTS, *ARTIFACTS["project"])],
         gap_table="results/gap/benchmark.csv",
+        pngs=[f"paper_figures/{a}.png" for a in (*PAPER_ARTIFACTS, *ARTIFACTS["project"])],
     output:
         markdown="paper_figures/CLAIMS.md",
         json="paper_figures/claims.json",
+        sheet="paper_figures/contact_sheet.html",
     params:
         project=ARTIFACTS["project"],
         interval=config["draws"]["interval"],
