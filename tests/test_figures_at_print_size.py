@@ -36,6 +36,7 @@ from dtwin.figures.fig09_bic import plot_bic
 from dtwin.figures.fig10_mcda_actions import plot_mcda_actions
 from dtwin.figures.fig11_sensitivity import plot_sensitivity
 from dtwin.figures.fig12_claims_across_draws import plot_claims_across_draws
+from dtwin.figures.fig13_ar_hmm import plot_ar_hmm
 from dtwin.figures.gap_benchmark import gap_benchmark
 from dtwin.wiring import MODULES
 from tests.conftest import REPO
@@ -228,6 +229,15 @@ def draw_fig12():
     return plot_claims_across_draws(claims, table, r_values)
 
 
+def draw_fig13():
+    k = np.arange(1, 9)
+    ar_table = pd.DataFrame(
+        {"K": k, "bic": 5000 - 300 * k + 40 * k**2, "accuracy": rng().uniform(0.3, 0.8, 8)}
+    )
+    gaussian_table = pd.DataFrame({"K": k, "bic": 6000 - 200 * k + 15 * k**2})
+    return plot_ar_hmm(ar_table, gaussian_table, 0.84)
+
+
 def draw_gap_benchmark():
     table = benchmark_table()
     metrics = {
@@ -255,6 +265,7 @@ FIGURES = {
     "fig10_mcda_actions": draw_fig10,
     "fig11_sensitivity": draw_fig11,
     "fig12_claims_across_draws": draw_fig12,
+    "fig13_ar_hmm": draw_fig13,
     "gap_benchmark": draw_gap_benchmark,
 }
 

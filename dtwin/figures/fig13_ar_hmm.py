@@ -16,7 +16,14 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
-from dtwin.figures._style import ALT_METHOD_COLOR, OURS_COLOR, R_COLOR, new_figure, panel_title
+from dtwin.figures._style import (
+    ALT_METHOD_COLOR,
+    OURS_COLOR,
+    R_COLOR,
+    new_figure,
+    panel_title,
+    unitless,
+)
 from dtwin.figures.fig09_bic import STABLE_LOGLIK
 
 __all__ = ["N_REGIMES", "plot_ar_hmm", "ar_hmm_checks", "fig13_ar_hmm"]
@@ -54,6 +61,7 @@ def _bic_panel(ax, curves: list[tuple[str, pd.DataFrame, str, str]]) -> None:
     ax.set_ylim(-0.05 * top, 1.08 * top)
     ax.set_xlabel("number of states K")
     ax.set_ylabel("BIC − min BIC (★ minimum)")
+    unitless(ax, "xy")
     ax.legend(loc="upper right")
 
 
@@ -91,6 +99,7 @@ def plot_ar_hmm(
     ax_acc.set_ylim(0, 1)
     ax_acc.set_xlabel("number of states K")
     ax_acc.set_ylabel("accuracy (Hungarian)")
+    unitless(ax_acc, "xy")
     ax_acc.legend(loc="lower left")
     panel_title(ax_acc, "B", "States against the injected regimes")
     return figure
