@@ -47,6 +47,7 @@ from dtwin.hmm import (
     DIRICHLET_ALPHA,
     MIN_OCCUPANCY,
     HmmFitError,
+    _freeze,
     _monotone,
     _require_count,
     _restart_seeds,
@@ -465,12 +466,6 @@ def _fit_one_start(
     else:
         row.update(status="ok", converged=True)
     return row, (None if row["status"] == "degenerate" else model)
-
-
-def _freeze(array: np.ndarray) -> np.ndarray:
-    array = np.array(array)
-    array.setflags(write=False)
-    return array
 
 
 def _decoded(model: _ArGaussianHMM, design: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
