@@ -241,9 +241,9 @@ def benchmark_table() -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def test_gap_benchmark_shares_rows_and_reads_at_print_size():
-    table = benchmark_table()
-    metrics = {
+def benchmark_metrics_of(table: pd.DataFrame) -> dict:
+    """Made-up headline metrics for a benchmark table (a drawing input, not a result)."""
+    return {
         "n_cases": len(table),
         "cases_per_effect": table.groupby("effect").size().to_dict(),
         "module_accuracy": 0.9,
@@ -252,6 +252,11 @@ def test_gap_benchmark_shares_rows_and_reads_at_print_size():
         "unexplained_accuracy": 1.0,
         "median_shrink_pct": 85.0,
     }
+
+
+def test_gap_benchmark_shares_rows_and_reads_at_print_size():
+    table = benchmark_table()
+    metrics = benchmark_metrics_of(table)
     artifact = gap_benchmark(table, metrics, [], {"median_shrink_pct": 85.0})
     check = print_check(artifact.figure)
     assert check.passed, check.observed
@@ -312,15 +317,7 @@ def test_every_figure_starts_from_the_shared_style(path):
 def test_gap_benchmark_draws_the_paper_family_only():
     table = benchmark_table().assign(family="paper")
     rig = table.head(2).assign(family="rig", expected_effect="rig_only_effect")
-    metrics = {
-        "n_cases": len(table),
-        "cases_per_effect": table.groupby("effect").size().to_dict(),
-        "module_accuracy": 0.9,
-        "effect_accuracy": 0.8,
-        "none_accuracy": 1.0,
-        "unexplained_accuracy": 1.0,
-        "median_shrink_pct": 85.0,
-    }
+    metrics = benchmark_metrics_of(table)
     artifact = gap_benchmark(pd.concat([table, rig]), metrics, [], {"median_shrink_pct": 85.0})
     rows = [label.get_text() for label in artifact.figure.axes[0].get_yticklabels()]
     assert "rig_only_effect" not in rows

@@ -40,7 +40,7 @@ from dtwin.figures.fig13_ar_hmm import plot_ar_hmm
 from dtwin.figures.gap_benchmark import gap_benchmark
 from dtwin.wiring import MODULES
 from tests.conftest import REPO
-from tests.test_figure_style import benchmark_table
+from tests.test_figure_style import benchmark_metrics_of, benchmark_table
 
 DT = 0.05
 T = np.arange(400) * DT
@@ -240,15 +240,7 @@ def draw_fig13():
 
 def draw_gap_benchmark():
     table = benchmark_table()
-    metrics = {
-        "n_cases": len(table),
-        "cases_per_effect": table.groupby("effect").size().to_dict(),
-        "module_accuracy": 0.9,
-        "effect_accuracy": 0.8,
-        "none_accuracy": 1.0,
-        "unexplained_accuracy": 1.0,
-        "median_shrink_pct": 85.0,
-    }
+    metrics = benchmark_metrics_of(table)
     return gap_benchmark(table, metrics, [], {"median_shrink_pct": 85.0}).figure
 
 
