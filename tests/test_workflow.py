@@ -672,36 +672,46 @@ def assert_landing_is_the_contact_sheet(report_html: Path, landing: np.ndarray, 
     assert rule.max() > 600, f"the sheet's closing rule is not on screen (longest run {rule.max()})"
 
 
-@pytest.mark.xfail(
-    reason="since the sweep runs in scattergather chunks, Snakemake exited 0 after SIGINT in this "
-    "test (twice, with 4 and 12 chunks; a manual Ctrl-C exited 1 with no debris): under "
-    "investigation, issue 11",
-    strict=False,
-)
-def test_a_run_interrupted_during_the_sweep_resumes_to_identical_outputs(workflow_copy):
-    """SIGINT to Snakemake mid-sweep, then the same command again: complete, equal, no debris."""
-    sweep_dir = workflow_copy / "results" / "sensitivity"
-    figure_files = sorted((workflow_copy / "paper_figures").glob("fig11_sensitivity.*"))
-    reference = {p: p.read_bytes() for p in [*sorted(sweep_dir.rglob("*.*")), *figure_files]}
+def test_a_run_interrupted_during_the_sweep_resumes_to_identical_outputs(workflow_copy, tmp_path):
+    """SIGINT to Snakemake mid-sweep, then the same command again: complete, equal, no debris.
+
+    Runs on its own copy with a 12-point grid in 12 chunks, so that chunks are still pending
+    when the first one lands (the shared copy's grid has 4 points: at most 4 chunks) and so
+    that a failure here cannot leave the other tests' copy half-deleted.
+    """
+    workdir = tmp_path / "repo"
+    shutil.copytree(workflow_copy, workdir, symlinks=True)
+
+    def twelve_points(config: dict) -> None:
+        config["sensitivity"].update(alphas=[0.2, 0.5, 0.8], sensor_B_mults=[0.5, 1.0, 1.5, 2.0])
+
+    edit_config(workdir, twelve_points)
+    sweep_dir = workdir / "results" / "sensitivity"
+    target = ["results/sensitivity/summary.csv", "--set-scatter", "sweep=12"]
+    snakemake(workdir, "--cores", "2", *target)
+    figure_files = sorted((workdir / "paper_figures").glob("fig11_sensitivity.*"))
+    chunks = sorted(sweep_dir.glob("chunks/*-of-12.json"))
+    assert len(chunks) == 12
+    gathered = [sweep_dir / "summary.csv", sweep_dir / "runs.csv", *figure_files]
+    reference = {p: p.read_bytes() for p in [*chunks, *gathered]}
     for path in reference:
         path.unlink()
-    env = {**os.environ, "PYTHONPATH": str(workflow_copy), "MPLBACKEND": "Agg"}
-    # twelve chunks: with the default four, two finish together and a signal can land after
-    # the last job of the sweep has ended (Snakemake then exits 0)
-    command = [sys.executable, "-m", "snakemake", "--cores", "2", "--set-scatter", "sweep=12"]
+    env = {**os.environ, "PYTHONPATH": str(workdir), "MPLBACKEND": "Agg"}
+    command = [sys.executable, "-m", "snakemake", "--cores", "2", *target]
     process = subprocess.Popen(
-        command, cwd=workflow_copy, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        command, cwd=workdir, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
     )
     deadline = time.monotonic() + 300
-    while not list(sweep_dir.glob("chunks/*.json")) and time.monotonic() < deadline:
+    while not list(sweep_dir.glob("chunks/*-of-12.json")) and time.monotonic() < deadline:
         time.sleep(0.05)
     process.send_signal(signal.SIGINT)
-    assert process.wait(timeout=120) != 0
+    log, _ = process.communicate(timeout=120)
+    assert process.returncode != 0, f"Snakemake exited 0 after SIGINT:\n{log}"
     finished = len(list(sweep_dir.glob("chunks/*-of-12.json")))
     assert 1 <= finished < 12, f"{finished} of 12 sweep chunks had finished when interrupted"
-    debris = [p.name for p in workflow_copy.rglob(".*.tmp*")]
+    debris = [p.name for p in workdir.rglob(".*.tmp*")]
     assert not debris, debris
-    snakemake(workflow_copy, "--cores", "2")
+    snakemake(workdir, "--cores", "2", *target)
     changed = [p.name for p, data in reference.items() if not p.exists() or p.read_bytes() != data]
     assert not changed
 
