@@ -39,4 +39,4 @@ def test_emps_names_coulomb_friction_in_the_plant():
     )
     assert (result.module, result.effect) == ("M1", "coulomb_friction")
     assert abs(result.params["Fc"] / PUBLISHED_FC - 1) <= 0.30
-    assert result.excess_shrink_pct >= 50
+    assert result.excess_shrink_pct >= 50 and result.own_shrink_pct >= 50

@@ -29,6 +29,7 @@ from dtwin.gap.benchmark import (
     true_parameter,
     wilson_interval,
 )
+from dtwin.gap.report import render_markdown
 
 NONLINEAR_PLANT = ("coulomb_friction", "cubic_stiffness", "quadratic_damping")
 
@@ -63,6 +64,8 @@ def test_a_weak_coulomb_friction_has_a_large_own_share(seed):
     assert result.own_shrink_pct >= 70
     # the linear re-fit alone leaves an excess the friction then removes: the reference is it
     assert result.gap_after < result.gap_refit < result.gap_before
+    headline = render_markdown(result).splitlines()[2]  # the report's answer, first
+    assert f"removes {result.own_shrink_pct:.0f} % of the excess gap left by re-fitting" in headline
 
 
 @pytest.mark.parametrize(

@@ -203,7 +203,7 @@ def draw_reliability(ax: Axes, metrics: Mapping[str, Any]) -> None:
     ax.set_ylim(0, 1.05)
     ax.set_xlabel("mean confidence of the bin")
     ax.set_ylabel("accuracy")
-    unitless(ax)
+    unitless(ax, "xy")
     panel_title(ax, "E", "Reliability (n per bin)")
 
 
@@ -230,6 +230,7 @@ def draw_parameter_errors(ax: Axes, table: pd.DataFrame, target: float) -> None:
     ax.set_yticks(range(len(effects)), effects)
     ax.set_ylim(-0.6, max(len(effects), 1) - 0.4)
     ax.set_xlabel("|fitted − true| / effect size")
+    unitless(ax, "x")
     ax.grid(axis="y", alpha=0.15)
     panel_title(ax, "D", "Parameter error")
 
@@ -310,8 +311,15 @@ def _shrinks_sentence(metrics: Mapping[str, Any]) -> str:
         f"{_pct(metrics['median_own_shrink_pct'])} over {metrics['n_shrinks']} right "
         f"diagnoses (scoring part); raw error {_pct(metrics['median_raw_shrink_pct'])}; excess "
         f"over noise {_pct(metrics['median_excess_shrink_pct'])} "
-        f"({metrics['n_excess_clipped']} clipped at 100 %)."
+        f"({metrics['n_excess_clipped']} clipped at 100 %){_refit_clause(metrics)}."
     )
+
+
+def _refit_clause(metrics: Mapping[str, Any]) -> str:
+    refit = metrics.get("median_refit_shrink_pct")
+    if refit is None:
+        return ""
+    return f", of which the linear re-fit alone removes a median {refit:.0f} %"
 
 
 def _parameter_sentence(metrics: Mapping[str, Any]) -> str:

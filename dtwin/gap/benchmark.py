@@ -11,8 +11,10 @@ confidence; :func:`benchmark_checks` states the targets as checks. The figure is
 
 Table columns (:func:`score_cases`): ``case, family, arm, effect, module, expected_effect,
 in_list, magnitude, snr, n_samples, diagnosed_module, diagnosed_effect, confidence,
-raw_shrink_pct, own_shrink_pct, excess_shrink_pct, excess_clipped, kpi_shrink_pct, module_ok,
-effect_ok, param_name, param_true, param_fitted, param_error``.
+raw_shrink_pct, own_shrink_pct, excess_shrink_pct, excess_clipped, refit_shrink_pct,
+kpi_shrink_pct, module_ok, effect_ok, param_name, param_true, param_fitted, param_error``
+(``refit_shrink_pct``: the excess shrink of the linear re-fit alone, what the own share leaves
+out).
 """
 
 from __future__ import annotations
@@ -190,6 +192,23 @@ def _parameter_columns(key, diagnosis, effect_ok: bool) -> dict[str, Any]:
     return out
 
 
+def _refit_shrink(diagnosis: Mapping[str, Any]) -> float | None:
+    """Return the excess shrink (%) of the linear re-fit alone: ``gap_before → gap_refit``.
+
+    The part of a candidate's excess shrink that the own share does not credit to the effect
+    (docs/gap.md §How far); None without a chosen effect.
+    """
+    before, refit = diagnosis.get("gap_before"), diagnosis.get("gap_refit")
+    if before is None or refit is None:
+        return None
+    floor = (diagnosis["modules"][diagnosis["module"]].get("noise_floor")) or 0.0
+    excess_before = math.sqrt(max(before * before - floor * floor, 0.0))
+    if excess_before <= 0:
+        return None
+    excess_refit = math.sqrt(max(refit * refit - floor * floor, 0.0))
+    return 100.0 * (1.0 - excess_refit / excess_before)
+
+
 def score_cases(cases: Iterable[tuple[str, Mapping[str, Any], Mapping[str, Any]]]) -> pd.DataFrame:
     """Return one row per case from ``(case name, key, diagnosis)`` triples (see the columns)."""
     rows = []
@@ -215,6 +234,7 @@ def score_cases(cases: Iterable[tuple[str, Mapping[str, Any], Mapping[str, Any]]
                 "confidence": diagnosis.get("confidence"),
                 **{column: diagnosis.get(column) for column in SHRINK_COLUMNS},
                 "excess_clipped": diagnosis.get("excess_clipped"),
+                "refit_shrink_pct": _refit_shrink(diagnosis),
                 "kpi_shrink_pct": diagnosis.get("kpi_shrink_pct"),
                 "module_ok": bool(module_ok),
                 "effect_ok": effect_ok,
@@ -280,12 +300,23 @@ def _parameter_errors(right: pd.DataFrame) -> dict[str, Any]:
 
 
 def _shrink_metrics(right: pd.DataFrame) -> dict[str, Any]:
-    """Return the three shrinks' medians over right in-list diagnoses, and the clipped count."""
+    """Return the three shrinks' medians over right in-list diagnoses, and the clipped count.
+
+    ``median_refit_shrink_pct``: the excess shrink of the linear re-fit alone (what the own
+    share does not credit to the effect), over right diagnoses other than
+    ``parameter_mismatch`` (for which the re-fit is the effect).
+    """
     clipped = right.excess_clipped.astype("boolean").fillna(False) if len(right) else right
     return {
         "n_shrinks": int(len(right)),
         **{f"median_{column}": _median(right[column]) for column in SHRINK_COLUMNS},
         "n_excess_clipped": int(clipped.sum()) if len(right) else 0,
+        # the linear re-fit's share, over effects other than the re-fit itself
+        "median_refit_shrink_pct": _median(
+            right[right.effect != PARAMETER_MISMATCH]["refit_shrink_pct"]
+        )
+        if "refit_shrink_pct" in right
+        else None,
         "median_kpi_shrink_pct": _median(right.kpi_shrink_pct),
     }
 

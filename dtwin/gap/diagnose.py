@@ -778,14 +778,17 @@ def _check_arguments(recording, twin, train_frac, heldout, choose_frac) -> tuple
 def join_heldout(
     recording: Recording, n_train: int, heldout: Recording, names: list[str]
 ) -> Recording:
-    """Return the training part of ``recording`` followed by the held-out recording.
+    """Return the first ``n_train`` samples of ``recording`` followed by the held-out recording.
+
+    :func:`diagnose` keeps the whole first recording (its training and choosing parts); the
+    held-out recording is the scoring part.
 
     Parameters
     ----------
     recording : Recording
-        The training experiment; its first ``n_train`` samples are kept.
+        The first experiment; its first ``n_train`` samples are kept.
     n_train : int
-        Number of training samples.
+        Number of samples kept.
     heldout : Recording
         The validation experiment; it must record every signal of the diagnosed ``names``.
     names : list of str
