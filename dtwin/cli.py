@@ -33,6 +33,8 @@ __all__ = ["main", "build_parser", "load_twin_file", "warning_notes"]
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 3
+#: ``--train-frac`` default with ``--heldout``: the recording's rest is the choosing part.
+HELDOUT_TRAIN_FRAC = 0.7
 
 logger = logging.getLogger("dtwin.cli")
 
@@ -111,7 +113,7 @@ def _diagnose(args: argparse.Namespace) -> int:
         heldout = _read_heldout(args.heldout)
     train_frac = args.train_frac
     if train_frac is None:
-        train_frac = 1.0 if heldout is not None else 0.5
+        train_frac = HELDOUT_TRAIN_FRAC if heldout is not None else 0.5
     twin = twin_from_mapping(twin_content, dt=recording.dt)
     result = diagnose(
         recording,
@@ -123,7 +125,8 @@ def _diagnose(args: argparse.Namespace) -> int:
     )
     result = _with_warning_notes(result, getattr(args, "warnings_caught", ()))
     atomic_write_folder(args.out, lambda tmp: write_report(result, tmp))
-    shrink = f", excess gap −{result.shrink_pct:.0f} %" if result.shrink_pct is not None else ""
+    own = result.own_shrink_pct
+    shrink = f", its own share of the gap −{own:.0f} %" if own is not None else ""
     print(f"{result.module or '-'}: {result.effect}{shrink} -> {args.out}")
     return 0
 
@@ -194,13 +197,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--train-frac",
         type=_fraction,
         default=None,
-        help="training fraction (default 0.5; 1.0 with --heldout; at most 0.95 without it)",
+        help="training fraction, at most 0.95 (default 0.5; 0.7 with --heldout, the rest of "
+        "the recording then chooses and the held-out file scores)",
     )
     diag.add_argument(
         "--heldout",
         default=None,
         metavar="RECORDING2.csv",
-        help="a separate validation experiment on which every gap is measured",
+        help="a separate validation experiment: the scoring part (every shrink is measured on it)",
     )
     diag.set_defaults(run=_diagnose)
 

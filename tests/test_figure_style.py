@@ -50,7 +50,8 @@ from dtwin.figures.fig09_bic import (
 )
 from dtwin.figures.fig10_mcda_actions import single_step_lock_ins
 from dtwin.figures.fig11_sensitivity import _with_notes
-from dtwin.figures.gap_benchmark import gap_benchmark, wilson_interval
+from dtwin.figures.gap_benchmark import gap_benchmark
+from dtwin.gap.benchmark import TARGETS, benchmark_metrics
 from tests.conftest import REPO
 
 FIGURE_MODULES = [
@@ -222,57 +223,56 @@ def test_fig01_is_drawn_at_print_size_without_collisions():
 
 
 def benchmark_table() -> pd.DataFrame:
+    """A made-up scored table (the columns of dtwin.gap.benchmark.score_cases a figure reads)."""
     rows = []
     for effect in ("coulomb_friction", "sensor_delay", "none", "unexplained"):
         for i in range(3):
             right = not (effect == "sensor_delay" and i == 0)
+            named = effect not in ("none", "unexplained")
             rows.append(
                 {
                     "effect": effect,
                     "expected_effect": effect,
-                    "in_list": effect not in ("none", "unexplained"),
+                    "in_list": named,
                     "magnitude": 0.1 + 0.3 * i,
                     "diagnosed_effect": effect if right else "none",
-                    "shrink_pct": 80.0 + 5 * i,
+                    "confidence": (0.6, 0.85, 1.0)[i] if named and right else None,
+                    "own_shrink_pct": 70.0 + 5 * i,
+                    "raw_shrink_pct": 60.0 + 5 * i,
+                    "excess_shrink_pct": 80.0 + 10 * i,
+                    "excess_clipped": i == 2,
+                    "kpi_shrink_pct": 50.0,
                     "module_ok": right,
                     "effect_ok": right,
+                    "param_error": 0.01 * (i + 1) if named and right else float("nan"),
                 }
             )
     return pd.DataFrame(rows)
 
 
 def benchmark_metrics_of(table: pd.DataFrame) -> dict:
-    """Made-up headline metrics for a benchmark table (a drawing input, not a result)."""
-    return {
-        "n_cases": len(table),
-        "cases_per_effect": table.groupby("effect").size().to_dict(),
-        "module_accuracy": 0.9,
-        "effect_accuracy": 0.8,
-        "none_accuracy": 1.0,
-        "unexplained_accuracy": 1.0,
-        "median_shrink_pct": 85.0,
-    }
+    """The benchmark's metrics of a made-up table (a drawing input, not a result)."""
+    return benchmark_metrics(table)
 
 
 def test_gap_benchmark_shares_rows_and_reads_at_print_size():
     table = benchmark_table()
     metrics = benchmark_metrics_of(table)
-    artifact = gap_benchmark(table, metrics, [], {"median_shrink_pct": 85.0})
+    artifact = gap_benchmark(table, metrics, [], TARGETS)
     check = print_check(artifact.figure)
     assert check.passed, check.observed
-    matrix, shrinks, _ = artifact.figure.axes
+    matrix, shrinks, _, _errors, reliability = artifact.figure.axes
     assert matrix.get_shared_y_axes().joined(matrix, shrinks)
     rows = [label.get_text() for label in matrix.get_yticklabels()]
-    dots = shrinks.collections[0].get_offsets()
-    # every dot sits on its own effect's row of the confusion matrix
-    assert {rows[int(y)] for _, y in dots} == {"coulomb_friction", "sensor_delay"}
+    own = shrinks.collections[0].get_offsets()
+    # every own-share dot sits on its own effect's row of the confusion matrix
+    assert {rows[int(round(y))] for _, y in own} == {"coulomb_friction", "sensor_delay"}
+    assert len(shrinks.collections) == 3  # own share, raw error, excess over noise
     assert artifact.caption.startswith("12 withheld-effect cases (3 per effect)")
-
-
-def test_wilson_interval_matches_the_closed_form():
-    low, high = wilson_interval(8, 10)
-    assert low == pytest.approx(0.4902, abs=1e-4) and high == pytest.approx(0.9433, abs=1e-4)
-    assert np.isnan(wilson_interval(0, 0)[0])
+    assert "own share" in artifact.caption and "5/6" in artifact.caption
+    # one reliability point per non-empty confidence bin: 0.6, 0.85 and 1.0
+    drawn = reliability.containers[0].lines[0].get_xdata()
+    assert len(drawn) == len(metrics["reliability"]) == 3
 
 
 def test_bandwidth_is_r_bw_nrd0():
@@ -318,7 +318,7 @@ def test_gap_benchmark_draws_the_paper_family_only():
     table = benchmark_table().assign(family="paper")
     rig = table.head(2).assign(family="rig", expected_effect="rig_only_effect")
     metrics = benchmark_metrics_of(table)
-    artifact = gap_benchmark(pd.concat([table, rig]), metrics, [], {"median_shrink_pct": 85.0})
+    artifact = gap_benchmark(pd.concat([table, rig]), metrics, [], TARGETS)
     rows = [label.get_text() for label in artifact.figure.axes[0].get_yticklabels()]
     assert "rig_only_effect" not in rows
     assert artifact.caption.endswith("2 cases of other families are in the JSON only.")

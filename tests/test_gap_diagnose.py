@@ -63,14 +63,17 @@ def test_each_effect_is_diagnosed(effect, module, seed):
     payload = diagnosis_to_dict(result)
     jsonschema.validate(payload, SCHEMA)
     if result.effect != "unexplained":
-        assert result.shrink_pct >= 50 and 0 <= result.confidence <= 1
+        assert 0 <= result.confidence <= 1
         assert result.candidates[0].effect == effect
+        # scored on samples no decision saw: the effect need not help there, but it does
+        assert result.gap_after < result.gap_before and result.raw_shrink_pct > 0
 
 
 def test_none_on_a_clean_case():
     _case, result = _diagnose_case("none", None, 1)
     assert (result.module, result.effect, result.params) == (None, "none", {})
-    assert result.shrink_pct is None and not result.candidates
+    assert result.own_shrink_pct is None and result.excess_shrink_pct is None
+    assert not result.candidates
     assert all(m.status in ("clean", "inherited") for m in result.modules.values())
     jsonschema.validate(diagnosis_to_dict(result), SCHEMA)
 
@@ -135,7 +138,7 @@ def test_rig_in_volts_with_coulomb_friction_is_named():
     result = diagnose(recording_from_frame(_rig(0.3)), twin_from_mapping({"dt": 0.002}))
     assert (result.module, result.effect) == ("M1", "coulomb_friction")
     assert result.params["Fc"] == pytest.approx(0.3, rel=0.2)
-    assert result.shrink_pct >= 80
+    assert result.excess_shrink_pct >= 80 and result.own_shrink_pct >= 70
 
 
 def test_clean_rig_is_calibrated_to_its_physics_and_names_no_effect():

@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 import yaml
 
+from dtwin._validation import DtwinValueError
 from dtwin.cli import main
 from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping
 from dtwin.gap.rigs import generate_rig_case
@@ -49,8 +50,19 @@ def test_heldout_scores_on_the_second_recording_only():
     half = len(frame) // 2
     train = recording_from_frame(frame.iloc[:half].reset_index(drop=True))
     held = recording_from_frame(frame.iloc[half:].reset_index(drop=True))
-    result = diagnose(train, twin_from_mapping(case.twin), train_frac=1.0, heldout=held)
-    assert (result.n_train, result.n_samples) == (half, len(frame))
+    result = diagnose(train, twin_from_mapping(case.twin), train_frac=0.7, heldout=held)
+    # training: 70 % of the first recording; choosing: the rest of it; scoring: the second
+    assert (result.n_train, result.n_choose) == (round(0.7 * half), half)
+    assert result.n_samples == len(frame)
+
+
+def test_heldout_needs_a_choosing_part():
+    case = generate_rig_case("none", 3)
+    train = recording_from_frame(case.recording.iloc[:600].reset_index(drop=True))
+    held = recording_from_frame(case.recording.iloc[600:].reset_index(drop=True))
+    # 95 % of 600 samples train: 30 are left to choose on, fewer than 50
+    with pytest.raises(DtwinValueError, match="50 each for choosing and for scoring"):
+        diagnose(train, twin_from_mapping(case.twin), train_frac=0.95, heldout=held)
 
 
 @pytest.mark.slow

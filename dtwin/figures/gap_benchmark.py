@@ -2,10 +2,13 @@
 
 One function per panel, so a panel (a rig family, say) can be added without touching the
 others: :func:`draw_confusion` (true effect × diagnosed effect, coloured by the share of the
-row), :func:`draw_shrinks` (the held-out excess gap each right diagnosis removes, one dot per
-case, on the confusion matrix's rows) and :func:`draw_accuracy` (effect accuracy per magnitude
-bin with Wilson intervals and the number of cases). The scoring itself is
-:mod:`dtwin.gap.benchmark`'s; this module only draws its table.
+row), :func:`draw_shrinks` (the three shrinks of each right diagnosis on the scoring part, the
+effect's own share first, one mark per case, on the confusion matrix's rows),
+:func:`draw_accuracy` (effect accuracy per magnitude bin with Wilson intervals and the number
+of cases), :func:`draw_reliability` (the reliability table: accuracy against mean confidence
+per confidence bin) and :func:`draw_parameter_errors` (fitted against true parameter, one dot
+per case). The scoring, the intervals included, is :mod:`dtwin.gap.benchmark`'s; this module
+only draws its table and metrics.
 """
 
 from __future__ import annotations
@@ -22,34 +25,24 @@ from dtwin.artifacts import Check, FigureArtifact
 from dtwin.figures._style import OURS_COLOR, R_COLOR, new_figure, panel_title, unitless
 
 __all__ = [
-    "MAGNITUDE_BINS",
-    "wilson_interval",
     "draw_confusion",
     "draw_shrinks",
     "draw_accuracy",
+    "draw_reliability",
+    "draw_parameter_errors",
     "plot_gap_benchmark",
     "gap_benchmark",
 ]
 
-#: Edges of the effect-magnitude bins (0 = barely above the noise, 1 = strong).
-MAGNITUDE_BINS: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
+#: How each shrink is drawn: (column, label, marker, filled, vertical offset on its row).
+_SHRINK_MARKS = (
+    ("own_shrink_pct", "own share", "o", True, 0.0),
+    ("raw_shrink_pct", "raw error", "o", False, -0.28),
+    ("excess_shrink_pct", "excess over noise", "x", True, 0.28),
+)
 
-
-def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """Wilson score interval of a proportion (95 % for ``z`` = 1.96); (nan, nan) when n = 0.
-
-    Examples
-    --------
-    >>> [round(v, 3) for v in wilson_interval(3, 3)]
-    [0.438, 1.0]
-    """
-    if n == 0:
-        return float("nan"), float("nan")
-    p = successes / n
-    denominator = 1 + z**2 / n
-    centre = (p + z**2 / (2 * n)) / denominator
-    half = z * np.sqrt(p * (1 - p) / n + z**2 / (4 * n**2)) / denominator
-    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
+#: Shrinks below this are drawn at it (a candidate can make the gap worse without bound).
+_SHRINK_AXIS_LOW = -50.0
 
 
 def _rows(table: pd.DataFrame) -> list[str]:
@@ -86,50 +79,55 @@ def draw_confusion(ax: Axes, table: pd.DataFrame) -> None:
 
 
 def draw_shrinks(ax: Axes, table: pd.DataFrame, target_pct: float) -> None:
-    """Panel B: each right in-list diagnosis's held-out excess-gap shrink, on its matrix row."""
+    """Panel B: each right in-list diagnosis's three shrinks (scoring part), on its matrix row.
+
+    The effect's own share (filled), the raw error (open) and the excess over the noise floor
+    (cross) sit just above and below each other on the effect's row; values below
+    ``_SHRINK_AXIS_LOW`` are drawn at it.
+    """
     rows = {effect: i for i, effect in enumerate(_rows(table))}
     right = table[table.in_list & table.effect_ok]
-    shrink = pd.to_numeric(right.shrink_pct, errors="coerce")
     y = right.expected_effect.map(rows).to_numpy(dtype=float)
-    ax.scatter(shrink, y, s=10, color=OURS_COLOR, alpha=0.8, lw=0, zorder=3)
+    for column, label, marker, filled, offset in _SHRINK_MARKS:
+        values = pd.to_numeric(right[column], errors="coerce").to_numpy(dtype=float)
+        color = OURS_COLOR if column == "own_shrink_pct" else R_COLOR
+        style = {"color": color} if filled else {"facecolors": "none", "edgecolors": color}
+        ax.scatter(
+            np.clip(values, _SHRINK_AXIS_LOW, 100.0),
+            y + offset,
+            s=9,
+            marker=marker,
+            lw=0.7,
+            zorder=3,
+            label=label,
+            **style,
+        )
     ax.axvline(target_pct, color=R_COLOR, ls="--", lw=0.8)
-    ax.annotate(
-        f"target {target_pct:g} %",
-        (target_pct, 0),
-        xycoords=("data", "axes fraction"),
-        xytext=(-2, 2),
-        textcoords="offset points",
-        ha="right",
-        va="bottom",
-        fontsize=7,
-        color="#555555",
-    )
+    ax.set_xlim(_SHRINK_AXIS_LOW - 5, 105)
     ax.tick_params(labelleft=False)
-    ax.set_xlabel("excess gap removed,\nheld out (%)")
+    ax.set_xlabel("gap removed, scoring\npart (%)")
     ax.grid(axis="y", alpha=0.15)
-    panel_title(ax, "B", "Gap removed")
-
-
-def draw_accuracy(ax: Axes, table: pd.DataFrame, no_effect: str = "none") -> None:
-    """Panel C: effect accuracy per magnitude bin, Wilson 95 % intervals, n per bin."""
-    scored = table[table.expected_effect != no_effect]
-    bins = pd.cut(scored.magnitude, list(MAGNITUDE_BINS), include_lowest=True)
-    centres = (np.asarray(MAGNITUDE_BINS[:-1]) + np.asarray(MAGNITUDE_BINS[1:])) / 2
-    grouped = scored.groupby(bins, observed=False).effect_ok
-    k, n = grouped.sum().to_numpy(dtype=int), grouped.size().to_numpy(dtype=int)
-    rate = np.divide(k, n, out=np.full(len(n), np.nan), where=n > 0)
-    intervals = np.array([wilson_interval(int(a), int(b)) for a, b in zip(k, n, strict=True)])
-    ax.errorbar(
-        centres,
-        rate,
-        yerr=[rate - intervals[:, 0], intervals[:, 1] - rate],
-        fmt="o-",
-        color=OURS_COLOR,
-        ms=3.5,
-        lw=1.0,
-        capsize=2,
+    ax.legend(
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.3),
+        fontsize=7,
+        handletextpad=0.1,
+        borderpad=0.2,
+        frameon=False,
     )
-    for x, count in zip(centres, n, strict=True):
+    panel_title(ax, "B", "Shrinks")
+
+
+def _rate_arrays(rates: Sequence[Mapping[str, Any]]) -> tuple[np.ndarray, ...]:
+    """Return ``(rate, low, high, n)`` arrays of :func:`dtwin.gap.benchmark`'s rate entries."""
+    rate = np.array([np.nan if r["rate"] is None else r["rate"] for r in rates], dtype=float)
+    low = np.array([r["low"] for r in rates], dtype=float)
+    high = np.array([r["high"] for r in rates], dtype=float)
+    return rate, low, high, np.array([r["n"] for r in rates], dtype=int)
+
+
+def _annotate_n(ax: Axes, xs: Sequence[float], ns: Sequence[int]) -> None:
+    for x, count in zip(xs, ns, strict=True):
         ax.annotate(
             f"n={count}",
             (x, 0),
@@ -140,34 +138,137 @@ def draw_accuracy(ax: Axes, table: pd.DataFrame, no_effect: str = "none") -> Non
             va="bottom",
             fontsize=7,
         )
-    low = np.nanmin(intervals[:, 0]) if np.isfinite(intervals).any() else 0.5
-    ax.set_ylim(min(0.5, float(low) - 0.05) - 0.08, 1.03)
+
+
+def draw_accuracy(ax: Axes, metrics: Mapping[str, Any]) -> None:
+    """Panel C: effect accuracy per magnitude bin, Wilson 95 % intervals, n per bin."""
+    rates = list(metrics["accuracy_by_magnitude"].values())
+    edges = np.array([r["edges"] for r in rates], dtype=float).reshape(-1, 2)
+    centres = edges.mean(axis=1)
+    rate, low, high, n = _rate_arrays(rates)
+    ax.errorbar(
+        centres,
+        rate,
+        yerr=[rate - low, high - rate],
+        fmt="o-",
+        color=OURS_COLOR,
+        ms=3.5,
+        lw=1.0,
+        capsize=2,
+    )
+    _annotate_n(ax, centres, n)
+    floor = np.nanmin(low) if np.isfinite(low).any() else 0.5
+    ax.set_ylim(min(0.5, float(floor) - 0.05) - 0.08, 1.03)
     ax.set_xlim(0, 1)
-    ax.set_xticks(MAGNITUDE_BINS)
+    ax.set_xticks(np.unique(np.clip(edges, 0, 1)))
     ax.set_xlabel("effect magnitude\n(0 noise level, 1 strong)")
     ax.set_ylabel("effect accuracy")
     unitless(ax)
     panel_title(ax, "C", "By magnitude")
 
 
-def plot_gap_benchmark(table: pd.DataFrame, target_pct: float, no_effect: str = "none") -> Figure:
-    """Draw the benchmark: confusion matrix and shrinks on shared rows, accuracy by magnitude.
+def draw_reliability(ax: Axes, metrics: Mapping[str, Any]) -> None:
+    """Panel E: the reliability table, accuracy (Wilson 95 %) against mean confidence per bin.
+
+    The diagonal is perfect calibration, the band ±10 points around it the target.
+    """
+    rows = metrics["reliability"]
+    line = np.array([0.0, 1.0])
+    ax.fill_between(line, line - 0.1, line + 0.1, color=R_COLOR, alpha=0.15, lw=0)
+    ax.plot(line, line, color=R_COLOR, lw=0.8, ls="--")
+    if rows:
+        confidence = np.array([r["mean_confidence"] for r in rows], dtype=float)
+        rate, low, high, n = _rate_arrays(rows)
+        ax.errorbar(
+            confidence,
+            rate,
+            yerr=[rate - low, high - rate],
+            fmt="o",
+            color=OURS_COLOR,
+            ms=3.5,
+            lw=1.0,
+            capsize=2,
+        )
+        for x, y, count in zip(confidence, low, n, strict=True):  # n below each bar
+            ax.annotate(
+                f"{count}",
+                (x, y),
+                xytext=(0, -3),
+                textcoords="offset points",
+                ha="center",
+                va="top",
+                fontsize=7,
+            )
+    ax.set_xlim(0, 1.02)
+    ax.set_ylim(0, 1.05)
+    ax.set_xlabel("mean confidence of the bin")
+    ax.set_ylabel("accuracy")
+    unitless(ax, "xy")
+    panel_title(ax, "E", "Reliability (n per bin)")
+
+
+def draw_parameter_errors(ax: Axes, table: pd.DataFrame, target: float) -> None:
+    """Panel D: per effect, each right diagnosis's fitted-parameter error (one dot per case).
+
+    ``param_error`` of :func:`dtwin.gap.benchmark.score_cases` on a log axis (at least 1e-4);
+    effects whose real form has no catalogue parameter have no dot.
+    """
+    scored = table.dropna(subset=["param_error"]) if "param_error" in table else table.iloc[:0]
+    effects = sorted(scored.effect.unique())
+    rows = {effect: i for i, effect in enumerate(effects)}
+    ax.scatter(
+        np.maximum(scored.param_error.to_numpy(dtype=float), 1e-4),
+        scored.effect.map(rows).to_numpy(dtype=float),
+        s=9,
+        color=OURS_COLOR,
+        lw=0,
+        zorder=3,
+    )
+    ax.axvline(target, color=R_COLOR, ls="--", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_xlim(5e-5, 20)
+    ax.set_yticks(range(len(effects)), effects)
+    ax.set_ylim(-0.6, max(len(effects), 1) - 0.4)
+    ax.set_xlabel("|fitted − true| / effect size")
+    unitless(ax, "x")
+    ax.grid(axis="y", alpha=0.15)
+    panel_title(ax, "D", "Parameter error")
+
+
+def plot_gap_benchmark(
+    table: pd.DataFrame,
+    metrics: Mapping[str, Any],
+    targets: Mapping[str, float],
+    no_effect: str = "none",
+) -> Figure:
+    """Draw the benchmark (five panels; the scoring is :mod:`dtwin.gap.benchmark`'s).
+
+    Above: confusion matrix and the three shrinks on shared rows, accuracy by magnitude; below:
+    the parameter errors and the reliability table.
 
     Parameters
     ----------
     table : DataFrame
         :func:`dtwin.gap.benchmark.score_cases` (one row per case).
-    target_pct : float
-        The median-shrink target of docs/gap.md §Targets, %.
+    metrics : mapping
+        :func:`dtwin.gap.benchmark.benchmark_metrics` of the same cases.
+    targets : mapping
+        docs/gap.md §Targets: ``median_own_shrink_pct`` (%) and ``median_parameter_error``.
     no_effect : str
-        The effect name of cases without an effect (left out of panel C).
+        The effect name of cases without an effect.
     """
-    figure = new_figure(4.4)
-    grid = figure.add_gridspec(1, 3, width_ratios=[1.5, 0.75, 1.0])
-    ax_matrix = figure.add_subplot(grid[0])
+    figure = new_figure(7.0)
+    grid = figure.add_gridspec(2, 3, width_ratios=[1.5, 0.75, 1.0], height_ratios=[1.5, 1.0])
+    ax_matrix = figure.add_subplot(grid[0, 0])
     draw_confusion(ax_matrix, table)
-    draw_shrinks(figure.add_subplot(grid[1], sharey=ax_matrix), table, target_pct)
-    draw_accuracy(figure.add_subplot(grid[2]), table, no_effect)
+    draw_shrinks(
+        figure.add_subplot(grid[0, 1], sharey=ax_matrix), table, targets["median_own_shrink_pct"]
+    )
+    draw_accuracy(figure.add_subplot(grid[0, 2]), metrics)
+    draw_parameter_errors(
+        figure.add_subplot(grid[1, 0:2]), table, targets.get("median_parameter_error", 0.15)
+    )
+    draw_reliability(figure.add_subplot(grid[1, 2]), metrics)
     return figure
 
 
@@ -186,6 +287,51 @@ def _misses(table: pd.DataFrame, n_shown: int = 3) -> str:
 
 def _percent(value: float | None) -> str:
     return "–" if value is None else f"{100 * value:.0f} %"
+
+
+def _accuracy(metrics: Mapping[str, Any], name: str) -> str:
+    """Return "k/n = r % [low–high %]" of ``<name>_accuracy`` (Wilson 95 %)."""
+    rate = metrics["intervals"][f"{name}_accuracy"]
+    if not rate["n"]:
+        return "– (no case)"
+    return (
+        f"{rate['k']}/{rate['n']} = {_percent(rate['rate'])} "
+        f"[{100 * rate['low']:.0f}–{100 * rate['high']:.0f} %]"
+    )
+
+
+def _pct(value: float | None) -> str:
+    return "–" if value is None else f"{value:.0f} %"
+
+
+def _shrinks_sentence(metrics: Mapping[str, Any]) -> str:
+    """Return the caption's headline: the three shrinks' medians over right diagnoses."""
+    return (
+        f"the effect's own share of the gap (beyond re-fitting the linear parameters) median "
+        f"{_pct(metrics['median_own_shrink_pct'])} over {metrics['n_shrinks']} right "
+        f"diagnoses (scoring part); raw error {_pct(metrics['median_raw_shrink_pct'])}; excess "
+        f"over noise {_pct(metrics['median_excess_shrink_pct'])} "
+        f"({metrics['n_excess_clipped']} clipped at 100 %){_refit_clause(metrics)}."
+    )
+
+
+def _refit_clause(metrics: Mapping[str, Any]) -> str:
+    refit = metrics.get("median_refit_shrink_pct")
+    if refit is None:
+        return ""
+    return f", of which the linear re-fit alone removes a median {refit:.0f} %"
+
+
+def _parameter_sentence(metrics: Mapping[str, Any]) -> str:
+    """Return the caption's sentence on parameter errors and calibration."""
+    error = metrics["median_parameter_error"]
+    gap = metrics["max_calibration_gap"]
+    return (
+        f"Median parameter error {'–' if error is None else f'{100 * error:.0f} %'} "
+        f"({metrics['n_parameter_errors']} cases); largest |accuracy − confidence| over "
+        f"{len(metrics['reliability'])} confidence bins "
+        f"{'–' if gap is None else f'{100 * gap:.0f} points'}."
+    )
 
 
 def gap_benchmark(
@@ -207,21 +353,22 @@ def gap_benchmark(
     checks : sequence of Check
         :func:`dtwin.gap.benchmark.benchmark_checks`.
     targets : mapping
-        :data:`dtwin.gap.benchmark.TARGETS` (``median_shrink_pct`` is drawn).
+        :data:`dtwin.gap.benchmark.TARGETS` (``median_own_shrink_pct`` and
+        ``median_parameter_error`` are drawn).
     no_effect : str
         The effect name of cases without an effect.
     """
     family = table["family"] if "family" in table.columns else pd.Series("paper", table.index)
     others = int((family != "paper").sum())
     table = table[family == "paper"]
-    figure = plot_gap_benchmark(table, targets["median_shrink_pct"], no_effect)
+    figure = plot_gap_benchmark(table, metrics, targets, no_effect)
     per_effect = sorted(set(metrics["cases_per_effect"].values()))
     caption = (
         f"{metrics['n_cases']} withheld-effect cases ({'/'.join(map(str, per_effect))} per "
-        f"effect): module {_percent(metrics['module_accuracy'])}, effect "
-        f"{_percent(metrics['effect_accuracy'])}, none {_percent(metrics['none_accuracy'])}, "
-        f"out-of-list → unexplained {_percent(metrics['unexplained_accuracy'])}, median "
-        f"excess gap removed {metrics['median_shrink_pct'] or 0:.0f} %." + _misses(table)
+        f"effect): {_shrinks_sentence(metrics)} Module {_accuracy(metrics, 'module')}, effect "
+        f"{_accuracy(metrics, 'effect')}, none {_accuracy(metrics, 'none')}, out-of-list → "
+        f"unexplained {_accuracy(metrics, 'unexplained')} (Wilson 95 %). "
+        f"{_parameter_sentence(metrics)}" + _misses(table)
     ) + (f" {others} cases of other families are in the JSON only." if others else "")
     return FigureArtifact(
         "gap_benchmark",

@@ -4,23 +4,28 @@
 
 1. **Where.** Each module whose input and output are recorded is driven with its *recorded*
    input; its local gap (:mod:`dtwin.gap.localise`) is compared with the largest gap its noise
-   explains (:mod:`dtwin.gap.noise`). Twins are never calibrated exactly, so the comparison
-   uses the gap left after re-fitting the module's own linear parameters inside
-   ``calibration_tolerance`` of their nominal values on the training part: a gap such a
-   re-fit removes is calibration slack, not a sim-to-real gap. A module above its threshold has
-   a gap; the *source* is the one furthest above. The chain shows which other gaps are only
-   inherited.
+   explains (:mod:`dtwin.gap.noise`), both on the choosing part. Twins are never calibrated
+   exactly, so the comparison uses the gap left after re-fitting the module's own linear
+   parameters inside ``calibration_tolerance`` of their nominal values on the training part: a
+   gap such a re-fit removes is calibration slack, not a sim-to-real gap. A module above its
+   threshold has a gap; the *source* is the one furthest above. The chain shows which other
+   gaps are only inherited.
 2. **Which.** Every candidate of a module with a gap (:mod:`dtwin.gap.effects`, plus
    ``parameter_mismatch``) is fitted on the training part together with the module's linear
-   parameters (:mod:`dtwin.gap.fit`), then scored on the held-out part by
+   parameters (:mod:`dtwin.gap.fit`), then scored on the **choosing part** by
    ``n_eff·ln(MSE) + p·ln(n_eff)`` (BIC with the effective sample size of the module's noise,
    so that slowly varying noise is not counted as independent evidence). The lowest score
-   wins; ``unexplained`` if it removes less than ``min_share`` of the held-out excess gap;
-   ``none`` if no module has a gap. ``confidence`` is the winner's BIC weight.
-3. **How far.** The held-out gap of the winner gives ``shrink_pct`` (of the excess gap, the
-   part above the noise floor: ``√(gap² − floor²)``) and ``raw_shrink_pct`` (of the whole gap);
-   the chain re-run with the effect added gives ``kpi_shrink_pct`` (end-to-end KPI ``z``, or the
-   most downstream recorded signal when ``z`` is not recorded).
+   wins; ``unexplained`` if it removes less than ``min_share`` of the choosing part's excess
+   gap; ``none`` if no module has a gap. ``confidence`` is the winner's BIC weight.
+3. **How far.** On the **scoring part**, never used for a decision, three shrinks:
+   ``raw_shrink_pct`` (whole error), ``own_shrink_pct`` (the effect's own share: the excess
+   gap left by the twin with only its linear parameters re-fitted on the same training data,
+   against the excess left with the effect) and ``excess_shrink_pct`` (the excess over the
+   module's one noise floor, ``√(gap² − floor²)``, with ``excess_clipped`` when that reaches
+   100 %); the chain re-run with the effect added gives ``kpi_shrink_pct``.
+
+Every decision (where the gap lies, which candidate, ``unexplained``) is taken on the choosing
+part; every reported shrink on the scoring part (docs/gap.md §Interface).
 """
 
 from __future__ import annotations
@@ -118,7 +123,13 @@ class GapSettings:
     min_gap : float, default 0.005
         Smallest normalised gap worth reporting, whatever the noise.
     min_share : float, default 0.5
-        Share of the held-out excess gap the best candidate must remove to explain it.
+        Share of the choosing part's excess gap the best candidate must remove to explain it.
+    choose_frac : float, default 0.5
+        Share of the samples after the training part that is the **choosing part** (every
+        decision: where, which, ``unexplained``); the rest is the **scoring part** (every
+        reported gap after an effect and every shrink). Ignored with a separate held-out
+        recording: that recording is the scoring part, the samples of the first recording after
+        its training part the choosing part (docs/gap.md §Interface).
     """
 
     noise_tolerance: float = 0.10
@@ -126,6 +137,7 @@ class GapSettings:
     significance: float = 0.01
     min_gap: float = 0.005
     min_share: float = 0.5
+    choose_frac: float = 0.5
 
     def __post_init__(self) -> None:
         require_in_range("gap.noise_tolerance", self.noise_tolerance, 0.0, 1.0)
@@ -133,6 +145,7 @@ class GapSettings:
         require_in_range("gap.significance", self.significance, 1e-9, 0.5)
         require_in_range("gap.min_gap", self.min_gap, 0.0, 1.0)
         require_in_range("gap.min_share", self.min_share, 0.0, 1.0)
+        require_in_range("gap.choose_frac", self.choose_frac, 0.1, 0.9)
 
     @classmethod
     def from_mapping(cls, mapping: Mapping[str, Any] | None) -> GapSettings:
@@ -146,7 +159,14 @@ class GapSettings:
 
 @dataclass(frozen=True)
 class ModuleReport:
-    """What the diagnoser found for one module (gaps normalised as in :mod:`~.localise`)."""
+    """What the diagnoser found for one module (gaps normalised as in :mod:`~.localise`).
+
+    ``gap_before``, ``gap_calibrated``, ``threshold`` and ``n_eff`` are measured on the
+    choosing part (they decide where the gap lies); ``scoring_gap_before``,
+    ``scoring_gap_refit`` (the twin with only its linear parameters re-fitted, source module
+    only), ``scoring_gap_after`` (with the chosen effect), ``chain_gap`` and
+    ``chain_gap_after`` on the scoring part (docs/gap.md §How far).
+    """
 
     name: str
     status: str
@@ -154,7 +174,9 @@ class ModuleReport:
     calibrated: bool = False
     gap_before: float | None = None
     gap_calibrated: float | None = None
-    gap_after: float | None = None
+    scoring_gap_before: float | None = None
+    scoring_gap_refit: float | None = None
+    scoring_gap_after: float | None = None
     chain_gap: float | None = None
     chain_gap_after: float | None = None
     noise_floor: float | None = None
@@ -171,16 +193,26 @@ class ModuleReport:
 
 @dataclass(frozen=True)
 class CandidateReport:
-    """One fitted candidate, scored on the held-out part."""
+    """One fitted candidate: chosen on the choosing part, scored on the scoring part.
+
+    ``choosing_gap``, ``choosing_share_pct`` (excess removed, against the candidate's own
+    floor), ``score`` and ``weight`` come from the choosing part; ``scoring_gap_after`` and the
+    three shrinks (``raw_shrink_pct``, ``own_shrink_pct``, ``excess_shrink_pct`` with
+    ``excess_clipped``) from the scoring part (docs/gap.md §Which, §How far).
+    """
 
     module: str
     effect: str
     params: dict[str, float]
     lin: dict[str, float]
     n_params: int
-    gap_after: float
-    heldout_shrink_pct: float
+    choosing_gap: float
+    choosing_share_pct: float
+    scoring_gap_after: float
     raw_shrink_pct: float
+    own_shrink_pct: float
+    excess_shrink_pct: float
+    excess_clipped: bool
     score: float
     weight: float
 
@@ -190,22 +222,33 @@ class Diagnosis:
     """The diagnosis of one recording (the content of ``diagnosis.json``).
 
     ``module`` is the source module or None; ``effect`` an effect name, ``"none"`` or
-    ``"unexplained"``; shrinks are percentages on the held-out part (None when no effect
-    was added). ``series`` holds held-out time series of the source module for the figure.
+    ``"unexplained"``. The three shrinks (docs/gap.md §How far) are percentages on the scoring
+    part, None when no effect was added: ``raw_shrink_pct`` (whole error, ``gap_before`` →
+    ``gap_after``), ``own_shrink_pct`` (the effect's own share: excess of the twin with only
+    its linear parameters re-fitted, ``gap_refit``, → ``gap_after``) and ``excess_shrink_pct``
+    (excess over the module's one noise floor; ``excess_clipped`` when the gap after is within
+    the floor, i.e. 100 %). ``series`` holds scoring-part time series of the source module for
+    the figure.
     """
 
     module: str | None
     effect: str
     params: dict[str, float]
     confidence: float | None
-    shrink_pct: float | None
+    gap_before: float | None
+    gap_refit: float | None
+    gap_after: float | None
     raw_shrink_pct: float | None
+    own_shrink_pct: float | None
+    excess_shrink_pct: float | None
+    excess_clipped: bool | None
     kpi_shrink_pct: float | None
     kpi_signal: str | None
     modules: dict[str, ModuleReport]
     candidates: list[CandidateReport]
     n_samples: int
     n_train: int
+    n_choose: int
     dt: float
     train_frac: float
     calibrated: tuple[str, ...]
@@ -453,6 +496,28 @@ def _prepare_exact_plant(data, nominal, n_train, n_held, holds) -> tuple[ModuleD
     return best[1], best[2]
 
 
+@dataclass(frozen=True)
+class _Split:
+    """The three parts of a recording (docs/gap.md §Interface).
+
+    Training ``[0, n_train)``, choosing ``[n_train, n_choose)``, scoring ``[n_choose, n)``.
+    """
+
+    n_train: int
+    n_choose: int
+    n: int
+
+    @property
+    def choose(self) -> slice:
+        """The choosing part: every decision (where, which, ``unexplained``)."""
+        return slice(self.n_train, self.n_choose)
+
+    @property
+    def score(self) -> slice:
+        """The scoring part: every reported gap after an effect and every shrink."""
+        return slice(self.n_choose, self.n)
+
+
 @dataclass
 class _ModuleWork:
     name: str
@@ -463,19 +528,36 @@ class _ModuleWork:
     norm: float
     sim_before: np.ndarray
     gap_before: float
+    gap_scored: float
     floor: NoiseFloor
     floor_twin: float | None
     floor_data: float
     gap_cal: float
     threshold: float
     n_eff: float
-    candidates: list[tuple[Effect, CandidateFit, np.ndarray, float]] = field(default_factory=list)
+    candidates: list[_Fitted] = field(default_factory=list)
     reference_gap: float | None = None
 
 
-def _analyse_module(name, rec, twin, t, n_train, calibrate, settings, layout) -> _ModuleWork:
+@dataclass(frozen=True)
+class _Fitted:
+    """A fitted candidate: its prediction ``(n_samples,)`` and its choosing/scoring gaps."""
+
+    effect: Effect
+    fit: CandidateFit
+    predicted: np.ndarray
+    gap_choose: float
+    gap_score: float
+
+
+def _analyse_module(name, rec, twin, t, split: _Split, calibrate, settings, layout):
+    """Return the module's :class:`_ModuleWork`: its twin, floors, gaps and threshold.
+
+    The gap and threshold that decide where the gap lies are the choosing part's; the gap the
+    shrinks start from is the scoring part's (docs/gap.md §Where).
+    """
+    n_train = split.n_train
     data = _module_data(name, rec, t, layout)
-    held = slice(n_train, rec.n_samples)
     norm = float(np.std(data.output)) or 1.0
     nominal = _nominal_lin(name, twin)
     calibrated = calibrate or nominal is None
@@ -498,7 +580,7 @@ def _analyse_module(name, rec, twin, t, n_train, calibrate, settings, layout) ->
     )
     floor = floor_twin if floor_twin is not None else floor_data
     data = replace(data, scales=_scales(data, n_train, floor.rms, lin_base, sim_before))
-    gap_before = normalised_rms(data.output, sim_before, held, norm)
+    gap_before = normalised_rms(data.output, sim_before, split.choose, norm)
     if calibrated:
         gap_cal = gap_before
     else:
@@ -507,8 +589,9 @@ def _analyse_module(name, rec, twin, t, n_train, calibrate, settings, layout) ->
         in_band = fit_candidate(
             data, None, lin_base, n_train=n_train, free=list(bounds), lin_bounds=bounds
         )
-        gap_cal = normalised_rms(data.output, simulate_module(data, in_band.lin), held, norm)
-    n_eff = effective_samples(floor.acf, rec.n_samples - n_train)
+        in_band_sim = simulate_module(data, in_band.lin)
+        gap_cal = normalised_rms(data.output, in_band_sim, split.choose, norm)
+    n_eff = effective_samples(floor.acf, split.n_choose - n_train)
     threshold = gap_threshold(
         floor.rms / norm,
         n_eff,
@@ -525,6 +608,7 @@ def _analyse_module(name, rec, twin, t, n_train, calibrate, settings, layout) ->
         norm,
         sim_before,
         gap_before,
+        normalised_rms(data.output, sim_before, split.score, norm),
         floor,
         floor_twin.rms / norm if floor_twin is not None else None,
         floor_data.rms / norm,
@@ -534,26 +618,33 @@ def _analyse_module(name, rec, twin, t, n_train, calibrate, settings, layout) ->
     )
 
 
-def _fit_candidates(work: _ModuleWork, n_train: int) -> None:
-    held = slice(n_train, work.data.n_samples)
+def _finite(gap: float) -> float:
+    return gap if math.isfinite(gap) else math.inf
+
+
+def _fit_candidates(work: _ModuleWork, split: _Split) -> None:
     start = work.lin_base
     for effect in effects_for_module(work.name, include_mismatch=not work.calibrated):
-        fitted = fit_candidate(work.data, effect, start, n_train=n_train)
+        fitted = fit_candidate(work.data, effect, start, n_train=split.n_train)
         if effect.name == PARAMETER_MISMATCH:
             start = fitted.lin  # the effects start from the re-fitted linear twin
         predicted = simulate_module(work.data, fitted.lin, effect, fitted.theta)
-        gap = normalised_rms(work.data.output, predicted, held, work.norm)
-        gap = gap if math.isfinite(gap) else math.inf
-        work.candidates.append((effect, fitted, predicted, gap))
-        logger.debug("%s %s: held-out gap %.4g", work.name, effect.name, gap)
+        gaps = [
+            _finite(normalised_rms(work.data.output, predicted, part, work.norm))
+            for part in (split.choose, split.score)
+        ]
+        work.candidates.append(_Fitted(effect, fitted, predicted, *gaps))
+        logger.debug("%s %s: choosing/scoring gap %.4g/%.4g", work.name, effect.name, *gaps)
 
 
 def _quantizer_floor_and_deviance(work: _ModuleWork, fitted: CandidateFit, held: slice):
-    """Return a quantizer candidate's noise floor and held-out deviance (normalised units).
+    """Return a quantizer candidate's noise floor and deviance over ``held`` (normalised units).
 
-    A quantizer after noise makes part of the noise unpredictable: its variance is the floor
-    of this candidate (:func:`~dtwin.gap.effects.quantization_variance`). Its deviance is
-    ``−2·mean log p(y)`` of the quantizer's own density
+    ``held`` is the choosing part: both serve the choice only, never a reported shrink (which
+    uses the module's one floor). A quantizer after noise makes part of the noise
+    unpredictable: its variance is the floor of this candidate
+    (:func:`~dtwin.gap.effects.quantization_variance`). Its deviance is ``−2·mean log p(y)``
+    of the quantizer's own density
     (:func:`~dtwin.gap.effects.quantizer_log_density`) less ``log(2π) + 1``, on the scale of a
     Gaussian candidate's ``log(mse)``: values on a lattice are then evidence for it even when
     its mean prediction is no better (docs/gap.md §Which). The noise after the quantizer is
@@ -572,30 +663,72 @@ def _quantizer_floor_and_deviance(work: _ModuleWork, fitted: CandidateFit, held:
     return floor, deviance - math.log(2 * math.pi) - 1.0
 
 
-def _score_candidates(work: _ModuleWork, n_train: int, settings: GapSettings):
+def _linear_refit_gap(work: _ModuleWork) -> float:
+    """Return the scoring-part gap of the twin with only its linear parameters re-fitted.
+
+    That is the ``parameter_mismatch`` fit (every linear parameter free, same training part);
+    a module calibrated from data has no such candidate: its linear twin is already fitted
+    freely on the training part (docs/gap.md §How far).
+    """
+    for fitted in work.candidates:
+        if fitted.effect.name == PARAMETER_MISMATCH:
+            return fitted.gap_score
+    return work.gap_scored
+
+
+def _three_shrinks(work: _ModuleWork, effect: str, gap_after: float, refit: float) -> tuple:
+    """Return ``(raw, own, excess, clipped)``: the three shrinks (%) on the scoring part.
+
+    ``own`` compares with the linear re-fit ``refit`` (the twin as given for
+    ``parameter_mismatch``, which is that re-fit); ``excess`` uses the module's one noise floor
+    for every candidate; ``clipped`` when the gap after is within it (docs/gap.md §How far).
+    """
+    floor = work.floor.rms / work.norm
+    before = work.gap_scored
+    reference = before if effect == PARAMETER_MISMATCH else refit
+    excess_after = _excess(gap_after, floor)
+    return (
+        _shrink(before, gap_after),
+        _shrink(_excess(reference, floor), excess_after),
+        _shrink(_excess(before, floor), excess_after),
+        bool(gap_after <= floor),
+    )
+
+
+def _score_candidates(work: _ModuleWork, split: _Split, settings: GapSettings):
+    """Return the module's :class:`CandidateReport` list, best (lowest choosing score) first.
+
+    ``score = n_eff·deviance + n_params·ln(n_eff)`` on the choosing part (docs/gap.md §Which);
+    the shrinks on the scoring part (§How far).
+    """
     n_eff = work.n_eff
     floor = work.floor.rms / work.norm
-    excess_before = _excess(work.gap_before, floor)
+    excess_choose = _excess(work.gap_before, floor)
+    refit = _linear_refit_gap(work)
+    tolerance = settings.calibration_tolerance
     reports = []
-    held = slice(n_train, work.data.n_samples)
-    for effect, fitted, _, gap in work.candidates:
+    for fitted in work.candidates:
+        effect, fit, gap = fitted.effect, fitted.fit, fitted.gap_choose
         floor_c = floor
         deviance = math.log(max(gap * gap, 1e-300))  # a Gaussian's, less log(2π) + 1
         if effect.name == "sensor_quantization":
-            floor_c, deviance = _quantizer_floor_and_deviance(work, fitted, held)
-        score = n_eff * deviance + fitted.n_free * math.log(max(n_eff, 2.0))
+            floor_c, deviance = _quantizer_floor_and_deviance(work, fit, split.choose)
+        score = n_eff * deviance + fit.n_free * math.log(max(n_eff, 2.0))
+        raw, own, excess, clipped = _three_shrinks(work, effect.name, fitted.gap_score, refit)
         reports.append(
             CandidateReport(
                 module=work.name,
                 effect=effect.name,
-                params=_effect_params(
-                    effect, fitted, work.lin_nominal, settings.calibration_tolerance
-                ),
-                lin=dict(fitted.lin),
-                n_params=fitted.n_free,
-                gap_after=gap,
-                heldout_shrink_pct=_shrink(excess_before, _excess(gap, floor_c)),
-                raw_shrink_pct=_shrink(work.gap_before, gap),
+                params=_effect_params(effect, fit, work.lin_nominal, tolerance),
+                lin=dict(fit.lin),
+                n_params=fit.n_free,
+                choosing_gap=gap,
+                choosing_share_pct=_shrink(excess_choose, _excess(gap, floor_c)),
+                scoring_gap_after=fitted.gap_score,
+                raw_shrink_pct=raw,
+                own_shrink_pct=own,
+                excess_shrink_pct=excess,
+                excess_clipped=clipped,
                 score=score,
                 weight=0.0,
             )
@@ -615,13 +748,17 @@ def _score_candidates(work: _ModuleWork, n_train: int, settings: GapSettings):
 # --- the steps of the entry point ------------------------------------------------------
 
 
-def _check_arguments(
-    recording: Recording, twin: TwinParams, train_frac: float, heldout: Recording | None
-) -> tuple:
-    """Validate the arguments of :func:`diagnose`; return ``(train_frac, n_train)``.
+#: Fewest samples of the training part, and of the choosing and the scoring part.
+MIN_TRAIN_SAMPLES, MIN_PART_SAMPLES = 100, 50
 
-    ``n_train`` is the number of samples, from the start, in the training part
-    (docs/gap.md §Interface). With a separate held-out recording ``train_frac`` may be 1.
+
+def _check_arguments(recording, twin, train_frac, heldout, choose_frac) -> tuple:
+    """Validate the arguments of :func:`diagnose`; return ``(train_frac, n_train, n_choose)``.
+
+    ``n_train`` samples from the start are the training part; the choosing part ends at
+    ``n_choose`` (the ``choose_frac`` share of the rest; with a separate held-out recording,
+    the whole rest of the recording: the held-out recording is the scoring part)
+    (docs/gap.md §Interface).
     """
     if not isinstance(recording, Recording):
         raise DtwinTypeError(f"recording must be a Recording (got {type(recording).__name__})")
@@ -629,8 +766,7 @@ def _check_arguments(
         raise DtwinTypeError(f"twin must be TwinParams (got {type(twin).__name__})")
     if heldout is not None and not isinstance(heldout, Recording):
         raise DtwinTypeError(f"heldout must be a Recording (got {type(heldout).__name__})")
-    top = 0.95 if heldout is None else 1.0
-    train_frac = require_in_range("train_frac", train_frac, 0.05, top)
+    train_frac = require_in_range("train_frac", train_frac, 0.05, 0.95)
     for label, rec in (("recording", recording), ("held-out recording", heldout)):
         if rec is not None and abs(rec.dt - twin.dt) > DT_TOLERANCE * twin.dt:
             raise DtwinValueError(
@@ -639,26 +775,34 @@ def _check_arguments(
             )
     n = recording.n_samples
     n_train = int(round(train_frac * n))
-    n_held = heldout.n_samples if heldout is not None else n - n_train
-    if min(n_train, n_held) < 100:
+    if heldout is not None:
+        n_choose, n_score = n - n_train, heldout.n_samples
+    else:
+        n_choose = int(round(choose_frac * (n - n_train)))
+        n_score = n - n_train - n_choose
+    if n_train < MIN_TRAIN_SAMPLES or min(n_choose, n_score) < MIN_PART_SAMPLES:
         raise DtwinValueError(
-            f"train_frac must leave at least 100 samples for training and for the held-out "
-            f"part (got {n_train} and {n_held})"
+            f"train_frac must leave at least {MIN_TRAIN_SAMPLES} samples for training and "
+            f"{MIN_PART_SAMPLES} each for choosing and for scoring (got {n_train}, {n_choose} "
+            f"and {n_score}{'; the scoring part is the held-out recording' if heldout else ''})"
         )
-    return train_frac, n_train
+    return train_frac, n_train, n_train + n_choose
 
 
 def join_heldout(
     recording: Recording, n_train: int, heldout: Recording, names: list[str]
 ) -> Recording:
-    """Return the training part of ``recording`` followed by the held-out recording.
+    """Return the first ``n_train`` samples of ``recording`` followed by the held-out recording.
+
+    :func:`diagnose` keeps the whole first recording (its training and choosing parts); the
+    held-out recording is the scoring part.
 
     Parameters
     ----------
     recording : Recording
-        The training experiment; its first ``n_train`` samples are kept.
+        The first experiment; its first ``n_train`` samples are kept.
     n_train : int
-        Number of training samples.
+        Number of samples kept.
     heldout : Recording
         The validation experiment; it must record every signal of the diagnosed ``names``.
     names : list of str
@@ -703,8 +847,8 @@ def _module_notes(works: Mapping[str, _ModuleWork], calibrate: bool) -> list[str
             notes.append(f"{work.name}: linear twin fitted on the training part ({why})")
         if work.reference_gap is not None:
             notes.append(
-                f"{work.name}: held-out gap of the calibrated linear twin "
-                f"{work.gap_before:.4g} ({work.data.discretisation}, windows of "
+                f"{work.name}: scoring-part gap of the calibrated linear twin "
+                f"{work.gap_scored:.4g} ({work.data.discretisation}, windows of "
                 f"{work.data.horizon} samples); a plain output-error fit OE(nb=3, nf=2) on the "
                 f"same split and windows: {work.reference_gap:.4g}"
             )
@@ -723,7 +867,8 @@ def _choose(flagged: list[_ModuleWork], ranked: Mapping[str, list], settings: Ga
 
     The source is the flagged module furthest above its threshold (``gap_cal/threshold``);
     ``chosen`` is its best-scored candidate if that removes at least ``min_share`` of the
-    held-out excess gap, else None (docs/gap.md §Which). Both are None when nothing is flagged.
+    choosing part's excess gap, else None (docs/gap.md §Which). Both are None when nothing is
+    flagged. Every number used here is the choosing part's.
     """
     source = max(flagged, key=lambda w: w.gap_cal / w.threshold) if flagged else None
     chosen = None
@@ -731,7 +876,7 @@ def _choose(flagged: list[_ModuleWork], ranked: Mapping[str, list], settings: Ga
         if not ranked[source.name]:
             return source, None
         best = ranked[source.name][0]
-        chosen = best if best.heldout_shrink_pct >= 100 * settings.min_share else None
+        chosen = best if best.choosing_share_pct >= 100 * settings.min_share else None
     return source, chosen
 
 
@@ -755,16 +900,15 @@ def _chain_before_after(rec, twin, works, t, source, chosen) -> tuple[dict, dict
     chain_before = run_chain(rec.signals, models, rec.dt, t, scales, layouts)
     chain_after = chain_before
     if chosen is not None:
-        effect = next(e for e, *_ in source.candidates if e.name == chosen.effect)
-        fitted = next(f for e, f, *_ in source.candidates if e.name == chosen.effect)
+        fitted = next(f for f in source.candidates if f.effect.name == chosen.effect)
         models_after = dict(models)
-        models_after[source.name] = ModuleModel(fitted.lin, effect, fitted.theta)
+        models_after[source.name] = ModuleModel(fitted.fit.lin, fitted.effect, fitted.fit.theta)
         chain_after = run_chain(rec.signals, models_after, rec.dt, t, scales, layouts)
     return chain_before, chain_after
 
 
-def _kpi_shrink(rec, chain_before, chain_after, source, chosen, held, notes) -> tuple:
-    """Return ``(kpi_signal, kpi_shrink_pct)`` on the held-out part; may append to ``notes``.
+def _kpi_shrink(rec, chain_before, chain_after, source, chosen, scored, notes) -> tuple:
+    """Return ``(kpi_signal, kpi_shrink_pct)`` on the scoring part; may append to ``notes``.
 
     The KPI signal is the most downstream recorded signal the chain simulates (``z`` first);
     its shrink is None when no effect was chosen or the source is not upstream of it.
@@ -779,8 +923,8 @@ def _kpi_shrink(rec, chain_before, chain_after, source, chosen, held, notes) -> 
         if source.name in upstream_modules(kpi_signal):
             recorded = rec.signals[kpi_signal]
             norm = float(np.std(recorded)) or 1.0
-            before = normalised_rms(recorded, chain_before[kpi_signal], held, norm)
-            after = normalised_rms(recorded, chain_after[kpi_signal], held, norm)
+            before = normalised_rms(recorded, chain_before[kpi_signal], scored, norm)
+            after = normalised_rms(recorded, chain_after[kpi_signal], scored, norm)
             kpi_shrink = _shrink(before, after)
         else:
             notes.append(f"{source.name} is not upstream of the end-to-end signal {kpi_signal}")
@@ -815,10 +959,11 @@ def _skipped_report(module, rec: Recording) -> ModuleReport:
     )
 
 
-def _module_reports(rec, works, flagged, source, chosen, chains, held) -> dict[str, ModuleReport]:
+def _module_reports(rec, works, flagged, source, chosen, chains, split: _Split) -> dict:
     """Return one :class:`ModuleReport` per module of the wiring table, in its order.
 
-    ``chains`` is ``(chain_before, chain_after)`` from :func:`_chain_before_after`.
+    ``chains`` is ``(chain_before, chain_after)`` from :func:`_chain_before_after`; the status
+    compares the choosing part's chain gap, the reported chain gaps are the scoring part's.
     """
     chain_before, chain_after = chains
     modules = {}
@@ -829,14 +974,19 @@ def _module_reports(rec, works, flagged, source, chosen, chains, held) -> dict[s
             continue
         work = works[name]
         out = module.output
-        chain_gap = chain_gap_after = None
+        chain_choose = chain_gap = chain_gap_after = None
         if out in chain_before:
-            chain_gap = normalised_rms(work.data.output, chain_before[out], held, work.norm)
-            chain_gap_after = normalised_rms(work.data.output, chain_after[out], held, work.norm)
-        gap_after = work.gap_before
+            chain_choose = normalised_rms(
+                work.data.output, chain_before[out], split.choose, work.norm
+            )
+            chain_gap = normalised_rms(work.data.output, chain_before[out], split.score, work.norm)
+            chain_gap_after = normalised_rms(
+                work.data.output, chain_after[out], split.score, work.norm
+            )
+        gap_after = refit = None
         if source is not None and name == source.name and chosen is not None:
-            gap_after = chosen.gap_after
-        status, reason = _status(work, flagged, source, chain_gap)
+            gap_after, refit = chosen.scoring_gap_after, _linear_refit_gap(work)
+        status, reason = _status(work, flagged, source, chain_choose)
         modules[name] = ModuleReport(
             name,
             status,
@@ -844,6 +994,8 @@ def _module_reports(rec, works, flagged, source, chosen, chains, held) -> dict[s
             work.calibrated,
             work.gap_before,
             work.gap_cal,
+            work.gap_scored,
+            refit,
             gap_after,
             chain_gap,
             chain_gap_after,
@@ -861,8 +1013,8 @@ def _module_reports(rec, works, flagged, source, chosen, chains, held) -> dict[s
     return modules
 
 
-def _heldout_series(rec: Recording, source, ranked, held: slice) -> dict[str, np.ndarray]:
-    """Return the source module's held-out series for the figure, each ``(n_held,)``.
+def _scoring_series(rec: Recording, source, ranked, scored: slice) -> dict[str, np.ndarray]:
+    """Return the source module's scoring-part series for the figure, each ``(n_scored,)``.
 
     Keys ``t`` (s), ``recorded``, ``before`` (the twin) and ``after`` (the best candidate);
     empty when there is no source.
@@ -870,37 +1022,44 @@ def _heldout_series(rec: Recording, source, ranked, held: slice) -> dict[str, np
     if source is None:
         return {}
     series = {
-        "t": rec.t[held],
-        "recorded": source.data.output[held],
-        "before": source.sim_before[held],
+        "t": rec.t[scored],
+        "recorded": source.data.output[scored],
+        "before": source.sim_before[scored],
     }
     if not ranked[source.name]:
         return series
-    best_prediction = next(
-        p for e, f, p, g in source.candidates if e.name == ranked[source.name][0].effect
-    )
-    series["after"] = best_prediction[held]
+    best = ranked[source.name][0].effect
+    series["after"] = next(f.predicted for f in source.candidates if f.effect.name == best)[scored]
     return series
 
 
-def _verdict(source, chosen) -> tuple:
-    """Return ``(module, effect, params, confidence, shrink_pct, raw_shrink_pct)``.
+def _verdict(source, chosen) -> dict[str, Any]:
+    """Return the answer's fields of :class:`Diagnosis` (module to ``excess_clipped``).
 
     ``none`` without a source, ``unexplained`` with a source but no chosen candidate
-    (docs/gap.md §Statuses).
+    (docs/gap.md §Statuses); the gaps and shrinks are the scoring part's.
     """
-    if source is None:
-        return None, NONE, {}, None, None, None
-    if chosen is None:
-        return source.name, UNEXPLAINED, {}, None, None, None
-    return (
-        source.name,
-        chosen.effect,
-        chosen.params,
-        chosen.weight,
-        chosen.heldout_shrink_pct,
-        chosen.raw_shrink_pct,
+    verdict = dict.fromkeys(
+        ("gap_before", "gap_refit", "gap_after", "raw_shrink_pct", "own_shrink_pct"), None
     )
+    verdict.update(excess_shrink_pct=None, excess_clipped=None, params={}, confidence=None)
+    if source is None:
+        return {**verdict, "module": None, "effect": NONE}
+    if chosen is None:
+        return {**verdict, "module": source.name, "effect": UNEXPLAINED}
+    return {
+        "module": source.name,
+        "effect": chosen.effect,
+        "params": chosen.params,
+        "confidence": chosen.weight,
+        "gap_before": source.gap_scored,
+        "gap_refit": _linear_refit_gap(source),
+        "gap_after": chosen.scoring_gap_after,
+        "raw_shrink_pct": chosen.raw_shrink_pct,
+        "own_shrink_pct": chosen.own_shrink_pct,
+        "excess_shrink_pct": chosen.excess_shrink_pct,
+        "excess_clipped": chosen.excess_clipped,
+    }
 
 
 # --- the entry point -----------------------------------------------------------------
@@ -927,15 +1086,17 @@ def diagnose(
     calibrate : bool, default False
         Fit every diagnosed module's linear twin on the training part first.
     train_frac : float, default 0.5
-        Fraction of samples, from the start, used for fitting; the rest is held out.
+        Fraction of samples, from the start, used for fitting (the training part); of the
+        rest, the first ``settings.choose_frac`` is the choosing part (every decision), the
+        remainder the scoring part (every reported gap after an effect and every shrink).
     settings : GapSettings, optional
         Decision constants.
     discretisation : {"euler", "zoh", "foh", "bandlimited"}, optional
         The plant's discretisation (the twin file's ``discretisation``); None: the exact hold
         (zero-order, first-order or band-limited) that fits the training part best.
     heldout : Recording, optional
-        A separate validation experiment: every gap is measured on it, and the first
-        ``round(train_frac·n)`` samples of ``recording`` are the training part.
+        A separate validation experiment: the scoring part. The first ``round(train_frac·n)``
+        samples of ``recording`` are the training part, the rest of it the choosing part.
 
     Returns
     -------
@@ -944,8 +1105,9 @@ def diagnose(
     Raises
     ------
     DtwinValueError
-        If ``twin.dt`` disagrees with the recording's by more than 1 %, ``train_frac`` leaves
-        fewer than 100 samples on either side, or a module input is constant.
+        If ``twin.dt`` disagrees with the recording's by more than 1 %, the split leaves fewer
+        than 100 training samples or fewer than 50 for choosing or for scoring, or a module
+        input is constant.
 
     Notes
     -----
@@ -960,23 +1122,25 @@ def diagnose(
 def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, heldout):
     """Run :func:`diagnose` (same arguments) with the thread limit set."""
     settings = settings or GapSettings()
-    train_frac, n_train = _check_arguments(recording, twin, train_frac, heldout)
+    train_frac, n_train, n_choose = _check_arguments(
+        recording, twin, train_frac, heldout, settings.choose_frac
+    )
     holds = EXACT_HOLDS if discretisation is None else (discretisation,)
     layout = _Layout(holds)
     names = diagnosable_modules(recording.signals)
     _check_inputs_vary(recording, names, n_train)
     if heldout is not None:
-        recording = join_heldout(recording, n_train, heldout, names)
-        layout = _Layout(holds, (n_train,))
+        recording = join_heldout(recording, n_choose, heldout, names)
+        layout = _Layout(holds, (n_choose,))
     n = recording.n_samples
+    split = _Split(n_train, n_choose, n)
     t = recording.t - recording.t[0]
-    held = slice(n_train, n)
     notes: list[str] = []
     if recording.ignored:
         notes.append(f"ignored columns that are not module signals: {', '.join(recording.ignored)}")
 
     works = {
-        name: _analyse_module(name, recording, twin, t, n_train, calibrate, settings, layout)
+        name: _analyse_module(name, recording, twin, t, split, calibrate, settings, layout)
         for name in names
     }
     for work in works.values():
@@ -984,40 +1148,35 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
             reference = output_error_reference(
                 work.data, int(work.lin_base.get("delay_samples", 0)), n_train
             )
-            work.reference_gap = normalised_rms(work.data.output, reference, held, work.norm)
+            work.reference_gap = normalised_rms(work.data.output, reference, split.score, work.norm)
     notes.extend(_module_notes(works, calibrate))
     flagged = [w for w in works.values() if w.gap_cal > w.threshold]
     for work in flagged:
-        _fit_candidates(work, n_train)
-    ranked = {w.name: _score_candidates(w, n_train, settings) for w in flagged}
+        _fit_candidates(work, split)
+    ranked = {w.name: _score_candidates(w, split, settings) for w in flagged}
     source, chosen = _choose(flagged, ranked, settings)
 
     chains = _chain_before_after(recording, twin, works, t, source, chosen)
-    kpi_signal, kpi_shrink = _kpi_shrink(recording, *chains, source, chosen, held, notes)
-    modules = _module_reports(recording, works, flagged, source, chosen, chains, held)
+    kpi_signal, kpi_shrink = _kpi_shrink(recording, *chains, source, chosen, split.score, notes)
+    modules = _module_reports(recording, works, flagged, source, chosen, chains, split)
     candidates = [
         c
         for name in sorted(ranked, key=lambda k: k != getattr(source, "name", None))
         for c in ranked[name]
     ]
-    module, effect, params, confidence, shrink, raw_shrink = _verdict(source, chosen)
     return Diagnosis(
-        module=module,
-        effect=effect,
-        params=params,
-        confidence=confidence,
-        shrink_pct=shrink,
-        raw_shrink_pct=raw_shrink,
+        **_verdict(source, chosen),
         kpi_shrink_pct=kpi_shrink,
         kpi_signal=kpi_signal,
         modules=modules,
         candidates=candidates,
         n_samples=n,
         n_train=n_train,
+        n_choose=n_choose,
         dt=recording.dt,
         train_frac=train_frac,
         calibrated=tuple(w.name for w in works.values() if w.calibrated),
         notes=tuple(notes),
         settings=settings,
-        series=_heldout_series(recording, source, ranked, held),
+        series=_scoring_series(recording, source, ranked, split.score),
     )

@@ -6,7 +6,7 @@ Specification: docs/gap.md §Output files.
 diagnosis.schema.json``); :func:`write_report` writes all three files into a folder, each
 atomically. The figure answers in one look: where the gap lies (local vs chain gap per module
 against its noise threshold), the ranked candidates, and the source module before/after on the
-held-out part.
+scoring part. The three shrinks are defined once, in :data:`DEFINITIONS` (docs/gap.md §How far).
 """
 
 from __future__ import annotations
@@ -21,32 +21,64 @@ import numpy as np
 from dtwin.artifacts import atomic_write, to_jsonable, write_json
 from dtwin.gap.diagnose import Diagnosis
 
-__all__ = ["SCHEMA_VERSION", "DEFINITIONS", "diagnosis_to_dict", "render_markdown", "write_report"]
+__all__ = [
+    "SCHEMA_VERSION",
+    "DEFINITIONS",
+    "SHRINKS",
+    "diagnosis_to_dict",
+    "render_markdown",
+    "write_report",
+]
 
-SCHEMA_VERSION = "dtwin.gap/1"
+SCHEMA_VERSION = "dtwin.gap/2"
 
 #: How every number of the report is defined (copied into ``diagnosis.json``).
 DEFINITIONS: dict[str, str] = {
-    "gap": "normalised RMS error over the held-out samples (those after the training fraction): "
-    "RMS(recorded − twin) / std(recorded signal over the whole recording)",
+    "parts": "the recording is cut in three: the training part (the first train_frac of the "
+    "samples: every parameter is fitted there), the choosing part (the next choose_frac of the "
+    "rest: every decision, i.e. where the gap lies, which candidate, unexplained) and the "
+    "scoring part (the remaining samples, or the --heldout recording: every gap after an "
+    "effect and every shrink). No reported shrink is measured on data used for a decision",
+    "gap": "normalised RMS error over a part: RMS(recorded − twin) / std(recorded signal over "
+    "the whole recording)",
     "local gap": "the module's twin driven with the module's recorded input",
     "chain gap": "the whole twin run from the most upstream recorded signal, each module fed by "
-    "its simulated predecessor",
+    "its simulated predecessor (scoring part)",
     "noise_floor": "the gap the module's own noise explains (twin noise levels; from the data "
-    "when the twin gives none)",
+    "when the twin gives none); one floor per module, the same for every candidate",
     "threshold": "noise floor × (1 + noise_tolerance) × the upper (1 − significance) quantile of "
-    "a noise RMS over the held-out part's effective sample size, at least min_gap",
-    "gap_calibrated": "local gap after re-fitting the module's linear parameters within "
-    "calibration_tolerance of nominal on the training part (calibration slack removed)",
-    "excess gap": "sqrt(gap² − noise_floor²): the part of the gap above what noise explains",
-    "shrink_pct": "100·(1 − excess gap after / excess gap before) of the source module, held-out "
-    "part, the effect's parameters fitted on the training part",
-    "raw_shrink_pct": "100·(1 − gap after / gap before) of the source module, held-out part",
+    "a noise RMS over the choosing part's effective sample size, at least min_gap",
+    "gap_before, gap_calibrated": "choosing part: the twin's local gap, and that gap after "
+    "re-fitting the module's linear parameters within calibration_tolerance of nominal on the "
+    "training part (calibration slack removed); they decide where the gap lies",
+    "excess gap": "sqrt(max(gap² − noise_floor², 0)): the part of the gap above what noise "
+    "explains",
+    "raw_shrink_pct": "shrink 1 of 3, the whole error: 100·(1 − gap_after / gap_before) of the "
+    "source module on the scoring part",
+    "own_shrink_pct": "shrink 2 of 3, the effect's own share (the headline): 100·(1 − excess "
+    "gap after / excess gap of gap_refit), gap_refit being the twin with only its linear "
+    "parameters re-fitted on the same training part (every effect fit re-fits them too, so "
+    "this is what the effect adds to that re-fit); for parameter_mismatch, which is that "
+    "re-fit, the reference is the twin as given. Scoring part",
+    "excess_shrink_pct": "shrink 3 of 3, the excess over the noise floor: 100·(1 − excess gap "
+    "after / excess gap before), the module's one noise floor for every candidate; "
+    "excess_clipped is true when the gap after is within the floor (the shrink is then "
+    "exactly 100 %). Scoring part",
     "kpi_shrink_pct": "100·(1 − chain gap after / chain gap before) of the end-to-end signal "
-    "(kpi_signal: z when recorded), held-out part; null when the source is not upstream of it",
-    "score": "n_eff·ln(held-out MSE) + n_params·ln(n_eff), relative to the best candidate",
+    "(kpi_signal: z when recorded), scoring part; null when the source is not upstream of it",
+    "choosing_share_pct": "the excess gap a candidate removes on the choosing part, against its "
+    "own floor (a quantizer's includes its rounding); the winner needs min_share of it",
+    "score": "n_eff·deviance + n_params·ln(n_eff) on the choosing part (deviance ln MSE; a "
+    "quantizer's its own density's), relative to the best candidate",
     "confidence": "BIC weight of the chosen candidate among the module's candidates",
 }
+
+#: The three shrinks (``Diagnosis`` field, short label), the effect's own share first.
+SHRINKS: tuple[tuple[str, str], ...] = (
+    ("own_shrink_pct", "effect's own share"),
+    ("raw_shrink_pct", "raw error"),
+    ("excess_shrink_pct", "excess over noise"),
+)
 
 
 def diagnosis_to_dict(diagnosis: Diagnosis) -> dict[str, Any]:
@@ -63,27 +95,30 @@ def diagnosis_to_dict(diagnosis: Diagnosis) -> dict[str, Any]:
         entry = asdict(candidate)
         entry["linear_params"] = entry.pop("lin")
         candidates.append(entry)
+    d = diagnosis
     payload = {
         "schema": SCHEMA_VERSION,
-        "module": diagnosis.module,
-        "effect": diagnosis.effect,
-        "params": diagnosis.params,
-        "confidence": diagnosis.confidence,
-        "shrink_pct": diagnosis.shrink_pct,
-        "raw_shrink_pct": diagnosis.raw_shrink_pct,
-        "kpi_shrink_pct": diagnosis.kpi_shrink_pct,
-        "kpi_signal": diagnosis.kpi_signal,
+        "module": d.module,
+        "effect": d.effect,
+        "params": d.params,
+        "confidence": d.confidence,
+        **{key: getattr(d, key) for key in ("gap_before", "gap_refit", "gap_after")},
+        **{key: getattr(d, key) for key, _ in SHRINKS},
+        "excess_clipped": d.excess_clipped,
+        "kpi_shrink_pct": d.kpi_shrink_pct,
+        "kpi_signal": d.kpi_signal,
         "modules": modules,
         "candidates": candidates,
         "recording": {
-            "n_samples": diagnosis.n_samples,
-            "n_train": diagnosis.n_train,
-            "dt": diagnosis.dt,
-            "train_frac": diagnosis.train_frac,
+            "n_samples": d.n_samples,
+            "n_train": d.n_train,
+            "n_choose": d.n_choose,
+            "dt": d.dt,
+            "train_frac": d.train_frac,
         },
-        "calibrated": list(diagnosis.calibrated),
-        "notes": list(diagnosis.notes),
-        "settings": asdict(diagnosis.settings),
+        "calibrated": list(d.calibrated),
+        "notes": list(d.notes),
+        "settings": asdict(d.settings),
         "definitions": DEFINITIONS,
     }
     return to_jsonable(payload)
@@ -103,18 +138,21 @@ def _headline(d: Diagnosis) -> str:
     if d.effect == "unexplained":
         return (
             f"**Gap in {d.module}, unexplained**: no candidate effect removes at least "
-            f"{d.settings.min_share:.0%} of its held-out excess gap."
+            f"{d.settings.min_share:.0%} of its excess gap on the choosing part."
         )
     params = ", ".join(f"{k} = {v:.4g}" for k, v in d.params.items())
     kpi = (
-        f", end-to-end {d.kpi_signal} gap −{d.kpi_shrink_pct:.0f} %"
+        f"; end-to-end {d.kpi_signal} gap −{d.kpi_shrink_pct:.0f} %"
         if d.kpi_shrink_pct is not None
         else ""
     )
+    clipped = " (clipped: the gap after is within the noise floor)" if d.excess_clipped else ""
     return (
         f"**Gap in {d.module}: {d.effect}** ({params}; confidence {d.confidence:.2f}). "
-        f"Added to the twin, it removes {d.shrink_pct:.0f} % of the held-out excess gap "
-        f"({d.raw_shrink_pct:.0f} % of the whole gap{kpi})."
+        f"On the scoring part, it removes {d.own_shrink_pct:.0f} % of the excess gap left by "
+        f"re-fitting the linear parameters alone (its own share); whole error "
+        f"{d.gap_before:.3g} → {d.gap_after:.3g} (−{d.raw_shrink_pct:.0f} %); excess over the "
+        f"noise floor −{d.excess_shrink_pct:.0f} %{clipped}{kpi}."
     )
 
 
@@ -129,34 +167,38 @@ def render_markdown(diagnosis: Diagnosis, figure_name: str = "gap.png") -> str:
         f"![gap diagnosis]({figure_name})",
         "",
         f"Recording: {d.n_samples} samples, dt = {d.dt:.6g} s; parameters fitted on the first "
-        f"{d.n_train} samples ({d.train_frac:.0%}), every gap measured on the remaining "
-        f"{d.n_samples - d.n_train} (held out).",
+        f"{d.n_train} samples ({d.train_frac:.0%}, training part), decisions taken on the next "
+        f"{d.n_choose - d.n_train} (choosing part), every shrink measured on the remaining "
+        f"{d.n_samples - d.n_choose} (scoring part).",
         "",
         "## Where: per module",
         "",
-        "| module | status | local gap | after calibration slack | threshold | chain gap "
-        "| gap after | why |",
-        "|---|---|---|---|---|---|---|---|",
+        "| module | status | local gap (choosing) | after calibration slack | threshold "
+        "| gap (scoring) | after linear re-fit | after effect | chain gap | why |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, m in d.modules.items():
         lines.append(
             f"| {name} | {m.status} | {_fmt(m.gap_before)} | {_fmt(m.gap_calibrated)} "
-            f"| {_fmt(m.threshold)} | {_fmt(m.chain_gap)} | {_fmt(m.gap_after)} | {m.reason} |"
+            f"| {_fmt(m.threshold)} | {_fmt(m.scoring_gap_before)} | {_fmt(m.scoring_gap_refit)} "
+            f"| {_fmt(m.scoring_gap_after)} | {_fmt(m.chain_gap)} | {m.reason} |"
         )
-    lines += ["", "## Which: candidates (held-out part, best first)", ""]
+    lines += ["", "## Which: candidates (score on the choosing part, best first)", ""]
     if d.candidates:
         lines += [
-            "| module | effect | parameters | gap after | excess shrink % | raw shrink % "
-            "| score | weight |",
-            "|---|---|---|---|---|---|---|---|",
+            "| module | effect | parameters | share removed (choosing) % | score | weight "
+            "| gap after (scoring) | own share % | raw % | excess % |",
+            "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for c in d.candidates:
             params = ", ".join(f"{k}={v:.4g}" for k, v in c.params.items())
             lines.append(
-                f"| {c.module} | {c.effect} | {params} | {_fmt(c.gap_after)} "
-                f"| {_fmt(c.heldout_shrink_pct)} | {_fmt(c.raw_shrink_pct)} | {c.score:.1f} "
-                f"| {c.weight:.2f} |"
+                f"| {c.module} | {c.effect} | {params} | {_fmt(c.choosing_share_pct)} "
+                f"| {c.score:.1f} | {c.weight:.2f} | {_fmt(c.scoring_gap_after)} "
+                f"| {_fmt(c.own_shrink_pct)} | {_fmt(c.raw_shrink_pct)} "
+                f"| {_fmt(c.excess_shrink_pct)}{'*' if c.excess_clipped else ''} |"
             )
+        lines += ["", "\\* clipped: the gap after is within the noise floor."]
     else:
         lines.append("No module has a gap beyond its noise, so no candidate was fitted.")
     if d.notes:
@@ -188,12 +230,12 @@ def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
     ax = axes[1]
     if d.candidates:
         labels = [f"{c.module} {c.effect}" for c in d.candidates][::-1]
-        values = [c.heldout_shrink_pct for c in d.candidates][::-1]
+        values = [c.choosing_share_pct for c in d.candidates][::-1]
         values = [v if np.isfinite(v) else -100.0 for v in values]
         bar_colors = ["tab:green" if c.effect == d.effect else "gray" for c in d.candidates][::-1]
         ax.barh(labels, np.clip(values, -100, 100), color=bar_colors)
         ax.axvline(100 * d.settings.min_share, color="k", ls="--", lw=1)
-        ax.set_xlabel("held-out excess gap removed, %")
+        ax.set_xlabel("excess gap removed on the choosing part, %")
         ax.tick_params(axis="y", labelsize=8)
     else:
         ax.text(0.5, 0.5, "no gap beyond noise:\nno candidates", ha="center", va="center")
@@ -213,14 +255,16 @@ def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
                 label=f"recorded − ({after_label})",
             )
         ax.axhline(0.0, color="k", lw=0.5)
-        ax.set_xlabel("t (s), held-out part")
+        ax.set_xlabel("t (s), scoring part")
         ax.set_ylabel(f"{d.module} output error (recording units)")
         ax.legend(fontsize=8)
     else:
         ax.set_axis_off()
     ax.set_title("How far: before / after")
     title = {"none": "No gap beyond noise", "unexplained": f"{d.module}: unexplained gap"}.get(
-        d.effect, f"{d.module}: {d.effect}, excess gap −{(d.shrink_pct or 0):.0f} % held-out"
+        d.effect,
+        f"{d.module}: {d.effect}, its own share of the gap −{(d.own_shrink_pct or 0):.0f} % "
+        "(scoring part)",
     )
     fig.suptitle(title, fontsize=13, fontweight="bold")
     fig.tight_layout()
