@@ -4,12 +4,12 @@
 
 1. **Where.** Each module whose input and output are recorded is driven with its *recorded*
    input; its local gap (:mod:`dtwin.gap.localise`) is compared with the largest gap its noise
-   explains (:mod:`dtwin.gap.noise`), both on the choosing part. Twins are never calibrated
-   exactly, so the comparison uses the gap left after re-fitting the module's own linear
-   parameters inside ``calibration_tolerance`` of their nominal values on the training part: a
-   gap such a re-fit removes is calibration slack, not a sim-to-real gap. A module above its
-   threshold has a gap; the *source* is the one furthest above. The chain shows which other
-   gaps are only inherited.
+   explains (:mod:`dtwin.gap.noise`), both on the training and choosing parts. Twins are
+   never calibrated exactly, so the comparison uses the gap left after re-fitting the module's
+   own linear parameters inside ``calibration_tolerance`` of their nominal values on the
+   training part: a gap such a re-fit removes is calibration slack, not a sim-to-real gap. A
+   module above its threshold has a gap; the *source* is the one furthest above. The chain
+   shows which other gaps are only inherited.
 2. **Which.** Every candidate of a module with a gap (:mod:`dtwin.gap.effects`, plus
    ``parameter_mismatch``) is fitted on the training part together with the module's linear
    parameters (:mod:`dtwin.gap.fit`), then scored on the **choosing part** by
@@ -24,8 +24,9 @@
    module's one noise floor, ``√(gap² − floor²)``, with ``excess_clipped`` when that reaches
    100 %); the chain re-run with the effect added gives ``kpi_shrink_pct``.
 
-Every decision (where the gap lies, which candidate, ``unexplained``) is taken on the choosing
-part; every reported shrink on the scoring part (docs/gap.md §Interface).
+Every decision is taken before the scoring part (where the gap lies: training and choosing
+parts; which candidate and ``unexplained``: the choosing part); every reported shrink on the
+scoring part (docs/gap.md §Interface).
 """
 
 from __future__ import annotations
@@ -161,8 +162,9 @@ class GapSettings:
 class ModuleReport:
     """What the diagnoser found for one module (gaps normalised as in :mod:`~.localise`).
 
-    ``gap_before``, ``gap_calibrated``, ``threshold`` and ``n_eff`` are measured on the
-    choosing part (they decide where the gap lies); ``scoring_gap_before``,
+    ``gap_calibrated``, ``threshold`` and ``n_eff`` are measured on the training and the
+    choosing part together (they decide where the gap lies), ``gap_before`` on the choosing
+    part (candidates' shares start from it); ``scoring_gap_before``,
     ``scoring_gap_refit`` (the twin with only its linear parameters re-fitted, source module
     only), ``scoring_gap_after`` (with the chosen effect), ``chain_gap`` and
     ``chain_gap_after`` on the scoring part (docs/gap.md §How far).
@@ -513,6 +515,11 @@ class _Split:
         return slice(self.n_train, self.n_choose)
 
     @property
+    def decide(self) -> slice:
+        """Where the gap lies: the training and the choosing part (all before scoring)."""
+        return slice(0, self.n_choose)
+
+    @property
     def score(self) -> slice:
         """The scoring part: every reported gap after an effect and every shrink."""
         return slice(self.n_choose, self.n)
@@ -553,8 +560,11 @@ class _Fitted:
 def _analyse_module(name, rec, twin, t, split: _Split, calibrate, settings, layout):
     """Return the module's :class:`_ModuleWork`: its twin, floors, gaps and threshold.
 
-    The gap and threshold that decide where the gap lies are the choosing part's; the gap the
-    shrinks start from is the scoring part's (docs/gap.md §Where).
+    The gap and threshold that decide where the gap lies are those of all data before the
+    scoring part (training and choosing: a linear re-fit of a few parameters is barely biased
+    in-sample, and a third of the data made faint effects read ``none``); candidates are
+    compared on the choosing part; the gap the shrinks start from is the scoring part's
+    (docs/gap.md §Where).
     """
     n_train = split.n_train
     data = _module_data(name, rec, t, layout)
@@ -581,17 +591,16 @@ def _analyse_module(name, rec, twin, t, split: _Split, calibrate, settings, layo
     floor = floor_twin if floor_twin is not None else floor_data
     data = replace(data, scales=_scales(data, n_train, floor.rms, lin_base, sim_before))
     gap_before = normalised_rms(data.output, sim_before, split.choose, norm)
-    if calibrated:
-        gap_cal = gap_before
-    else:
+    gap_cal = normalised_rms(data.output, sim_before, split.decide, norm)
+    if not calibrated:
         typical = linear_typical(name, lin_base, data.scales)
         bounds = _in_band_bounds(lin_base, typical, settings.calibration_tolerance)
         in_band = fit_candidate(
             data, None, lin_base, n_train=n_train, free=list(bounds), lin_bounds=bounds
         )
         in_band_sim = simulate_module(data, in_band.lin)
-        gap_cal = normalised_rms(data.output, in_band_sim, split.choose, norm)
-    n_eff = effective_samples(floor.acf, split.n_choose - n_train)
+        gap_cal = min(gap_cal, normalised_rms(data.output, in_band_sim, split.decide, norm))
+    n_eff = effective_samples(floor.acf, split.n_choose)
     threshold = gap_threshold(
         floor.rms / norm,
         n_eff,
@@ -612,7 +621,7 @@ def _analyse_module(name, rec, twin, t, split: _Split, calibrate, settings, layo
         floor,
         floor_twin.rms / norm if floor_twin is not None else None,
         floor_data.rms / norm,
-        min(gap_cal, gap_before),
+        gap_cal,
         threshold,
         n_eff,
     )

@@ -47,7 +47,7 @@ DEFINITIONS: dict[str, str] = {
     "noise_floor": "the gap the module's own noise explains (twin noise levels; from the data "
     "when the twin gives none); one floor per module, the same for every candidate",
     "threshold": "noise floor × (1 + noise_tolerance) × the upper (1 − significance) quantile of "
-    "a noise RMS over the choosing part's effective sample size, at least min_gap",
+    "a noise RMS over the effective sample size before the scoring part, at least min_gap",
     "gap_before, gap_calibrated": "choosing part: the twin's local gap, and that gap after "
     "re-fitting the module's linear parameters within calibration_tolerance of nominal on the "
     "training part (calibration slack removed); they decide where the gap lies",
