@@ -1,9 +1,20 @@
 """One HMM fit in a fresh process: seconds per EM iteration and peak memory (benchmark).
 
 Usage: python benchmarks/hmm_fit.py {dtwin,hmmlearn} T [n_restarts] [max_iter]
+       python benchmarks/hmm_fit.py {em-dtwin,em-hmmlearn} T [repeats]
 Prints one JSON line. Data: T×10 features from a 4-state switching Gaussian, seed 0.
-Seconds per EM iteration = (time of the fit with max_iter − time with 1 iteration) / (extra
-iterations), so start-up, random starts and the final posteriors are not counted.
+
+``dtwin``/``hmmlearn``: one whole fit (random starts, EM, decoding, posteriors);
+``seconds_per_iteration`` is the fit's seconds over its EM iterations (everything included),
+``peak_mb`` the process's peak resident memory.
+
+``em-*``: one EM iteration alone (K 4, from one k-means++ start, BLAS on one thread), through
+dtwin's GaussianHMM subclass or hmmlearn's own GaussianHMM: ``seconds_per_iteration`` is
+``(t(fit, 3 iterations) − t(fit, 1 iteration)) / 2`` (so set-up, validation and the first call
+are not counted; median of ``repeats``), ``iteration_peak_mb`` the peak of the memory numpy
+allocates during a 1-iteration fit (tracemalloc, MiB; ``X`` itself is allocated before), and
+``peak_mb`` the process's peak resident memory (MiB) after the measurements — with the
+interpreter and imports (``baseline_mb``) and ``X``.
 """
 
 from __future__ import annotations
@@ -23,8 +34,58 @@ def features(n_steps: int) -> np.ndarray:
     return means[states] + rng.standard_normal((n_steps, 10))
 
 
+def em_iteration(engine: str, n_steps: int, repeats: int) -> dict:
+    """Seconds per EM iteration and its memory peak (see the module docstring)."""
+    import os
+    import statistics
+    import tracemalloc
+
+    from hmmlearn.hmm import GaussianHMM
+    from threadpoolctl import threadpool_limits
+
+    from dtwin import hmm
+
+    baseline_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    X = features(n_steps)
+    means, variances, _ = hmm._kmeanspp_start(X, 4, np.random.default_rng(0), 1e-3)
+
+    def fit(n_iter: int) -> float:
+        if engine == "em-dtwin":
+            model = hmm._new_model(4, "scaling", n_iter=n_iter)
+        else:
+            model = GaussianHMM(4, "diag", n_iter=n_iter, tol=0.0, init_params="")
+        uniform = np.full(4, 0.25)
+        hmm._set_params(model, uniform, np.tile(uniform, (4, 1)), means, variances)
+        start = time.perf_counter()
+        model.fit(X)
+        return time.perf_counter() - start
+
+    with threadpool_limits(limits=1):
+        fit(1)
+        tracemalloc.start()
+        fit(1)
+        iteration_peak = tracemalloc.get_traced_memory()[1] / 2**20
+        tracemalloc.stop()
+        samples = [(fit(3) - fit(1)) / 2 for _ in range(repeats)]
+    return {
+        "engine": engine,
+        "T": n_steps,
+        "repeats": repeats,
+        "seconds_per_iteration": statistics.median(samples),
+        "seconds_per_iteration_all": sorted(samples),
+        "iteration_peak_mb": iteration_peak,
+        "baseline_mb": baseline_mb,
+        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "load_1min": os.getloadavg()[0],
+    }
+
+
 def main() -> None:
     engine, n_steps = sys.argv[1], int(float(sys.argv[2]))
+    if engine.startswith("em-"):
+        repeats = int(sys.argv[3]) if len(sys.argv) > 3 else 3
+        print(json.dumps(em_iteration(engine, n_steps, repeats)))
+        return
     n_restarts = int(sys.argv[3]) if len(sys.argv) > 3 else 10
     max_iter = int(sys.argv[4]) if len(sys.argv) > 4 else 500
     X = features(n_steps)
