@@ -66,11 +66,12 @@ class HoldMatrices(NamedTuple):
         before, after = max(-self.first, 0), max(self.first + len(self.taps) - 1, 0)
         padded = np.concatenate([np.full(before, w[0]), w, np.full(after, w[-1])])
         start = before + self.first  # d[i] = Σ_j taps[j]·padded[start + i + j]
-        columns = [
-            np.correlate(padded[start : start + len(w) + len(self.taps) - 1], self.taps[:, i])
-            for i in (0, 1)
-        ]
-        return np.column_stack(columns)
+        drive = np.empty((len(w), 2))
+        for i in (0, 1):
+            drive[:, i] = np.correlate(
+                padded[start : start + len(w) + len(self.taps) - 1], self.taps[:, i]
+            )
+        return drive
 
 
 @lru_cache(maxsize=512)
@@ -301,10 +302,25 @@ def exact_plant_response(
     for start, stop in windows:
         by_length.setdefault(stop - start, []).append(start)
     for length, starts in by_length.items():
-        rows = np.asarray(starts)[:, None] + np.arange(length)
-        x0, v0 = x_start[rows[:, 0]], v_start[rows[:, 0]]
+        first = np.asarray(starts)
+        x0, v0 = x_start[first], v_start[first]
+        tiled = _tiling(first, length)
+        rows = tiled or first[:, None] + np.arange(length)
+        windows_drive = drive[rows].reshape(len(first), length, 2)
         if force is None:
-            out[rows] = _linear_windows(drive[rows], x0, v0, step.a)
+            positions = _linear_windows(windows_drive, x0, v0, step.a)
         else:
-            out[rows] = _force_windows(drive[rows], x0, v0, step.a, force_step, force, 1 / m)
+            positions = _force_windows(windows_drive, x0, v0, step.a, force_step, force, 1 / m)
+        out[rows] = positions.reshape(-1) if tiled else positions
     return out
+
+
+def _tiling(starts: np.ndarray, length: int) -> slice | None:
+    """Return the slice the windows cover if they tile it back to back, else None.
+
+    Back-to-back windows (a fixed horizon) are a reshaped slice of the series, not a gathered
+    copy: the same values, without the fancy indexing.
+    """
+    if len(starts) and np.array_equal(np.diff(starts), np.full(len(starts) - 1, length)):
+        return slice(int(starts[0]), int(starts[0]) + len(starts) * length)
+    return None
