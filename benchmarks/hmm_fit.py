@@ -9,13 +9,17 @@ Prints one JSON line. Data: T×10 features from a 4-state switching Gaussian, se
 ``peak_mb`` the process's peak resident memory.
 
 ``em-*``: one EM iteration alone (K 4, from one k-means++ start, BLAS on one thread), through
-dtwin's GaussianHMM subclass or hmmlearn's own GaussianHMM: ``seconds_per_iteration`` is
-``(t(fit, 3 iterations) − t(fit, 1 iteration)) / 2`` (so set-up, validation and the first call
-are not counted; median of ``repeats``), ``iteration_peak_mb`` the peak of the memory numpy
-allocates during a 1-iteration fit (tracemalloc, MiB; ``X`` itself is allocated before), and
-``peak_mb`` the process's peak resident memory (MiB) after the measurements — with the
-interpreter and imports (``baseline_mb``) and ``X`` (``setup_mb``: after the data and the
-start, which come from the first 10,000 samples).
+dtwin's GaussianHMM subclass or hmmlearn's own GaussianHMM:
+
+- ``seconds_per_iteration``: ``(t(fit, 3 iterations) − t(fit, 1 iteration)) / 2``, so set-up,
+  validation and the first call are not counted; median of ``repeats``;
+- ``cpu_seconds_per_iteration``: the same in process CPU time (less sensitive to the other
+  processes of a shared machine);
+- ``iteration_peak_mb``: the peak of the memory numpy allocates during a 1-iteration fit
+  (tracemalloc, MiB; ``X`` is allocated before);
+- ``peak_mb``: the process's peak resident memory (MiB) after the measurements, with the
+  interpreter and imports (``baseline_mb``) and ``X`` (``setup_mb``: after the data and the
+  start, which comes from the first 10,000 samples).
 """
 
 from __future__ import annotations
@@ -62,16 +66,16 @@ def em_iteration(engine: str, n_steps: int, repeats: int) -> dict:
     means, variances, _ = hmm._kmeanspp_start(X[:10_000], 4, np.random.default_rng(0), 1e-3)
     setup_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
-    def fit(n_iter: int) -> float:
+    def fit(n_iter: int) -> tuple[float, float]:
         if engine == "em-dtwin":
             model = hmm._new_model(4, "scaling", n_iter=n_iter)
         else:
             model = GaussianHMM(4, "diag", n_iter=n_iter, tol=0.0, init_params="")
         uniform = np.full(4, 0.25)
         hmm._set_params(model, uniform, np.tile(uniform, (4, 1)), means, variances)
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         model.fit(X)
-        return time.perf_counter() - start
+        return time.perf_counter() - start, time.process_time() - cpu
 
     with threadpool_limits(limits=1):
         fit(1)
@@ -79,13 +83,18 @@ def em_iteration(engine: str, n_steps: int, repeats: int) -> dict:
         fit(1)
         iteration_peak = tracemalloc.get_traced_memory()[1] / 2**20
         tracemalloc.stop()
-        samples = [(fit(3) - fit(1)) / 2 for _ in range(repeats)]
+        samples, cpu_samples = [], []
+        for _ in range(repeats):
+            (three, three_cpu), (one, one_cpu) = fit(3), fit(1)
+            samples.append((three - one) / 2)
+            cpu_samples.append((three_cpu - one_cpu) / 2)
     return {
         "engine": engine,
         "T": n_steps,
         "repeats": repeats,
         "seconds_per_iteration": statistics.median(samples),
         "seconds_per_iteration_all": sorted(samples),
+        "cpu_seconds_per_iteration": statistics.median(cpu_samples),
         "iteration_peak_mb": iteration_peak,
         "baseline_mb": baseline_mb,
         "setup_mb": setup_mb,
