@@ -1,9 +1,25 @@
 """One HMM fit in a fresh process: seconds per EM iteration and peak memory (benchmark).
 
 Usage: python benchmarks/hmm_fit.py {dtwin,hmmlearn} T [n_restarts] [max_iter]
+       python benchmarks/hmm_fit.py {em-dtwin,em-hmmlearn} T [repeats]
 Prints one JSON line. Data: T×10 features from a 4-state switching Gaussian, seed 0.
-Seconds per EM iteration = (time of the fit with max_iter − time with 1 iteration) / (extra
-iterations), so start-up, random starts and the final posteriors are not counted.
+
+``dtwin``/``hmmlearn``: one whole fit (random starts, EM, decoding, posteriors);
+``seconds_per_iteration`` is the fit's seconds over its EM iterations (everything included),
+``peak_mb`` the process's peak resident memory.
+
+``em-*``: one EM iteration alone (K 4, from one k-means++ start, BLAS on one thread), through
+dtwin's GaussianHMM subclass or hmmlearn's own GaussianHMM:
+
+- ``seconds_per_iteration``: ``(t(fit, 3 iterations) − t(fit, 1 iteration)) / 2``, so set-up,
+  validation and the first call are not counted; median of ``repeats``;
+- ``cpu_seconds_per_iteration``: the same in process CPU time (less sensitive to the other
+  processes of a shared machine);
+- ``iteration_peak_mb``: the peak of the memory numpy allocates during a 1-iteration fit
+  (tracemalloc, MiB; ``X`` is allocated before);
+- ``peak_mb``: the process's peak resident memory (MiB) after the measurements, with the
+  interpreter and imports (``baseline_mb``) and ``X`` (``setup_mb``: after the data and the
+  start, which comes from the first 10,000 samples).
 """
 
 from __future__ import annotations
@@ -23,8 +39,76 @@ def features(n_steps: int) -> np.ndarray:
     return means[states] + rng.standard_normal((n_steps, 10))
 
 
+def features_in_place(n_steps: int) -> np.ndarray:
+    """:func:`features`, the same values, without its two T×10 temporaries."""
+    rng = np.random.default_rng(0)
+    means = rng.normal(scale=1.5, size=(4, 10))
+    X = rng.standard_normal((n_steps, 10))
+    states = (np.arange(n_steps) * 4 // n_steps).astype(int)
+    for state in range(4):
+        X[states == state] += means[state]
+    return X
+
+
+def em_iteration(engine: str, n_steps: int, repeats: int) -> dict:
+    """Seconds per EM iteration and its memory peak (see the module docstring)."""
+    import os
+    import statistics
+    import tracemalloc
+
+    from hmmlearn.hmm import GaussianHMM
+    from threadpoolctl import threadpool_limits
+
+    from dtwin import hmm
+
+    baseline_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    X = features_in_place(n_steps)
+    means, variances, _ = hmm._kmeanspp_start(X[:10_000], 4, np.random.default_rng(0), 1e-3)
+    setup_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+    def fit(n_iter: int) -> tuple[float, float]:
+        if engine == "em-dtwin":
+            model = hmm._new_model(4, "scaling", n_iter=n_iter)
+        else:
+            model = GaussianHMM(4, "diag", n_iter=n_iter, tol=0.0, init_params="")
+        uniform = np.full(4, 0.25)
+        hmm._set_params(model, uniform, np.tile(uniform, (4, 1)), means, variances)
+        start, cpu = time.perf_counter(), time.process_time()
+        model.fit(X)
+        return time.perf_counter() - start, time.process_time() - cpu
+
+    with threadpool_limits(limits=1):
+        fit(1)
+        tracemalloc.start()
+        fit(1)
+        iteration_peak = tracemalloc.get_traced_memory()[1] / 2**20
+        tracemalloc.stop()
+        samples, cpu_samples = [], []
+        for _ in range(repeats):
+            (three, three_cpu), (one, one_cpu) = fit(3), fit(1)
+            samples.append((three - one) / 2)
+            cpu_samples.append((three_cpu - one_cpu) / 2)
+    return {
+        "engine": engine,
+        "T": n_steps,
+        "repeats": repeats,
+        "seconds_per_iteration": statistics.median(samples),
+        "seconds_per_iteration_all": sorted(samples),
+        "cpu_seconds_per_iteration": statistics.median(cpu_samples),
+        "iteration_peak_mb": iteration_peak,
+        "baseline_mb": baseline_mb,
+        "setup_mb": setup_mb,
+        "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "load_1min": os.getloadavg()[0],
+    }
+
+
 def main() -> None:
     engine, n_steps = sys.argv[1], int(float(sys.argv[2]))
+    if engine.startswith("em-"):
+        repeats = int(sys.argv[3]) if len(sys.argv) > 3 else 3
+        print(json.dumps(em_iteration(engine, n_steps, repeats)))
+        return
     n_restarts = int(sys.argv[3]) if len(sys.argv) > 3 else 10
     max_iter = int(sys.argv[4]) if len(sys.argv) > 4 else 500
     X = features(n_steps)

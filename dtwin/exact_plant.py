@@ -66,11 +66,12 @@ class HoldMatrices(NamedTuple):
         before, after = max(-self.first, 0), max(self.first + len(self.taps) - 1, 0)
         padded = np.concatenate([np.full(before, w[0]), w, np.full(after, w[-1])])
         start = before + self.first  # d[i] = Σ_j taps[j]·padded[start + i + j]
-        columns = [
-            np.correlate(padded[start : start + len(w) + len(self.taps) - 1], self.taps[:, i])
-            for i in (0, 1)
-        ]
-        return np.column_stack(columns)
+        drive = np.empty((len(w), 2))
+        for i in (0, 1):
+            drive[:, i] = np.correlate(
+                padded[start : start + len(w) + len(self.taps) - 1], self.taps[:, i]
+            )
+        return drive
 
 
 @lru_cache(maxsize=512)
@@ -184,39 +185,46 @@ def _force_windows(drive, x0, v0, a, force_step: HoldMatrices, force: Force, inv
     if drive.shape[0] == 1:  # one long window: plain floats (numpy calls on 1-element arrays
         steps = (a11, a12, a21, a22, q1, q2, r1, r2)  # cost ~4× more per step)
         return _force_single(drive[0], float(x0[0]), float(v0[0]), steps, force, inv_m)[None]
-    drive_x, drive_v = drive[..., 0], drive[..., 1]
+    drive_x = np.ascontiguousarray(drive[..., 0].T)  # time-major: row j is step j of every
+    drive_v = np.ascontiguousarray(drive[..., 1].T)  # window, contiguous (not a strided column)
     x, v = np.asarray(x0, dtype=float).copy(), np.asarray(v0, dtype=float).copy()
     out = np.empty(drive_x.shape)
-    out[:, 0] = x
+    out[0] = x
     with np.errstate(all="ignore"):
-        for j in range(1, out.shape[1]):
+        for j in range(1, out.shape[0]):
             f_prev = force(x, v) * inv_m
-            x_free = a11 * x + a12 * v + drive_x[:, j - 1] - q1 * f_prev
-            v_free = a21 * x + a22 * v + drive_v[:, j - 1] - q2 * f_prev
+            x_free = a11 * x + a12 * v + drive_x[j - 1] - q1 * f_prev
+            v_free = a21 * x + a22 * v + drive_v[j - 1] - q2 * f_prev
             f_next = force(x_free - r1 * f_prev, v_free - r2 * f_prev) * inv_m
             x, v = x_free - r1 * f_next, v_free - r2 * f_next
-            out[:, j] = x
+            out[j] = x
+    out = out.T
     broken = ~(np.abs(out) < 1e300)
     out[np.cumsum(broken, axis=1) > 0] = np.inf
     return out
 
 
 def _force_single(drive, x, v, steps, force: Force, inv_m) -> np.ndarray:
-    """Run the step loop of :func:`_force_windows` for one window, on Python floats."""
+    """Run the step loop of :func:`_force_windows` for one window, on Python floats.
+
+    The same arithmetic in the same order, with the drive iterated as Python floats and the
+    positions collected in a list (no per-step indexing or numpy item assignment).
+    """
     a11, a12, a21, a22, q1, q2, r1, r2 = steps
-    drive_x, drive_v = drive[:, 0].tolist(), drive[:, 1].tolist()
-    out = np.full(len(drive_x), np.inf)
-    out[0] = x
+    positions = [x]
+    append = positions.append
     with np.errstate(all="ignore"):
-        for j in range(1, len(drive_x)):
+        for dx, dv in zip(drive[:-1, 0].tolist(), drive[:-1, 1].tolist(), strict=True):
             f_prev = float(force(x, v)) * inv_m
-            x_free = a11 * x + a12 * v + drive_x[j - 1] - q1 * f_prev
-            v_free = a21 * x + a22 * v + drive_v[j - 1] - q2 * f_prev
+            x_free = a11 * x + a12 * v + dx - q1 * f_prev
+            v_free = a21 * x + a22 * v + dv - q2 * f_prev
             f_next = float(force(x_free - r1 * f_prev, v_free - r2 * f_prev)) * inv_m
             x, v = x_free - r1 * f_next, v_free - r2 * f_next
             if not -1e300 < x < 1e300:
-                return out
-            out[j] = x
+                break
+            append(x)
+    out = np.full(len(drive), np.inf)
+    out[: len(positions)] = positions
     return out
 
 
@@ -294,10 +302,25 @@ def exact_plant_response(
     for start, stop in windows:
         by_length.setdefault(stop - start, []).append(start)
     for length, starts in by_length.items():
-        rows = np.asarray(starts)[:, None] + np.arange(length)
-        x0, v0 = x_start[rows[:, 0]], v_start[rows[:, 0]]
+        first = np.asarray(starts)
+        x0, v0 = x_start[first], v_start[first]
+        tiled = _tiling(first, length)
+        rows = tiled or first[:, None] + np.arange(length)
+        windows_drive = drive[rows].reshape(len(first), length, 2)
         if force is None:
-            out[rows] = _linear_windows(drive[rows], x0, v0, step.a)
+            positions = _linear_windows(windows_drive, x0, v0, step.a)
         else:
-            out[rows] = _force_windows(drive[rows], x0, v0, step.a, force_step, force, 1 / m)
+            positions = _force_windows(windows_drive, x0, v0, step.a, force_step, force, 1 / m)
+        out[rows] = positions.reshape(-1) if tiled else positions
     return out
+
+
+def _tiling(starts: np.ndarray, length: int) -> slice | None:
+    """Return the slice the windows cover if they tile it back to back, else None.
+
+    Back-to-back windows (a fixed horizon) are a reshaped slice of the series, not a gathered
+    copy: the same values, without the fancy indexing.
+    """
+    if len(starts) and np.array_equal(np.diff(starts), np.full(len(starts) - 1, length)):
+        return slice(int(starts[0]), int(starts[0]) + len(starts) * length)
+    return None

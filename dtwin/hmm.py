@@ -35,8 +35,10 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from hmmlearn import _hmmc
 from hmmlearn.base import ConvergenceMonitor
 from hmmlearn.hmm import GaussianHMM
+from hmmlearn.utils import normalize
 from threadpoolctl import threadpool_limits
 
 from dtwin._validation import (
@@ -174,20 +176,66 @@ class HmmFit:
 
 
 class _MatmulGaussianHMM(GaussianHMM):
-    """GaussianHMM whose diagonal log-densities are two matrix products.
+    """GaussianHMM whose diagonal log-densities are two matrix products, with a lean E-step.
 
     hmmlearn 0.3.3 evaluates ``((X[:, None, :] − μ)² / σ²).sum(-1)``, a T×K×D temporary
     (320 MB and ~0.7 s per E-step at T = 1e6, D = 10, K = 4). This override of the emission
     hook (``_compute_log_likelihood``, the method hmmlearn's own emission classes define) gives
-    the same values from ``X²·(1/σ²)ᵀ − 2X·(μ/σ²)ᵀ`` in O(T·K) memory. It is the one place
-    dtwin goes below hmmlearn's public methods; ``tests/test_hmm.py`` checks it against
-    hmmlearn's own density on every run, so a release that changes the hook fails loudly
-    (hmmlearn is pinned ``>=0.3.3,<0.4``).
+    the same values from ``X²·(1/σ²)ᵀ − 2X·(μ/σ²)ᵀ`` in O(T·K) memory. The E-step of the
+    ``scaling`` implementation (``_do_estep``, :func:`_lean_scaling_estep`) runs hmmlearn's own
+    compiled forward, backward and ξ-sum on the same arrays in the same order, and differs only
+    in memory: the densities are exponentiated in place and freed after the ξ-sum, and the
+    posteriors overwrite the forward lattice instead of being a fifth T×K copy (T = 1e6,
+    K = 4, D = 10: ~110 MB per iteration instead of ~210 MB, benchmarks/hmm_fit.py).
+    These are the places dtwin goes below hmmlearn's public methods; ``tests/test_hmm.py``
+    checks both against hmmlearn's own density and E-step (the latter bit for bit) on every
+    run, so a release that changes the hooks fails loudly (hmmlearn is pinned
+    ``>=0.3.3,<0.4``).
     """
 
     def _compute_log_likelihood(self, X: np.ndarray) -> np.ndarray:
         variances = np.maximum(_variances(self), np.finfo(float).tiny)
         return _log_emission(X, self.means_, variances)
+
+    def _do_estep(self, X: np.ndarray, lengths: Any) -> tuple[dict[str, Any], float]:
+        if self.implementation != "scaling" or len(lengths) != 1 or self.params != "stmc":
+            return super()._do_estep(X, lengths)
+        return _lean_scaling_estep(self, X)
+
+
+def _lean_scaling_estep(model: _MatmulGaussianHMM, X: np.ndarray) -> tuple[dict[str, Any], float]:
+    """Return the statistics and log p(X) of hmmlearn's scaling E-step in three T×K arrays.
+
+    The same calls and arithmetic as hmmlearn 0.3.3's ``_do_estep`` → ``_fit_scaling`` →
+    ``_accumulate_sufficient_statistics`` (so the statistics are bit-identical), but the
+    emission densities are exponentiated in place and freed after the ξ-sum, and the
+    posteriors ``γ ∝ α·β`` (Eq. (6)) are formed in the forward lattice. Peak memory beyond
+    ``X`` is one T×D temporary (``X²``) or ~3·T·K floats, whichever is larger, instead of
+    ~5·T·K floats plus a T×D temporary.
+    """
+    stats = model._initialize_sufficient_statistics()
+    frameprob = model._compute_log_likelihood(X)
+    with np.errstate(under="ignore"):
+        np.exp(frameprob, out=frameprob)
+    log_prob, forward, scaling = _hmmc.forward_scaling(model.startprob_, model.transmat_, frameprob)
+    backward = _hmmc.backward_scaling(model.startprob_, model.transmat_, frameprob, scaling)
+    xi_sum = (
+        _hmmc.compute_scaling_xi_sum(forward, model.transmat_, backward, frameprob)
+        if len(X) > 1
+        else None
+    )
+    del frameprob, scaling
+    posteriors = np.multiply(forward, backward, out=forward)
+    del backward
+    normalize(posteriors, axis=1)
+    stats["nobs"] += 1
+    stats["start"] += posteriors[0]
+    if xi_sum is not None:
+        stats["trans"] += xi_sum
+    stats["post"] += posteriors.sum(axis=0)
+    stats["obs"] += posteriors.T @ X
+    stats["obs**2"] += posteriors.T @ X**2
+    return stats, log_prob
 
 
 def _new_model(n_states: int, implementation: str, n_iter: int = 1) -> GaussianHMM:
@@ -609,12 +657,20 @@ def fit_hmm(
 def _log_emission(X: np.ndarray, means: np.ndarray, variances: np.ndarray) -> np.ndarray:
     """``log N(x_t | μ_k, diag σ_k²)``, shape (T, K), as two matrix products.
 
-    ``−½[Σ_d x²/σ² − 2 x·(μ/σ²) + Σ_d μ²/σ² + Σ_d log(2πσ²)]``.
+    ``−½[Σ_d x²/σ² − 2 x·(μ/σ²) + Σ_d μ²/σ² + Σ_d log(2πσ²)]``, evaluated in place on two
+    T×K arrays; the one T×D temporary (``X²``) is freed before the second product.
+    ``2·(X·M)`` is bit-identical to ``(2X)·M`` (doubling is exact in floating point outside
+    the subnormal range), so the values are those of the plain expression.
     """
     precision = 1.0 / variances
-    quadratic = (X**2) @ precision.T - 2.0 * X @ (means * precision).T
-    constant = (means**2 * precision).sum(axis=1) + np.log(2.0 * np.pi * variances).sum(axis=1)
-    return -0.5 * (quadratic + constant)
+    quadratic = (X**2) @ precision.T
+    cross = X @ (means * precision).T
+    cross *= 2.0
+    quadratic -= cross
+    del cross
+    quadratic += (means**2 * precision).sum(axis=1) + np.log(2.0 * np.pi * variances).sum(axis=1)
+    quadratic *= -0.5
+    return quadratic
 
 
 def _forward_filter(

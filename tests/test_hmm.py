@@ -337,3 +337,28 @@ def test_matmul_emission_hook_equals_hmmlearns_density():
     variances = np.diagonal(model.covars_, axis1=1, axis2=2)
     reference = log_multivariate_normal_density(X, model.means_, variances, "diag")
     np.testing.assert_allclose(ours, reference, rtol=1e-10)
+
+
+@pytest.mark.parametrize("n_steps", [1, 2, 700])
+def test_lean_estep_gives_hmmlearns_statistics_bit_for_bit(n_steps):
+    """The lean scaling E-step returns exactly hmmlearn's own E-step (same model, same X)."""
+    from hmmlearn.hmm import GaussianHMM
+
+    from dtwin.hmm import _new_model
+
+    rng = np.random.default_rng(n_steps)
+    X = rng.normal(size=(n_steps, 5)) * 2
+    model = _new_model(3, "scaling")
+    model.n_features = 5
+    model.startprob_ = rng.dirichlet(np.ones(3))
+    model.transmat_ = rng.dirichlet(np.ones(3), size=3)
+    model.means_ = rng.normal(size=(3, 5))
+    model.covars_ = rng.uniform(0.2, 3.0, size=(3, 5))
+    ours, ours_logprob = model._do_estep(X, np.array([n_steps]))
+    theirs, theirs_logprob = super(type(model), model)._do_estep(X, np.array([n_steps]))
+    assert type(model)._do_estep is not GaussianHMM._do_estep
+    assert ours_logprob == theirs_logprob
+    assert ours.keys() == theirs.keys()
+    for name, value in theirs.items():
+        assert np.array_equal(ours[name], value), name
+        assert np.asarray(ours[name]).tobytes() == np.asarray(value).tobytes(), name
