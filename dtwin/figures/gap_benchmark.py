@@ -189,14 +189,16 @@ def draw_reliability(ax: Axes, metrics: Mapping[str, Any]) -> None:
             lw=1.0,
             capsize=2,
         )
-        for x, y, count in zip(confidence, low, n, strict=True):  # n below each bar
+        for x, y, count in zip(confidence, rate, n, strict=True):  # n beside each point
+            # left of the point, inside the axes (below a bar at 0 it met the tick labels)
+            left = x > 0.15
             ax.annotate(
                 f"{count}",
                 (x, y),
-                xytext=(0, -3),
+                xytext=(-4 if left else 4, 0),
                 textcoords="offset points",
-                ha="center",
-                va="top",
+                ha="right" if left else "left",
+                va="center",
                 fontsize=7,
             )
     ax.set_xlim(0, 1.02)
