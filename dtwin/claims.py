@@ -121,14 +121,16 @@ def _row(payload: Mapping[str, Any], check: Mapping[str, Any], project: Sequence
 def _attach_draws(rows: list[dict[str, Any]], draws: Mapping[str, Any]) -> list[dict[str, Any]]:
     """Give each paper claim its verdicts across draws; return validity rows for mismatches.
 
-    Draw 0 is the main run, so its verdict must equal the figure's own.
+    Draw 0 is the main run, so its verdict must equal the figure's own, unless its entry says
+    ``draw0_is_main_run: false`` (Fig. 9's K* per draw with fewer EM starts than the figure).
     """
     mismatched = []
     for row in rows:
         entry = draws.get(f"{row['artifact']}:{row['id']}")
         if row["kind"] == "claim" and entry is not None:
             row["draws"] = dict(entry)
-            if bool(entry["draw0"]) != row["passed"]:
+            same_run = entry.get("draw0_is_main_run", True)  # False: fewer EM starts per draw
+            if same_run and bool(entry["draw0"]) != row["passed"]:
                 mismatched.append(f"{row['artifact']}:{row['id']}")
     return [
         {
@@ -292,7 +294,8 @@ def _draws_cell(row: Mapping[str, Any]) -> str:
     entry = row.get("draws")
     if not entry:
         return "– (not rerun across draws)"
-    return f"{entry['k']} of {entry['n']} [{entry['low']:.2f}, {entry['high']:.2f}]"
+    cell = f"{entry['k']} of {entry['n']} [{entry['low']:.2f}, {entry['high']:.2f}]"
+    return cell + (f"; {_cell(entry['detail'], 200)}" if entry.get("detail") else "")
 
 
 def _cases_cell(row: Mapping[str, Any]) -> str:

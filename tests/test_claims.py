@@ -136,6 +136,27 @@ def test_draws_column_and_a_draw0_that_disagrees_with_the_figure():
     assert check["passed"] is False and check["observed"] == ["figA:p"]
 
 
+def test_a_draw0_with_fewer_em_starts_is_not_compared_and_its_detail_is_shown():
+    entry = {"k": 0, "n": 10, "share": 0.0, "low": 0.0, "high": 0.28, "draw0": True}
+    draws = {
+        "artifact": "fig12_claims_across_draws",
+        "checks": [],
+        "metrics": {
+            "claims": {
+                "figA:p": {**entry, "draw0_is_main_run": False, "detail": "K* in 10 draws: 12 (10)"}
+            }
+        },
+    }
+    summary = summarise_claims([_claim("figA", "p", "paper: c", False), draws])
+    check = next(r for r in summary.rows if r["id"] == "draw0_verdicts_equal_the_figures")
+    assert check["passed"] is True
+    assert "| 0 of 10 [0.00, 0.28]; K* in 10 draws: 12 (10) |" in claims_markdown(summary)
+    draws["metrics"]["claims"]["figA:p"]["draw0_is_main_run"] = True
+    summary = summarise_claims([_claim("figA", "p", "paper: c", False), draws])
+    check = next(r for r in summary.rows if r["id"] == "draw0_verdicts_equal_the_figures")
+    assert check["passed"] is False
+
+
 def test_gap_targets_below_ten_cases_per_effect_are_marked_indicative():
     pd = pytest.importorskip("pandas")
     table = pd.DataFrame(
