@@ -148,6 +148,38 @@ def _attach_draws(rows: list[dict[str, Any]], draws: Mapping[str, Any]) -> list[
     ]
 
 
+#: The causes a failed paper claim or crosscheck names in its note (issue 12 item 5).
+CAUSES: tuple[str, ...] = ("draw", "optimiser", "method")
+
+
+def _cause_check(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Return the validity row: every failed paper claim and crosscheck names its cause.
+
+    The note of each must contain one of :data:`CAUSES` (the draw, the optimiser or the
+    method); the row lists those that do not.
+    """
+    silent = [
+        f"{row['artifact']}:{row['id']}"
+        for row in rows
+        if row["kind"] in ("claim", "crosscheck")
+        and not row["passed"]
+        and not any(cause in (row["note"] or "") for cause in CAUSES)
+    ]
+    return {
+        "artifact": "claims",
+        "id": "every_failed_claim_names_its_cause",
+        "kind": "validity",
+        "statement": "every failed paper claim and crosscheck has a note naming its cause: "
+        + ", ".join(CAUSES),
+        "expected": "0 without a cause",
+        "observed": silent or 0,
+        "reference": None,
+        "passed": not silent,
+        "note": None,
+        "draws": None,
+    }
+
+
 def _gap_denominators(table: Any) -> dict[str, tuple[int, int]]:
     """(k, n) of each gap accuracy target, from ``results/gap/benchmark.csv``.
 
@@ -231,6 +263,7 @@ def summarise_claims(
         rows += _attach_draws(rows, draws)
     if gap_metrics:
         _attach_gap_cases(rows, gap_metrics, gap_table, level)
+    rows.append(_cause_check(rows))
     counts: dict[str, dict[str, int]] = {}
     for row in rows:
         tally = counts.setdefault(row["kind"], {"passed": 0, "failed": 0})

@@ -48,12 +48,24 @@ PAYLOADS = [
 
 def test_counts_and_rows():
     summary = summarise_claims(PAYLOADS)
+    # the failed claim c1 has no note: the cause check fails
     assert summary.counts == {
         "claim": {"passed": 0, "failed": 1},
-        "validity": {"passed": 1, "failed": 0},
+        "validity": {"passed": 1, "failed": 1},
         "crosscheck": {"passed": 1, "failed": 0},
     }
-    assert [row["artifact"] for row in summary.rows] == ["figA", "figA", "figB"]
+    assert [row["artifact"] for row in summary.rows] == ["figA", "figA", "figB", "claims"]
+    assert summary.rows[-1]["observed"] == ["figA:c1"]
+
+
+@pytest.mark.parametrize(
+    ("note", "passed"),
+    [("optimiser: a low optimum", True), ("draw: seed 11 only", True), ("unclear", False)],
+)
+def test_a_failed_claim_must_name_its_cause(note, passed):
+    payload = {"artifact": "figA", "checks": [{**PAYLOADS[0]["checks"][0], "note": note}]}
+    row = summarise_claims([payload]).rows[-1]
+    assert row["id"] == "every_failed_claim_names_its_cause" and row["passed"] is passed
 
 
 def test_markdown_reports_a_failed_claim_with_its_reason_and_r_number():

@@ -6,7 +6,9 @@ judge every claim on each (:mod:`dtwin.figures._draw_claims`). This module gathe
 for every claim the number of draws in which it holds with a Wilson interval
 (:func:`dtwin.claims.wilson_interval`), the distribution of the headline numbers beside R's
 draw, and — the one panel that explains the e1/e4 result — the plant correction's dRMSE of
-e1 and e4 against the DynamicsOff window's mean of x.
+e1 and e4 against the DynamicsOff window's mean of x. The ``bic_draws`` jobs sweep the BIC
+over K on the first draws; their K* per data set judges Fig. 9's two claims on each draw
+(:mod:`dtwin.figures._draw_bic`) and its distribution is the third panel.
 
 Plain matplotlib, 7 in wide, 8–9 pt text.
 """
