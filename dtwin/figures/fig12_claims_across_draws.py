@@ -23,6 +23,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from dtwin._validation import DtwinValueError
 from dtwin.artifacts import Check, FigureArtifact
@@ -267,6 +268,7 @@ def _claims_panel(ax: plt.Axes, claims: pd.DataFrame) -> None:
     y = np.arange(len(claims))[::-1]
     share = claims["share"].to_numpy()
     err = np.vstack([share - claims["low"].to_numpy(), claims["high"].to_numpy() - share])
+    err = np.clip(err, 0.0, None)  # a Wilson bound may pass k/n by round-off (k = 0 or n)
     ax.errorbar(share, y, xerr=err, fmt="none", ecolor="#0b2545", elinewidth=1, capsize=2)
     held = claims["draw0"].to_numpy()
     ax.scatter(share[held], y[held], color="#0b2545", s=16, zorder=3, label="holds in draw 0")
@@ -277,7 +279,8 @@ def _claims_panel(ax: plt.Axes, claims: pd.DataFrame) -> None:
     ax.set_yticks(y, [_label(c) for c in claims["claim"]])
     ax.tick_params(axis="y", labelsize=7)
     ax.set_xlim(-0.02, 1.02)
-    ax.set_xlabel(f"share of the {int(claims['n'].iloc[0])} draws (95 % Wilson)")
+    sizes = list(dict.fromkeys(int(n) for n in claims["n"]))  # Fig. 9's K* may use fewer draws
+    ax.set_xlabel(f"share of the {' or '.join(map(str, sizes))} draws (95 % Wilson)")
     ax.axvline(0.5, color="#8c8c8c", lw=0.6, ls=":")
     ax.legend(loc="lower right", fontsize=7, frameon=False)
     panel_title(ax, "a", "claims across draws")
@@ -327,7 +330,8 @@ def _k_star_panel(ax: plt.Axes, k_star: Mapping[str, Mapping[str, Any]]) -> None
     ax.set_ylim(0, top * 1.7)
     unitless(ax, "xy")
     ax.legend(fontsize=7, frameon=False, loc="upper left")
-    panel_title(ax, "c", "K* per draw; ★ main run (Fig. 9)")
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    panel_title(ax, "c", "K* per draw; ★ Fig. 9")
 
 
 def plot_claims_across_draws(
