@@ -121,14 +121,16 @@ def _row(payload: Mapping[str, Any], check: Mapping[str, Any], project: Sequence
 def _attach_draws(rows: list[dict[str, Any]], draws: Mapping[str, Any]) -> list[dict[str, Any]]:
     """Give each paper claim its verdicts across draws; return validity rows for mismatches.
 
-    Draw 0 is the main run, so its verdict must equal the figure's own.
+    Draw 0 is the main run, so its verdict must equal the figure's own, unless its entry says
+    ``draw0_is_main_run: false`` (Fig. 9's K* per draw with fewer EM starts than the figure).
     """
     mismatched = []
     for row in rows:
         entry = draws.get(f"{row['artifact']}:{row['id']}")
         if row["kind"] == "claim" and entry is not None:
             row["draws"] = dict(entry)
-            if bool(entry["draw0"]) != row["passed"]:
+            same_run = entry.get("draw0_is_main_run", True)  # False: fewer EM starts per draw
+            if same_run and bool(entry["draw0"]) != row["passed"]:
                 mismatched.append(f"{row['artifact']}:{row['id']}")
     return [
         {
@@ -144,6 +146,38 @@ def _attach_draws(rows: list[dict[str, Any]], draws: Mapping[str, Any]) -> list[
             "draws": None,
         }
     ]
+
+
+#: The causes a failed paper claim or crosscheck names in its note (issue 12 item 5).
+CAUSES: tuple[str, ...] = ("draw", "optimiser", "method")
+
+
+def _cause_check(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Return the validity row: every failed paper claim and crosscheck names its cause.
+
+    The note of each must contain one of :data:`CAUSES` (the draw, the optimiser or the
+    method); the row lists those that do not.
+    """
+    silent = [
+        f"{row['artifact']}:{row['id']}"
+        for row in rows
+        if row["kind"] in ("claim", "crosscheck")
+        and not row["passed"]
+        and not any(cause in (row["note"] or "") for cause in CAUSES)
+    ]
+    return {
+        "artifact": "claims",
+        "id": "every_failed_claim_names_its_cause",
+        "kind": "validity",
+        "statement": "every failed paper claim and crosscheck has a note naming its cause: "
+        + ", ".join(CAUSES),
+        "expected": "0 without a cause",
+        "observed": silent or 0,
+        "reference": None,
+        "passed": not silent,
+        "note": None,
+        "draws": None,
+    }
 
 
 def _gap_denominators(table: Any) -> dict[str, tuple[int, int]]:
@@ -229,6 +263,7 @@ def summarise_claims(
         rows += _attach_draws(rows, draws)
     if gap_metrics:
         _attach_gap_cases(rows, gap_metrics, gap_table, level)
+    rows.append(_cause_check(rows))
     counts: dict[str, dict[str, int]] = {}
     for row in rows:
         tally = counts.setdefault(row["kind"], {"passed": 0, "failed": 0})
@@ -292,7 +327,8 @@ def _draws_cell(row: Mapping[str, Any]) -> str:
     entry = row.get("draws")
     if not entry:
         return "– (not rerun across draws)"
-    return f"{entry['k']} of {entry['n']} [{entry['low']:.2f}, {entry['high']:.2f}]"
+    cell = f"{entry['k']} of {entry['n']} [{entry['low']:.2f}, {entry['high']:.2f}]"
+    return cell + (f"; {_cell(entry['detail'], 200)}" if entry.get("detail") else "")
 
 
 def _cases_cell(row: Mapping[str, Any]) -> str:

@@ -48,12 +48,24 @@ PAYLOADS = [
 
 def test_counts_and_rows():
     summary = summarise_claims(PAYLOADS)
+    # the failed claim c1 has no note: the cause check fails
     assert summary.counts == {
         "claim": {"passed": 0, "failed": 1},
-        "validity": {"passed": 1, "failed": 0},
+        "validity": {"passed": 1, "failed": 1},
         "crosscheck": {"passed": 1, "failed": 0},
     }
-    assert [row["artifact"] for row in summary.rows] == ["figA", "figA", "figB"]
+    assert [row["artifact"] for row in summary.rows] == ["figA", "figA", "figB", "claims"]
+    assert summary.rows[-1]["observed"] == ["figA:c1"]
+
+
+@pytest.mark.parametrize(
+    ("note", "passed"),
+    [("optimiser: a low optimum", True), ("draw: seed 11 only", True), ("unclear", False)],
+)
+def test_a_failed_claim_must_name_its_cause(note, passed):
+    payload = {"artifact": "figA", "checks": [{**PAYLOADS[0]["checks"][0], "note": note}]}
+    row = summarise_claims([payload]).rows[-1]
+    assert row["id"] == "every_failed_claim_names_its_cause" and row["passed"] is passed
 
 
 def test_markdown_reports_a_failed_claim_with_its_reason_and_r_number():
@@ -134,6 +146,27 @@ def test_draws_column_and_a_draw0_that_disagrees_with_the_figure():
     assert "| 7 of 20 [0.18, 0.57] |" in text
     check = next(r for r in summary.rows if r["id"] == "draw0_verdicts_equal_the_figures")
     assert check["passed"] is False and check["observed"] == ["figA:p"]
+
+
+def test_a_draw0_with_fewer_em_starts_is_not_compared_and_its_detail_is_shown():
+    entry = {"k": 0, "n": 10, "share": 0.0, "low": 0.0, "high": 0.28, "draw0": True}
+    draws = {
+        "artifact": "fig12_claims_across_draws",
+        "checks": [],
+        "metrics": {
+            "claims": {
+                "figA:p": {**entry, "draw0_is_main_run": False, "detail": "K* in 10 draws: 12 (10)"}
+            }
+        },
+    }
+    summary = summarise_claims([_claim("figA", "p", "paper: c", False), draws])
+    check = next(r for r in summary.rows if r["id"] == "draw0_verdicts_equal_the_figures")
+    assert check["passed"] is True
+    assert "| 0 of 10 [0.00, 0.28]; K* in 10 draws: 12 (10) |" in claims_markdown(summary)
+    draws["metrics"]["claims"]["figA:p"]["draw0_is_main_run"] = True
+    summary = summarise_claims([_claim("figA", "p", "paper: c", False), draws])
+    check = next(r for r in summary.rows if r["id"] == "draw0_verdicts_equal_the_figures")
+    assert check["passed"] is False
 
 
 def test_gap_targets_below_ten_cases_per_effect_are_marked_indicative():

@@ -226,7 +226,14 @@ def draw_fig12():
         }
     )
     r_values = {"dynamics_off_mean_x": -0.209, "drmse_pct_e1": 22.9, "drmse_pct_e4": 23.0}
-    return plot_claims_across_draws(claims, table, r_values)
+    k_star = {
+        name: {"n": 10, "n_starts": 4, "counts": counts, "main_run": main, "paper": 8}
+        for name, counts, main in (
+            ("nominal_residuals", {"11": 3, "12": 5, "14": 2}, 14),
+            ("fault_features", {"13": 4, "15": 6}, 15),
+        )
+    }
+    return plot_claims_across_draws(claims, table, r_values, k_star)
 
 
 def draw_fig13():

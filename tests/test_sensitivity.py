@@ -220,3 +220,30 @@ def test_bimodality_coefficient_separates_one_and_two_modes():
     two = np.concatenate([rng.normal(24, 1, 250), rng.normal(40, 1, 250)])
     assert bimodality_coefficient(two) > 5 / 9
     assert math.isnan(bimodality_coefficient([1.0, 2.0, 3.0]))
+
+
+def test_a_failed_alpha_trend_claim_names_the_optimiser_with_the_slopes_of_each_source():
+    from dtwin.artifacts import Check
+    from dtwin.figures.fig11_sensitivity import _with_notes
+
+    def row(slope: float) -> dict:
+        return {"median_slope": slope, "mean_slope": slope, "frac_positive": float(slope > 0)}
+
+    observed = {
+        "ours": {"m_A=0.5": row(0.42), "m_A=1": row(-0.39)},
+        "r_rerun": {"m_A=0.5": row(2.6), "m_A=1": row(13.05)},
+        "passed_by_source": {"ours": False, "r_rerun": True},
+    }
+    check = Check(
+        id="alpha_trend_sensor_B_degraded",
+        kind="claim",
+        statement="paper §5: improvements increased with α",
+        expected="median slope > 0 in every Sensor A row",
+        observed=observed,
+        passed=False,
+    )
+    (noted,) = _with_notes([check], "ours 36.1–37.2 % in 36 of 36", 10, "kmeans++")
+    assert noted.note.startswith("optimiser: ours 36.1–37.2 % in 36 of 36")
+    assert "ours +0.42/-0.39; R's re-run +2.60/+13.05" in noted.note
+    assert "Holds: ours no, R's re-run yes" in noted.note
+    assert "Dirichlet start" in noted.note

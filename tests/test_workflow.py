@@ -74,7 +74,7 @@ AFTER_RESIDUALS = AFTER_FAULTS | {
 }
 SWEEP = {"sweep_chunk", "fig11_sensitivity"}
 #: The claims across random draws (they rerun the whole single-draw pipeline).
-DRAWS = {"claims_draws", "fig12_claims_across_draws"}
+DRAWS = {"claims_draws", "bic_draws", "fig12_claims_across_draws"}
 
 
 def small_sweep(config: dict) -> None:
@@ -174,6 +174,7 @@ def shorten(config: dict) -> None:
     small_sweep(config)
     config["gap"]["benchmark"].update(effects=["none", "coulomb_friction"], cases_per_effect=1)
     config["draws"].update(n_draws=2, chunk_size=2)
+    config["draws"]["bic"].update(n_draws=2, n_restarts=2, chunk_size=2)
     config["bic"].update(n_restarts=4, k_max=10)
     config["ar_hmm"].update(n_restarts=2, k_max=10)
 
@@ -298,7 +299,13 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     }
     edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.8))
     edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=3))
-    assert planned_rules(workflow_copy) == {"bic_sweep", "fig09_bic", "fig13_ar_hmm", "claims"}
+    assert planned_rules(workflow_copy) == {
+        "bic_sweep",
+        "fig09_bic",
+        "fig13_ar_hmm",
+        "fig12_claims_across_draws",
+        "claims",
+    }
     edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=4))
     edit_config(workflow_copy, lambda c: c["faults"].update(drift_origin="regime_start"))
     assert planned_rules(workflow_copy) == AFTER_FAULTS | DRAWS
@@ -333,14 +340,16 @@ def test_a_library_edit_reruns_the_rules_that_import_it(workflow_copy):
     }
     residual_stats, pipeline, correction = edited
     try:
+        # the draws' claims judge residual structure; their BIC sweeps do not import it
+        judged = DRAWS - {"bic_draws"}
         residual_stats.write_text(edited[residual_stats] + "\n# edited\n")
-        assert planned_rules(workflow_copy) == {"fig03_residual_acf", "claims", *DRAWS}
+        assert planned_rules(workflow_copy) == {"fig03_residual_acf", "claims", *judged}
         pipeline.write_text(edited[pipeline] + "\n# edited\n")
         assert planned_rules(workflow_copy) == {
             "fig01_pipeline",
             "fig03_residual_acf",
             "claims",
-            *DRAWS,
+            *judged,
         }
         correction.write_text(edited[correction] + "\n# edited\n")
         assert planned_rules(workflow_copy) == {

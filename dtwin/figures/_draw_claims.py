@@ -141,7 +141,7 @@ def judge_draw(
     r_scores: Mapping[str, float],
     r_rmse: Mapping[str, float],
 ) -> dict[str, Any]:
-    """Judge every single-draw claim of Figs. 2–8 and 10 on one draw.
+    """Judge every single-draw claim of Figs. 2–8 and 10 on one draw (Fig. 9's: ``_draw_bic``).
 
     Parameters
     ----------

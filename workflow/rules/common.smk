@@ -234,6 +234,25 @@ def draws_of_chunk(wildcards):
     return list(range(first, min(first + size, n_draws)))
 
 
+def bic_draw_count(draws):
+    """The draws that get a BIC sweep: draws.bic.n_draws, at most draws.n_draws."""
+    return min(draws["bic"]["n_draws"], draws["n_draws"])
+
+
+def bic_draw_chunk_files(draws):
+    """The result file of every chunk of BIC sweeps (K* across draws)."""
+    size = draws["bic"]["chunk_size"]
+    chunks = range(-(-bic_draw_count(draws) // size))
+    return expand("results/draws/bic/chunk{chunk}.json", chunk=chunks)
+
+
+def bic_draws_of_chunk(wildcards):
+    """The draw numbers of one chunk of BIC sweeps (params of bic_draws)."""
+    size = config["draws"]["bic"]["chunk_size"]
+    first = int(wildcards.chunk) * size
+    return list(range(first, min(first + size, bic_draw_count(config["draws"]))))
+
+
 # What a draw depends on: every section of the single-draw run (not n_draws: adding draws must
 # not rerun the chunks that exist).
 DRAW_SECTIONS = {
@@ -241,3 +260,8 @@ DRAW_SECTIONS = {
     for key in ("simulation", "command", "twin", "arx", "faults", "hmm", "correction", "mcda")
 }
 DRAW_ACF = {k: config["acf"][k] for k in ("ljungbox_lags", "significance", "strong_lag1")}
+# A draw's BIC sweep: Fig. 9's K range and stopping rule with the per-draw EM starts.
+DRAW_BIC = {
+    **{k: config["bic"][k] for k in ("ks", "k_max", "stop_after_rises")},
+    "n_restarts": config["draws"]["bic"]["n_restarts"],
+}

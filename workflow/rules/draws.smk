@@ -2,7 +2,9 @@
 
 claims_draws runs one chunk of draws (config["draws"]["chunk_size"] per job; the chunk list
 is draw_chunk_files() in common.smk); fig12_claims_across_draws gathers them. Draw 0 is the
-main run, so the claims rule can check that its verdicts equal the figures'.
+main run, so the claims rule can check that its verdicts equal the figures'. bic_draws sweeps
+the BIC over K on the first draws.bic.n_draws draws (K* across draws, Fig. 9's claims) with
+draws.bic.n_restarts EM starts per K, in chunks of draws.bic.chunk_size.
 """
 
 
@@ -33,12 +35,40 @@ rule claims_draws:
         "../../scripts/claims_draws.py"
 
 
+rule bic_draws:
+    message:
+        "K* across draws: the BIC over K ({params.bic[n_restarts]} EM starts each) on draws "
+        "{params.draws}"
+    input:
+        lib=dtwin_sources("scripts/bic_draws.py"),
+    output:
+        json="results/draws/bic/chunk{chunk}.json",
+    params:
+        draws=bic_draws_of_chunk,
+        sections=DRAW_SECTIONS,
+        bic=DRAW_BIC,
+    log:
+        "logs/bic_draws/chunk{chunk}.log",
+    benchmark:
+        "benchmarks/rules/bic_draws/chunk{chunk}.tsv"
+    threads: 1
+    resources:
+        mem_mb=500,
+        runtime=20,
+    conda:
+        "../envs/dtwin.yaml"
+    script:
+        "../../scripts/bic_draws.py"
+
+
 rule fig12_claims_across_draws:
     message:
         "Drawing Fig. 12: the paper's claims across {params.draws[n_draws]} random draws"
     input:
         lib=dtwin_sources("scripts/fig12_claims_across_draws.py"),
         chunks=draw_chunk_files(config["draws"]),
+        bic_chunks=bic_draw_chunk_files(config["draws"]),
+        bic_main=rules.bic_sweep.output.table,
         r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
         r_metrics=f"{REFERENCE_DIR}/targeted_intervention_metrics_rerun.csv",
         r_summary=f"{REFERENCE_DIR}/classification_summary_K4.csv",
@@ -52,8 +82,11 @@ rule fig12_claims_across_draws:
         pdf="paper_figures/fig12_claims_across_draws.pdf",
         json="paper_figures/fig12_claims_across_draws.json",
         table="results/draws/draws.csv",
+        k_star="results/draws/k_star.csv",
     params:
         draws=config["draws"],
+        bic_draws=bic_draw_count(config["draws"]),
+        main_n_restarts=config["bic"]["n_restarts"],
     log:
         "logs/fig12_claims_across_draws.log",
     benchmark:
