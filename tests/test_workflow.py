@@ -707,14 +707,29 @@ def test_a_run_interrupted_during_the_sweep_resumes_to_identical_outputs(workflo
         path.unlink()
     env = {**os.environ, "PYTHONPATH": str(workdir), "MPLBACKEND": "Agg"}
     command = [sys.executable, "-m", "snakemake", "--cores", "2", *target]
-    process = subprocess.Popen(
-        command, cwd=workdir, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
-    )
-    deadline = time.monotonic() + 300
-    while not list(sweep_dir.glob("chunks/*-of-12.json")) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    process.send_signal(signal.SIGINT)
-    log, _ = process.communicate(timeout=120)
+    log_path = tmp_path / "interrupted.log"
+    with log_path.open("w") as log_file:
+        process = subprocess.Popen(
+            command, cwd=workdir, env=env, stdout=log_file, stderr=subprocess.STDOUT
+        )
+        deadline = time.monotonic() + 300
+        while not list(sweep_dir.glob("chunks/*-of-12.json")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        # Snakemake 9 can miss a SIGINT that lands while it finishes a job (twice in about six
+        # runs the sweep then ran to the end); a user presses Ctrl-C again, and so does this
+        # test, until Snakemake says it is terminating (never during its clean-up)
+        for _ in range(30):
+            process.send_signal(signal.SIGINT)
+            try:
+                process.wait(timeout=2.0)
+                break
+            except subprocess.TimeoutExpired:
+                if "Terminating processes on user request" in log_path.read_text():
+                    process.wait(timeout=120)
+                    break
+        else:
+            process.wait(timeout=120)
+    log = log_path.read_text()
     assert process.returncode != 0, f"Snakemake exited 0 after SIGINT:\n{log}"
     finished = len(list(sweep_dir.glob("chunks/*-of-12.json")))
     assert 1 <= finished < 12, f"{finished} of 12 sweep chunks had finished when interrupted"
