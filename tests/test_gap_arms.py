@@ -164,3 +164,31 @@ def test_data_floor_of_coloured_sensor_noise_is_not_biased_low(phi):
     floor = data_noise_floor("M2a", {}, 0.03 * noise + 0.05 * slow, 0.0 * slow, {}, 0.02)
     assert floor.rms == pytest.approx(0.03, rel=0.08)
     assert np.r_[floor.acf, 0.0][1] == pytest.approx(phi, abs=0.08)
+
+
+def test_reconciled_floor_adds_the_positions_measurement_noise_and_trusts_larger_data():
+    from dtwin.gap.noise import NoiseFloor, reconcile_noise_floor
+
+    twin = NoiseFloor(0.03, "twin", np.array([1.0, 0.5, 0.25]))
+    quiet = NoiseFloor(0.02, "data", np.array([1.0]))
+    assert reconcile_noise_floor(None, quiet) is quiet
+    assert reconcile_noise_floor(twin, quiet) is twin
+    loud = NoiseFloor(0.04, "data", np.array([1.0, 0.3]))
+    assert reconcile_noise_floor(twin, loud) is loud  # the twin's level is understated
+    measured = NoiseFloor(0.035, "data", np.array([1.0, 0.2, 0.0]), measurement=0.04)
+    floor = reconcile_noise_floor(twin, measured)
+    assert floor.rms == pytest.approx(0.05) and floor.source == "twin+data"
+    assert floor.acf[1] == pytest.approx(0.5 * 0.03**2 / 0.05**2)
+
+
+def test_plant_data_floor_reads_the_noisy_positions_measurement_noise():
+    from dtwin.gap.noise import data_noise_floor
+
+    for case_type, expected in (("none", 0.0), ("noisy_x__none", NOISY_X_FRACTION)):
+        case = _case(case_type, 8)
+        rec, plant = case.recording, case.twin["twin"]["plant"]
+        floor = data_noise_floor(
+            "M1", {"u_act": rec["u_act"].to_numpy()}, rec["x"].to_numpy(), None, plant, 0.02
+        )
+        truth = expected * np.std(_case("none", 8).recording["x"])
+        assert floor.measurement == pytest.approx(truth, abs=0.1 * 0.01 * np.std(rec["x"]))

@@ -17,9 +17,13 @@ arm                   condition (expected answer)
                       Runge-Kutta at dt/20, sensor lags on the continuous position; the twin file
                       names no ``discretisation`` (the asset is no recursion)
 ``unseen``            (e) effect forms from families the catalogue does not use
-                      (:data:`UNSEEN_FORMS`; the answer is the nearest catalogue effect)
-``near``              (f) near-catalogue effects outside the list (:data:`NEAR_CATALOGUE`;
-                      the answer is ``unexplained``)
+                      (:data:`UNSEEN_FORMS`: Stribeck friction with a generalised exponent,
+                      an asymmetric tanh saturation, a dead zone one side 0.2–0.6 of the other,
+                      a quintic spring, a delay with i.i.d. jitter; the answer is the nearest
+                      catalogue effect)
+``near``              (f) near-catalogue effects outside the list (:data:`NEAR_CATALOGUE`:
+                      actuator backlash and rate limit, sensor hysteresis, plant stiction; the
+                      answer is ``unexplained``)
 ``two``               (g) two effects in two modules (``<effect>+<effect>``; the answer is the
                       one with the larger signal-to-noise ratio)
 ====================  =============================================================================
@@ -144,26 +148,26 @@ def _draw_stribeck(module, level, rng, scale) -> dict[str, Any]:
 
 
 def _draw_smooth_saturation(module, level, rng, scale) -> dict[str, Any]:
-    """Smooth saturation ``u/(1 + |u/U|^p)^(1/p)``, levels ``U_high``, ``U_low`` (u units)."""
+    """Asymmetric tanh saturation ``U·tanh(u/U)``, ``U_high`` above 0, ``U_low`` below (u units).
+
+    Not the catalogue's ``u/(1 + |u/U|^p)^(1/p)`` for any sharpness ``p``, and asymmetric.
+    """
     high = _log_between(1.6, 0.5, level) * scale["u_max"]
     low = high * rng.uniform(1.0, 1.4)
     if rng.uniform() < 0.5:
         high, low = low, high
-    return {"form": "p-norm sigmoid", "U_high": high, "U_low": low, "p": rng.uniform(1.5, 4.0)}
+    return {"form": "asymmetric tanh", "U_high": high, "U_low": low}
 
 
 def _draw_asymmetric_deadzone(module, level, rng, scale) -> dict[str, Any]:
-    """Dead zone ``[−D_low, D_high]`` with slopes ``s_high``, ``s_low`` outside (u units)."""
+    """Dead zone ``[−D_low, D_high]``, one side 0.2–0.6 of the other (u units).
+
+    The catalogue's dead zone is symmetric; the generator's default cases stay within 0.6–1.
+    """
     wide = _log_between(0.05, 0.3, level) * scale["u_std"]
     narrow = wide * rng.uniform(0.2, 0.6)
     high, low = (wide, narrow) if rng.uniform() < 0.5 else (narrow, wide)
-    return {
-        "form": "asymmetric, unequal slopes",
-        "D_high": high,
-        "D_low": low,
-        "s_high": rng.uniform(0.85, 1.15),
-        "s_low": rng.uniform(0.85, 1.15),
-    }
+    return {"form": "asymmetric", "D_high": high, "D_low": low}
 
 
 def _draw_quintic(module, level, rng, scale) -> dict[str, Any]:
@@ -268,13 +272,10 @@ def actuator_form(u: np.ndarray, spec: Mapping[str, Any], dt: float) -> np.ndarr
     effect = spec.get("effect")
     if effect == "smooth_saturation":
         level = np.where(u >= 0, spec["U_high"], spec["U_low"])
-        p = spec["p"]
-        return u / (1.0 + np.abs(u / level) ** p) ** (1.0 / p)
+        return level * np.tanh(u / level)
     if effect == "asymmetric_deadzone":
         high, low = spec["D_high"], spec["D_low"]
-        above = spec["s_high"] * (u - high)
-        below = spec["s_low"] * (u + low)
-        return np.where(u > high, above, np.where(u < -low, below, 0.0))
+        return np.where(u > high, u - high, np.where(u < -low, u + low, 0.0))
     if effect == "jittered_delay":
         return _jittered_delay(u, spec)
     if effect == "backlash":

@@ -68,6 +68,7 @@ from dtwin.gap.noise import (
     data_noise_floor,
     effective_samples,
     gap_threshold,
+    reconcile_noise_floor,
     spectral_noise_floor,
     twin_noise_floor,
 )
@@ -482,7 +483,7 @@ def _analyse_module(name, rec, twin, t, n_train, calibrate, settings, layout) ->
     floor_twin = (
         twin_noise_floor(name, twin.noise, lin_base, rec.dt) if twin.noise is not None else None
     )
-    floor = floor_twin if floor_twin is not None else floor_data
+    floor = reconcile_noise_floor(floor_twin, floor_data)
     data = replace(data, scales=_scales(data, n_train, floor.rms, lin_base, sim_before))
     gap_before = normalised_rms(data.output, sim_before, held, norm)
     if calibrated:
