@@ -100,13 +100,16 @@ NEAR_CATALOGUE: dict[str, tuple[str, ...]] = {
     "hysteresis": ("M2a", "M2b"),
     "stiction": ("M1",),
 }
-#: ``two`` arm: pairs of catalogue effects, always in different modules.
+#: ``two`` arm: pairs of catalogue effects, always in different modules. Most pair modules
+#: whose signal-to-noise ratios are alike (actuator and plant, the two sensors), so that either
+#: may be the larger; one pairs a plant effect with a (usually much smaller) sensor one.
 TWO_EFFECT_PAIRS: tuple[tuple[str, str], ...] = (
     ("coulomb_friction", "sensor_bias_drift"),
     ("actuator_saturation", "quadratic_damping"),
-    ("cubic_stiffness", "sensor_scale_error"),
-    ("actuator_delay", "sensor_quantization"),
-    ("actuator_deadzone", "sensor_delay"),
+    ("actuator_deadzone", "cubic_stiffness"),
+    ("actuator_delay", "coulomb_friction"),
+    ("sensor_bias_drift", "sensor_scale_error"),
+    ("sensor_delay", "sensor_quantization"),
 )
 
 

@@ -595,7 +595,7 @@ def generate_case(
             (effects[0], module, level, _draw_effect(effects[0], module, level, rng, scale))
         )
     for second in effects[1:]:
-        where = _draw_module(second, arm_rng)
+        where = _draw_module(second, arm_rng, exclude=module)
         second_level = float(arm_rng.uniform())
         second_scale = _signal_scale(u_cmd, baseline, where, noise_true)
         params = _draw_effect(second, where, second_level, arm_rng, second_scale)
@@ -653,9 +653,14 @@ def _check_case(effect: str, arm: str) -> tuple[str, list[str]]:
     return arm, effect.split("+")
 
 
-def _draw_module(effect: str, rng: np.random.Generator) -> str | None:
-    """Return a module ``effect`` may sit in (one draw when there are several), None for none."""
+def _draw_module(effect: str, rng: np.random.Generator, exclude: str | None = None) -> str | None:
+    """Return a module ``effect`` may sit in (one draw when there are several), None for none.
+
+    ``exclude`` (a two-effect case's first module) is left out of the choices.
+    """
     choices = _EFFECT_MODULES.get(effect, (None,))
+    if exclude is not None:
+        choices = tuple(m for m in choices if m != exclude)
     return str(rng.choice(choices)) if choices[0] is not None else None
 
 
