@@ -483,7 +483,7 @@ def _analyse_module(name, rec, twin, t, n_train, calibrate, settings, layout) ->
     floor_twin = (
         twin_noise_floor(name, twin.noise, lin_base, rec.dt) if twin.noise is not None else None
     )
-    floor = reconcile_noise_floor(floor_twin, floor_data)
+    floor = reconcile_noise_floor(floor_twin, floor_data, settings.noise_tolerance)
     data = replace(data, scales=_scales(data, n_train, floor.rms, lin_base, sim_before))
     gap_before = normalised_rms(data.output, sim_before, held, norm)
     if calibrated:

@@ -326,7 +326,9 @@ def _plant_data_floor(u: np.ndarray, x: np.ndarray, lin: dict, dt: float) -> Noi
     return NoiseFloor(math.sqrt(total), "data", mixed, math.sqrt(var_meas))
 
 
-def reconcile_noise_floor(twin: NoiseFloor | None, data: NoiseFloor) -> NoiseFloor:
+def reconcile_noise_floor(
+    twin: NoiseFloor | None, data: NoiseFloor, noise_tolerance: float = 0.0
+) -> NoiseFloor:
     """Return the floor a module's gap is tested against, from the twin's and the data's.
 
     Parameters
@@ -335,6 +337,8 @@ def reconcile_noise_floor(twin: NoiseFloor | None, data: NoiseFloor) -> NoiseFlo
         From the twin file's noise levels (:func:`twin_noise_floor`); None when it has none.
     data : NoiseFloor
         Estimated from the recording (:func:`data_noise_floor`).
+    noise_tolerance : float, default 0
+        Relative uncertainty of the twin's noise levels (``GapSettings.noise_tolerance``).
 
     Returns
     -------
@@ -342,8 +346,9 @@ def reconcile_noise_floor(twin: NoiseFloor | None, data: NoiseFloor) -> NoiseFlo
         The data's floor without a twin floor. Otherwise the twin's, with the data's white
         measurement noise on the output added in quadrature (a twin file states the process
         and sensor noise, never the noise of the recorded position); and the data's floor
-        instead when it is the larger: a twin level below what the recording shows is
-        understated. Its ``source`` says which (``"twin"``, ``"twin+data"`` or ``"data"``).
+        instead when it exceeds that by more than ``noise_tolerance``: the recording then
+        contradicts the twin's level. Its ``source`` says which (``"twin"``, ``"twin+data"``
+        or ``"data"``).
 
     Notes
     -----
@@ -362,7 +367,7 @@ def reconcile_noise_floor(twin: NoiseFloor | None, data: NoiseFloor) -> NoiseFlo
         white = np.r_[1.0, np.zeros(len(twin.acf) - 1)]
         acf = weight * twin.acf + (1 - weight) * white
         floor = NoiseFloor(math.sqrt(total), "twin+data", acf, data.measurement)
-    return data if data.rms > floor.rms else floor
+    return data if data.rms > floor.rms * (1.0 + noise_tolerance) else floor
 
 
 def effective_samples(acf: np.ndarray, n: int) -> float:
