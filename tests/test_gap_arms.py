@@ -177,6 +177,9 @@ def test_reconciled_floor_adds_the_positions_measurement_noise_and_trusts_larger
     assert reconcile_noise_floor(twin, loud) is loud  # the twin's level is understated
     assert reconcile_noise_floor(twin, loud, noise_tolerance=0.1) is loud
     assert reconcile_noise_floor(twin, loud, noise_tolerance=0.4) is twin  # within tolerance
+    white = NoiseFloor(0.03, "twin", np.array([1.0]))
+    coloured = reconcile_noise_floor(white, NoiseFloor(0.029, "data", np.array([1.0, 0.6, 0.36])))
+    assert coloured.rms == 0.03 and coloured.acf.tolist() == [1.0, 0.6, 0.36]
     measured = NoiseFloor(0.035, "data", np.array([1.0, 0.2, 0.0]), measurement=0.04)
     floor = reconcile_noise_floor(twin, measured)
     assert floor.rms == pytest.approx(0.05) and floor.source == "twin+data"

@@ -347,8 +347,9 @@ def reconcile_noise_floor(
         measurement noise on the output added in quadrature (a twin file states the process
         and sensor noise, never the noise of the recorded position); and the data's floor
         instead when it exceeds that by more than ``noise_tolerance``: the recording then
-        contradicts the twin's level. Its ``source`` says which (``"twin"``, ``"twin+data"``
-        or ``"data"``).
+        contradicts the twin's level. A twin floor of white noise (a sensor's: a twin file
+        gives levels, not colours) takes the data's autocorrelation. Its ``source`` says which
+        (``"twin"``, ``"twin+data"`` or ``"data"``).
 
     Notes
     -----
@@ -361,6 +362,8 @@ def reconcile_noise_floor(
     if twin is None:
         return data
     floor = twin
+    if len(twin.acf) == 1 and len(data.acf) > 1:
+        floor = NoiseFloor(twin.rms, twin.source, data.acf, twin.measurement)
     if data.measurement > 0:
         total = twin.rms**2 + data.measurement**2
         weight = twin.rms**2 / total if total > 0 else 1.0
