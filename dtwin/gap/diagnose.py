@@ -75,6 +75,7 @@ from dtwin.gap.noise import (
     data_noise_floor,
     effective_samples,
     gap_threshold,
+    reconcile_noise_floor,
     spectral_noise_floor,
     twin_noise_floor,
 )
@@ -588,7 +589,7 @@ def _analyse_module(name, rec, twin, t, split: _Split, calibrate, settings, layo
     floor_twin = (
         twin_noise_floor(name, twin.noise, lin_base, rec.dt) if twin.noise is not None else None
     )
-    floor = floor_twin if floor_twin is not None else floor_data
+    floor = reconcile_noise_floor(floor_twin, floor_data, settings.noise_tolerance)
     data = replace(data, scales=_scales(data, n_train, floor.rms, lin_base, sim_before))
     gap_before = normalised_rms(data.output, sim_before, split.choose, norm)
     gap_cal = normalised_rms(data.output, sim_before, split.decide, norm)

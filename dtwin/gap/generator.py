@@ -18,6 +18,12 @@ holding the truth, which the diagnoser never reads. It is deliberately unkind:
 - excitation amplitudes and frequencies, and lengths of 1000–5000 samples, vary by case;
 - out-of-list effects (``stiffness_change``: a mid-run change of k; ``sensor_interference``: a
   sinusoid on one sensor), which the diagnoser should call ``unexplained``.
+
+The benchmark's *arms* (:mod:`dtwin.gap.arms`: case types ``<arm>__<effect>``) take away what
+these default cases still give: the twin's noise levels, the exact state, the twin's own
+discretisation, the catalogue's families of forms, a single effect. Every key carries its
+``arm`` (``default`` here; the rig family's is ``rig``). The arms' extra draws come from a
+second random stream, so a default case's recording does not depend on the arms.
 """
 
 from __future__ import annotations
@@ -32,6 +38,24 @@ import pandas as pd
 
 from dtwin._validation import DtwinValueError, require_in_range
 from dtwin.command import make_command, time_axis
+from dtwin.gap.arms import (
+    ARM_DRAWS,
+    CONTINUOUS_SUBSTEPS,
+    DEFAULT_ARM,
+    NEAR_CATALOGUE,
+    NOISY_X_FRACTION,
+    TWO_EFFECT_PAIRS,
+    UNSEEN_FORMS,
+    WRONG_NOISE_ERROR,
+    actuator_form,
+    continuous_chain,
+    hysteresis_offset,
+    plant_form_force,
+    sensor_input_form,
+    split_case_type,
+    stiction_plant,
+    unseen_expected,
+)
 from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED, fractional_delay
 from dtwin.gap.noise import plant_noise_gain
 from dtwin.modules import CONTRACTS, fuse, kpi, lag_coefficient, lag_response, plant_response
@@ -41,6 +65,7 @@ __all__ = [
     "IN_LIST_EFFECTS",
     "OUT_OF_LIST_EFFECTS",
     "ALL_CASE_EFFECTS",
+    "ARM_EFFECTS",
     "NOMINAL_TWIN",
     "GeneratedCase",
     "generate_case",
@@ -68,6 +93,23 @@ OUT_OF_LIST_EFFECTS: dict[str, tuple[str, ...]] = {
 }
 #: Every case type, ``none`` included.
 ALL_CASE_EFFECTS: tuple[str, ...] = (*IN_LIST_EFFECTS, *OUT_OF_LIST_EFFECTS, NONE)
+#: The effects each arm may carry (dtwin/gap/arms.py); arms (a)–(d) change the conditions of
+#: the catalogue's effects and ``none``, (e)–(g) the effects.
+ARM_EFFECTS: dict[str, tuple[str, ...]] = {
+    DEFAULT_ARM: ALL_CASE_EFFECTS,
+    **{arm: (*IN_LIST_EFFECTS, NONE) for arm in ("no_noise", "wrong_noise", "noisy_x")},
+    "continuous": (*IN_LIST_EFFECTS, NONE),
+    "unseen": tuple(UNSEEN_FORMS),
+    "near": tuple(NEAR_CATALOGUE),
+    "two": tuple(f"{a}+{b}" for a, b in TWO_EFFECT_PAIRS),
+}
+#: The modules every effect (catalogue, out-of-list and the arms') may sit in.
+_EFFECT_MODULES: dict[str, tuple[str, ...]] = {
+    **IN_LIST_EFFECTS,
+    **OUT_OF_LIST_EFFECTS,
+    **{name: tuple(modules) for name, modules in UNSEEN_FORMS.items()},
+    **NEAR_CATALOGUE,
+}
 
 #: The paper's twin (r_notes.md §1), the nominal twin of every generated case.
 NOMINAL_TWIN: dict[str, Any] = {
@@ -100,9 +142,11 @@ class GeneratedCase:
     twin : dict
         The nominal twin file content (``{"twin": {...}}``).
     key : dict
-        The truth: ``effect``, ``module``, ``expected_effect``, ``magnitude`` (0–1),
+        The truth: ``arm``, ``effect``, ``module``, ``expected_effect``, ``magnitude`` (0–1),
         ``snr`` (RMS of the effect's contribution to the module output over its noise floor),
-        ``form`` and ``params`` of the real effect, and the asset's true parameters.
+        ``form`` and ``params`` of the real effect, and the asset's true parameters; an
+        ``unseen`` case adds ``nearest_catalogue`` (``<form> -> <catalogue effect>``), a
+        ``two`` case ``effects`` (each effect's module, magnitude, snr and params).
     """
 
     recording: pd.DataFrame
@@ -261,6 +305,7 @@ _DRAWS = {
     "sensor_interference": _draw_interference,
     "stiffness_change": _draw_stiffness_change,
     PARAMETER_MISMATCH: _draw_mismatch,
+    **ARM_DRAWS,
 }
 
 
@@ -284,7 +329,8 @@ def _draw_effect(effect, module, level, rng, scale) -> dict[str, Any]:
     return _DRAWS[effect](module, level, rng, scale)
 
 
-def _actuator(u_cmd, tau, dt, noise, spec):
+def _actuator_input(u_cmd, spec, dt):
+    """Return the command after the actuator's effect, before its lag, shape ``(n,)``."""
     u = u_cmd
     if spec.get("effect") == "actuator_saturation":
         if spec["form"] == "tanh":
@@ -299,6 +345,13 @@ def _actuator(u_cmd, tau, dt, noise, spec):
             u = np.where(u > high, u - high, np.where(u < -low, u + low, 0.0))
     elif spec.get("effect") == "actuator_delay":
         u = fractional_delay(u, spec["delay_samples"])
+    elif spec.get("effect") is not None:
+        u = actuator_form(u, spec, dt)
+    return u
+
+
+def _actuator(u_cmd, tau, dt, noise, spec):
+    u = _actuator_input(u_cmd, spec, dt)
     # the contract's lag, but the process noise enters inside the recursion (physics adds it by
     # superposition), a different rounding order: this loop stays so recordings keep their bits
     a = lag_coefficient(tau, dt)
@@ -308,15 +361,20 @@ def _actuator(u_cmd, tau, dt, noise, spec):
     return out
 
 
-def _plant_force(spec, c, k):
-    """Return the real effect's force hook ``F(x, v)`` (N) of the plant, or None."""
+def _plant_force(spec, c, k, min_smoothing=0.0):
+    """Return the real effect's force hook ``F(x, v)`` (N) of the plant, or None.
+
+    Friction's sign is smoothed over ``10⁻³·vs`` m/s, or ``min_smoothing`` if larger (the
+    continuous asset's Runge-Kutta step needs it).
+    """
     effect = spec.get("effect")
     if effect == "coulomb_friction":
         fc, fs, vs, extra = spec["Fc"], spec["Fs"], spec["vs"], spec["extra_c"]
+        smooth = max(1e-3 * vs, min_smoothing)
 
         def friction(xp, vp):
             level = fc + (fs - fc) * math.exp(-((vp / vs) ** 2))
-            return level * math.tanh(vp / (1e-3 * vs)) + extra * vp
+            return level * math.tanh(vp / smooth) + extra * vp
 
         return friction
     if effect == "cubic_stiffness":
@@ -325,7 +383,7 @@ def _plant_force(spec, c, k):
     if effect == "quadratic_damping":
         ratio, ref, power = spec["ratio"], spec["v_ref"], spec["power"]
         return lambda xp, vp: ratio * c * ref * math.copysign(abs(vp / ref) ** power, vp)
-    return None
+    return plant_form_force(spec, k, min_smoothing)
 
 
 def _plant(u, m, c, k, dt, noise, spec, n):
@@ -334,6 +392,8 @@ def _plant(u, m, c, k, dt, noise, spec, n):
     ``stiffness_change`` runs the plant in two parts, the second from the state at the change
     with ``k·factor``.
     """
+    if spec.get("effect") == "stiction":
+        return stiction_plant(u[:n], m, c, k, dt, noise[:n], spec)
     force = _plant_force(spec, c, k)
     if spec.get("effect") != "stiffness_change":
         x, v = plant_response(u[:n], m, c, k, dt, force=force, accel_noise=noise[:n])
@@ -355,9 +415,18 @@ def _plant(u, m, c, k, dt, noise, spec, n):
 
 def _sensor(x, tau, bias, dt, noise, spec, t):
     effect = spec.get("effect")
+    read = x
     if effect == "sensor_delay":
-        x = fractional_delay(x, spec["delay_samples"])
-    lag = lag_response(x, lag_coefficient(tau, dt))
+        read = fractional_delay(x, spec["delay_samples"])
+    elif effect is not None:
+        read = sensor_input_form(x, spec)
+    lag = lag_response(read, lag_coefficient(tau, dt))
+    return _sensor_output(lag, bias, noise, spec, t, x)
+
+
+def _sensor_output(lag, bias, noise, spec, t, x):
+    """Return the sensor's reading from its lag: gain, bias, noise and output effects."""
+    effect = spec.get("effect")
     if effect == "sensor_scale_error":
         lag = spec["gain"] * lag
     y = lag + bias + noise
@@ -375,6 +444,8 @@ def _sensor(x, tau, bias, dt, noise, spec, t):
         y = y + spec["amplitude"] * np.sin(2 * np.pi * spec["freq_hz"] * t + spec["phase"])
     elif effect == "sensor_quantization":
         y = spec["q"] * np.round(y / spec["q"])
+    elif effect == "hysteresis":
+        y = y + hysteresis_offset(x, spec)
     return y
 
 
@@ -402,6 +473,45 @@ def _run_asset(asset, u_cmd, noises, specs, t):
     }
 
 
+def _run_continuous_asset(asset, u_cmd, noises, specs, t):
+    """Return the signals of the continuous asset (arm ``continuous``), each ``(n,)``.
+
+    The command after the actuator's effect is held over each sample; actuator and plant are
+    integrated together (:func:`dtwin.gap.arms.continuous_chain`), the sensors' lags on the
+    continuous position; noise and the sensors' output effects are added at the samples.
+    """
+    dt = asset["dt"]
+    p = asset["plant"]
+    u_in = _actuator_input(u_cmd, specs["M0"], dt)
+    h = dt / CONTINUOUS_SUBSTEPS
+    friction = specs["M1"].get("Fs", specs["M1"].get("Fc", 0.0))
+    force = _plant_force(specs["M1"], p["c"], p["k"], min_smoothing=2 * h * friction / p["m"])
+    delays = {
+        which: specs[module].get("delay_samples", 0.0) * dt
+        if specs[module].get("effect") == "sensor_delay"
+        else 0.0
+        for which, module in (("A", "M2a"), ("B", "M2b"))
+    }
+    chain = continuous_chain(u_in, asset, force, noises["actuator"], noises["plant"], delays)
+    y = {}
+    for which, module in (("A", "M2a"), ("B", "M2b")):
+        bias = asset[f"sensor_{which}"]["bias"]
+        y[which] = _sensor_output(
+            chain[f"lag_{which}"], bias, noises[which], specs[module], t, chain["x"]
+        )
+    weights = asset["kpi"]
+    return {
+        "u_cmd": u_cmd,
+        "u_act": chain["u_act"],
+        "x": chain["x"],
+        "v": chain["v"],
+        "y_A": y["A"],
+        "y_B": y["B"],
+        "y_fused": fuse(y["A"], y["B"], asset["fusion"]["alpha"]),
+        "z": kpi(chain["x"], chain["v"], weights["w1"], weights["w2"]),
+    }
+
+
 #: The asset's parameters that are miscalibrated against the twin: the contract's parameters
 #: of the recursions (time constants and ``m, c, k``), in module order.
 _MISCALIBRATED = tuple((c.section, p) for c in CONTRACTS.values() for p in c.dynamic_params)
@@ -419,13 +529,15 @@ def generate_case(
     miscalibration: float = 0.03,
     noise_error: float = 0.10,
     nominal: Mapping[str, Any] | None = None,
+    arm: str = DEFAULT_ARM,
 ) -> GeneratedCase:
     """Generate one recording of the asset with a withheld effect.
 
     Parameters
     ----------
     effect : str
-        One of :data:`ALL_CASE_EFFECTS`.
+        One of :data:`ARM_EFFECTS` ``[arm]`` (:data:`ALL_CASE_EFFECTS` for the default arm),
+        optionally prefixed ``<arm>__``.
     seed : int
         Seed of every random draw of the case.
     magnitude : float in [0, 1], optional
@@ -440,6 +552,8 @@ def generate_case(
         Largest relative error of the noise levels written into the twin file.
     nominal : mapping, optional
         The nominal twin (default :data:`NOMINAL_TWIN`; all sections and ``noise`` needed).
+    arm : str, default "default"
+        The benchmark arm (:data:`dtwin.gap.arms.ARMS`), or ``"default"``.
 
     Returns
     -------
@@ -451,11 +565,10 @@ def generate_case(
     >>> case.recording.shape, case.key["module"], case.key["expected_effect"]
     ((1000, 9), 'M1', 'coulomb_friction')
     """
-    if effect not in ALL_CASE_EFFECTS:
-        raise DtwinValueError(
-            f"effect must be one of {', '.join(ALL_CASE_EFFECTS)} (got {effect!r})"
-        )
+    arm, effects = _check_case(effect, arm)
     rng = np.random.default_rng(seed)
+    # the arms' own draws come from a second stream: the default cases keep their bits
+    arm_rng = np.random.default_rng([int(seed), 16])
     nominal = {
         k: (dict(v) if isinstance(v, Mapping) else v) for k, v in (nominal or NOMINAL_TWIN).items()
     }
@@ -465,51 +578,156 @@ def generate_case(
         else require_in_range("magnitude", magnitude, 0, 1)
     )
     n = int(rng.integers(1000, 5001)) if n_samples is None else int(n_samples)
-    choices = {**IN_LIST_EFFECTS, **OUT_OF_LIST_EFFECTS}.get(effect, (None,))
-    module = module or (str(rng.choice(choices)) if choices[0] is not None else None)
+    module = module or _draw_module(effects[0], rng)
     dt = float(nominal["dt"])
     t = time_axis(n, dt)
     command, u_cmd = _excitation(rng, n, dt)
     asset = _miscalibrated_asset(nominal, rng, miscalibration)
     noise_true = dict(nominal["noise"])
     phis, noises = _draw_noises(rng, n, noise_true)
-    clean_specs = {m: {} for m in _MODULE_OUTPUT}
-    baseline = _run_asset(asset, u_cmd, noises, clean_specs, t)
+    run = _run_continuous_asset if arm == "continuous" else _run_asset
+    baseline = run(asset, u_cmd, noises, {m: {} for m in _MODULE_OUTPUT}, t)
     scale = _signal_scale(u_cmd, baseline, module, noise_true)
     specs = {m: {} for m in _MODULE_OUTPUT}
-    true_effect = {}
-    if effect != NONE:
-        true_effect = _draw_effect(effect, module, level, rng, scale)
-        if effect == PARAMETER_MISMATCH:
-            _apply_mismatch(asset, nominal, true_effect)
-        else:
-            specs[module] = {"effect": effect, **true_effect}
-    signals = _run_asset(asset, u_cmd, noises, specs, t)
-    snr = None
-    if effect != NONE:
-        snr = _effect_snr(asset, nominal, u_cmd, noises, specs, signals, module, t, noise_true)
+    placed = []
+    if effects[0] != NONE:
+        placed.append(
+            (effects[0], module, level, _draw_effect(effects[0], module, level, rng, scale))
+        )
+    for second in effects[1:]:
+        where = _draw_module(second, arm_rng, exclude=module)
+        second_level = float(arm_rng.uniform())
+        second_scale = _signal_scale(u_cmd, baseline, where, noise_true)
+        params = _draw_effect(second, where, second_level, arm_rng, second_scale)
+        placed.append((second, where, second_level, params))
+    for name, where, _, params in placed:
+        _place_effect(name, where, params, asset, nominal, specs)
+    signals = run(asset, u_cmd, noises, specs, t)
+    snrs = [
+        _effect_snr(asset, nominal, u_cmd, noises, specs, signals, where, t, noise_true)
+        if arm != "continuous"
+        else _snr_against(signals, baseline, asset, where, noise_true)
+        for _, where, _, _ in placed
+    ]
     twin_file = _twin_file(nominal, noise_true, rng, noise_error)
-    expected_effect = (
-        effect if effect in IN_LIST_EFFECTS else (NONE if effect == NONE else UNEXPLAINED)
-    )
     key = {
-        "effect": effect,
-        "module": module,
-        "expected_effect": expected_effect,
-        "expected_module": module,
-        "in_list": effect in IN_LIST_EFFECTS,
+        **_expected(arm, effect, effects, placed, snrs),
         "magnitude": level,
-        "snr": snr,
+        "snr": max(snrs) if snrs else None,
         "seed": int(seed),
         "n_samples": n,
-        "params": true_effect,
+        "params": placed[0][3] if placed else {},
         "asset": asset,
         "noise_true": noise_true,
         "noise_ar1_phi": phis,
         "command": command.__dict__,
     }
+    if len(placed) > 1:
+        key["effects"] = [
+            {"effect": e, "module": m, "magnitude": lv, "snr": r, "params": p}
+            for (e, m, lv, p), r in zip(placed, snrs, strict=True)
+        ]
     frame = pd.DataFrame({"t": t, **signals})
+    frame, twin_file = _apply_arm(arm, frame, twin_file, noise_true, arm_rng)
     return GeneratedCase(recording=frame, twin=twin_file, key=key)
+
+
+def _check_case(effect: str, arm: str) -> tuple[str, list[str]]:
+    """Return ``(arm, effects)`` after checking that ``effect`` belongs to ``arm``.
+
+    ``effect`` may carry the arm as a prefix (``no_noise__none``); the ``two`` arm's effect is
+    ``<effect>+<effect>`` (a pair of :data:`~dtwin.gap.arms.TWO_EFFECT_PAIRS`).
+    """
+    prefixed, bare = split_case_type(effect)
+    if prefixed != DEFAULT_ARM:
+        if arm not in (DEFAULT_ARM, prefixed):
+            raise DtwinValueError(f"case type {effect!r} is of arm {prefixed!r}, not {arm!r}")
+        arm, effect = prefixed, bare
+    allowed = ARM_EFFECTS.get(arm)
+    if allowed is None:
+        raise DtwinValueError(f"arm must be one of {', '.join(ARM_EFFECTS)} (got {arm!r})")
+    if effect not in allowed:
+        raise DtwinValueError(
+            f"effect of arm {arm!r} must be one of {', '.join(allowed)} (got {effect!r})"
+        )
+    return arm, effect.split("+")
+
+
+def _draw_module(effect: str, rng: np.random.Generator, exclude: str | None = None) -> str | None:
+    """Return a module ``effect`` may sit in (one draw when there are several), None for none.
+
+    ``exclude`` (a two-effect case's first module) is left out of the choices.
+    """
+    choices = _EFFECT_MODULES.get(effect, (None,))
+    if exclude is not None:
+        choices = tuple(m for m in choices if m != exclude)
+    return str(rng.choice(choices)) if choices[0] is not None else None
+
+
+def _place_effect(effect, module, params, asset, nominal, specs) -> None:
+    """Put a drawn effect into the asset (a parameter) or the module's spec (in place)."""
+    if effect == PARAMETER_MISMATCH:
+        _apply_mismatch(asset, nominal, params)
+    else:
+        specs[module] = {"effect": effect, **params}
+
+
+def _expected(arm, case_effect, effects, placed, snrs) -> dict[str, Any]:
+    """Return the answer key's ``arm, effect, module, expected_effect, expected_module, in_list``.
+
+    ``unseen``: the nearest catalogue effect (``nearest_catalogue`` names the mapping);
+    ``near`` and out-of-list effects: ``unexplained``; ``two``: the effect with the larger
+    signal-to-noise ratio, in its module.
+    """
+    if arm == "two":
+        larger = int(np.argmax(snrs))
+        effect, module = placed[larger][0], placed[larger][1]
+        return {
+            "arm": arm,
+            "effect": case_effect,
+            "module": module,
+            "expected_effect": effect,
+            "expected_module": module,
+            "in_list": True,
+        }
+    effect = effects[0]
+    module = placed[0][1] if placed else None
+    if arm == "unseen":
+        expected = unseen_expected(effect, module)
+    elif effect in IN_LIST_EFFECTS or effect == NONE:
+        expected = effect
+    else:
+        expected = UNEXPLAINED
+    key = {
+        "arm": arm,
+        "effect": effect,
+        "module": module,
+        "expected_effect": expected,
+        "expected_module": module,
+        "in_list": expected not in (NONE, UNEXPLAINED) or effect in IN_LIST_EFFECTS,
+    }
+    if arm == "unseen":
+        key["nearest_catalogue"] = f"{effect} -> {expected}"
+    return key
+
+
+def _apply_arm(arm, frame, twin_file, noise_true, rng) -> tuple[pd.DataFrame, dict]:
+    """Return the recording and twin file under the arm's condition (dtwin/gap/arms.py)."""
+    twin = dict(twin_file["twin"])
+    if arm == "no_noise":
+        del twin["noise"]
+    elif arm == "wrong_noise":
+        twin["noise"] = {
+            name: float(value * (1 + WRONG_NOISE_ERROR * (1 if rng.uniform() < 0.5 else -1)))
+            for name, value in noise_true.items()
+        }
+    elif arm == "noisy_x":
+        x = frame["x"].to_numpy()
+        noisy = x + NOISY_X_FRACTION * float(np.std(x)) * rng.standard_normal(len(x))
+        frame = frame.drop(columns=["v", "z"]).assign(x=noisy)
+    elif arm == "continuous":
+        del twin["discretisation"]
+    return frame, {"twin": twin}
 
 
 def _excitation(rng: np.random.Generator, n: int, dt: float):
@@ -562,6 +780,7 @@ def _signal_scale(u_cmd, baseline, module, noise_true) -> dict[str, float]:
         "u_max": float(np.max(np.abs((u_cmd if module == "M0" else baseline["u_act"])[: n // 2]))),
         "u_std": float(np.std(u_cmd)),
         "x_max": float(np.max(np.abs(baseline["x"]))),
+        "x_std": float(np.std(baseline["x"])),
         "v_max": float(np.max(np.abs(baseline["v"]))),
         "v_std": float(np.std(baseline["v"])),
         "sigma": sigma,
@@ -591,9 +810,16 @@ def _effect_snr(asset, nominal, u_cmd, noises, specs, signals, module, t, noise_
     The floors are those of docs/gap.md §Noise floors for the asset's true parameters; M3 and
     M4 (no noise) use 1 % of the output's standard deviation.
     """
+    contribution = _effect_contribution(asset, nominal, u_cmd, noises, specs, signals, module, t)
+    return float(
+        np.sqrt(np.mean(contribution**2)) / _module_floor(asset, module, signals, noise_true)
+    )
+
+
+def _module_floor(asset, module, signals, noise_true) -> float:
+    """Return the module's noise floor for the asset's true parameters (output units)."""
     dt = asset["dt"]
     out = _MODULE_OUTPUT[module]
-    contribution = _effect_contribution(asset, nominal, u_cmd, noises, specs, signals, module, t)
     floor = {
         "M0": noise_true["actuator"] / math.sqrt(1 - math.exp(-2 * dt / asset["actuator"]["tau"])),
         "M1": noise_true["plant"] * plant_noise_gain(**asset["plant"], dt=dt)[0],
@@ -602,7 +828,20 @@ def _effect_snr(asset, nominal, u_cmd, noises, specs, signals, module, t, noise_
     }.get(module)
     if floor is None:
         floor = float(np.std(signals[out])) * 0.01
-    return float(np.sqrt(np.mean(contribution**2)) / floor)
+    return floor
+
+
+def _snr_against(signals, baseline, asset, module, noise_true) -> float:
+    """Return the RMS of ``signals − baseline`` at ``module``'s output over its noise floor.
+
+    The continuous asset's signal-to-noise ratio: the run without the effect (and before a
+    parameter mismatch) is the same asset with the same noise; floors as :func:`_effect_snr`.
+    """
+    out = _MODULE_OUTPUT[module]
+    contribution = signals[out] - baseline[out]
+    return float(
+        np.sqrt(np.mean(contribution**2)) / _module_floor(asset, module, signals, noise_true)
+    )
 
 
 def _twin_file(nominal, noise_true, rng: np.random.Generator, noise_error: float) -> dict:
@@ -646,7 +885,10 @@ def _effect_contribution(asset, nominal, u_cmd, noises, specs, signals, module, 
 
 
 def case_spec(case: str, effects: Sequence[str], first_seed: int = 1000) -> dict[str, Any]:
-    """Return ``{"case", "effect", "seed"}`` of a case name ``<effect>_<NN>``.
+    """Return ``{"case", "effect", "arm", "seed"}`` of a case name ``<effect>_<NN>``.
+
+    ``effect`` is the case type as listed (``[<arm>__]<effect>``, or ``rig_<effect>``);
+    ``arm`` is its arm (:func:`dtwin.gap.arms.split_case_type`; ``default`` without a prefix).
 
     The seed is ``first_seed + 1000·(index of effect in effects) + NN``, so adding cases keeps
     the earlier ones (docs/gap.md §Benchmark).
@@ -662,4 +904,9 @@ def case_spec(case: str, effects: Sequence[str], first_seed: int = 1000) -> dict
             f"case must be <effect>_<number> with effect in {', '.join(effects)} (got {case!r})"
         )
     index = list(effects).index(effect)
-    return {"case": case, "effect": effect, "seed": int(first_seed) + 1000 * index + int(number)}
+    return {
+        "case": case,
+        "effect": effect,
+        "arm": split_case_type(effect)[0],
+        "seed": int(first_seed) + 1000 * index + int(number),
+    }

@@ -6,7 +6,7 @@ exact and only the noise of that module acted (output units):
 - M0: actuator process noise ``w`` through the lag: ``σ_w/√(1 − a²)``;
 - M1: acceleration noise ``ξ`` through the Euler plant: ``σ_ξ·√P_xx`` with ``P`` the
   stationary state covariance per unit noise (a discrete Lyapunov equation);
-- M2a/M2b: the measurement noise ``σ_s`` itself;
+- M2a/M2b: the measurement noise ``σ_s`` itself (its marginal standard deviation);
 - M3, M4: no noise in the twin, floor 0.
 
 From the twin (:func:`twin_noise_floor`) when its file gives noise levels; from the data
@@ -18,10 +18,13 @@ causes at a command step do not count. For M1 it separates process noise (white 
 error) from measurement noise on the position (coloured by the plant polynomial) by their
 autocovariances, lags 0–3 (method of moments).
 
+For the sensors, M3 and M4 the noise is taken as AR(1), fitted to the residual's spectrum
+above a tenth of the sampling rate (:func:`_ar1_floor`), which removes the plain estimate's
+low bias for coloured noise (``√(1 − φ)``, 0.63 at ``φ = 0.6``).
+
 The data estimate is reported beside the twin's but used only when the twin gives no noise: it
-cannot tell noise from high-frequency *effects* (a quantizer, an interference) and it is biased
-low for coloured noise, whereas the twin's level is trusted to the ``noise_tolerance`` that the
-threshold includes.
+cannot tell noise from high-frequency *effects* (a quantizer, an interference), whereas the
+twin's level is trusted to the ``noise_tolerance`` that the threshold includes.
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ __all__ = [
     "twin_noise_floor",
     "data_noise_floor",
     "spectral_noise_floor",
+    "reconcile_noise_floor",
     "effective_samples",
     "gap_threshold",
 ]
@@ -64,11 +68,15 @@ class NoiseFloor:
     acf : numpy.ndarray, shape (n_lags,)
         Autocorrelation of that noise in the simulation error, lags 0, 1, … (for the effective
         sample size of the gap).
+    measurement : float, default 0
+        The part of ``rms`` that is white measurement noise on the output (M1's position, read
+        from the data; no twin file states it), output units.
     """
 
     rms: float
     source: str
     acf: np.ndarray
+    measurement: float = 0.0
 
 
 def robust_std(values: np.ndarray) -> float:
@@ -174,9 +182,62 @@ def data_noise_floor(
         return NoiseFloor(sigma / math.sqrt(1 - a * a), "data", a ** np.arange(n_lags))
     if module == "M1":
         return _plant_data_floor(inputs["u_act"], output, lin, dt)
-    residual = output - simulated
-    sigma = robust_std(np.diff(residual)) / math.sqrt(2.0)
-    return NoiseFloor(sigma, "data", _white_acf())
+    return _ar1_floor(output - simulated, dt)
+
+
+#: Largest AR(1) coefficient :func:`_ar1_floor` reads from the data.
+_MAX_PHI = 0.95
+#: Lowest frequency (over the sampling rate) of the band the AR(1) spectrum is fitted on.
+_AR1_BAND_LOW = 0.1
+_AR1_GROUPS = 6
+
+
+def _ar1_spectrum_fit(residual: np.ndarray, dt: float) -> tuple[float, float]:
+    """Return ``(σ, φ)`` of AR(1) noise fitted to a residual's spectrum above 0.1·fs.
+
+    The one-sided PSD of AR(1) noise is ``2q/(fs·(1 − 2φ·cos ω + φ²))`` with ``q = σ²(1 − φ²)``,
+    so ``1/PSD`` is linear in ``cos ω``; the line is fitted to the medians of six groups of
+    Welch bins between 0.1·fs and the Nyquist frequency. The medians ignore the few lines a
+    periodic effect leaves there; smooth effects sit below the band.
+    """
+    fs = 1.0 / dt
+    n = len(residual)
+    segment = int(min(256, max(32, 2 ** math.floor(math.log2(max(n // 8, 32))))))
+    from scipy.signal import welch
+
+    freqs, density = welch(residual - residual.mean(), fs=fs, nperseg=min(segment, n))
+    band = (freqs >= _AR1_BAND_LOW * fs) & (freqs <= 0.5 * fs)
+    groups = np.array_split(np.flatnonzero(band), _AR1_GROUPS)
+    cosines = np.array([np.median(np.cos(2 * np.pi * freqs[g] / fs)) for g in groups])
+    levels = np.array([np.median(density[g]) for g in groups])
+    if np.any(levels <= 0):
+        return 0.0, 0.0
+    slope, intercept = np.polyfit(cosines, 1.0 / levels, 1)
+    ratio = min(max(-slope / intercept, 0.0), 0.99) if intercept > 0 else 0.0
+    phi = min((1.0 - math.sqrt(1.0 - ratio * ratio)) / ratio if ratio > 0 else 0.0, _MAX_PHI)
+    innovation = (1.0 + phi * phi) / intercept * fs / 2.0 if intercept > 0 else 0.0
+    return math.sqrt(max(innovation / (1.0 - phi * phi), 0.0)), phi
+
+
+def _ar1_floor(residual: np.ndarray, dt: float) -> NoiseFloor:
+    """Return the floor of AR(1) noise in a residual (sensors, M3, M4; output units).
+
+    ``φ`` and a level ``σ_spec`` come from the spectrum above 0.1·fs
+    (:func:`_ar1_spectrum_fit`); a second level from the first differences, whose variance is
+    ``2σ²(1 − φ)``: ``σ_diff = robust_std(Δr)/√(2(1 − φ))``. The floor is the lower of the two:
+    the spectrum is blind to a quantizer's lattice (its error is white), the robust spread of
+    the differences is not (most differences of a quantized reading are 0), while a periodic
+    effect inflates the differences but not the spectrum's median. ``φ = 0`` gives the plain
+    ``robust_std(Δr)/√2``, which for coloured noise is biased low by ``√(1 − φ)``. The
+    autocorrelation ``φ^l`` sets the effective sample size of the gap.
+    """
+    residual = np.asarray(residual, dtype=float)
+    if len(residual) < 64 or robust_std(np.diff(residual)) == 0.0:
+        return NoiseFloor(robust_std(np.diff(residual)) / math.sqrt(2.0), "data", _white_acf())
+    sigma_spec, phi = _ar1_spectrum_fit(residual, dt)
+    sigma_diff = robust_std(np.diff(residual)) / math.sqrt(2.0 * (1.0 - phi))
+    n_lags = 1 if phi <= 0 else max(1, int(math.log(1e-3) / math.log(phi)) + 1)
+    return NoiseFloor(min(sigma_spec, sigma_diff), "data", phi ** np.arange(n_lags))
 
 
 def spectral_noise_floor(residual: np.ndarray, dt: float, bandwidth_hz: float) -> NoiseFloor:
@@ -262,7 +323,54 @@ def _plant_data_floor(u: np.ndarray, x: np.ndarray, lin: dict, dt: float) -> Noi
     total = (sigma_accel * gain) ** 2 + var_meas
     weight = (sigma_accel * gain) ** 2 / total if total > 0 else 1.0
     mixed = weight * acf + (1 - weight) * np.r_[1.0, np.zeros(len(acf) - 1)]
-    return NoiseFloor(math.sqrt(total), "data", mixed)
+    return NoiseFloor(math.sqrt(total), "data", mixed, math.sqrt(var_meas))
+
+
+def reconcile_noise_floor(
+    twin: NoiseFloor | None, data: NoiseFloor, noise_tolerance: float = 0.0
+) -> NoiseFloor:
+    """Return the floor a module's gap is tested against, from the twin's and the data's.
+
+    Parameters
+    ----------
+    twin : NoiseFloor or None
+        From the twin file's noise levels (:func:`twin_noise_floor`); None when it has none.
+    data : NoiseFloor
+        Estimated from the recording (:func:`data_noise_floor`).
+    noise_tolerance : float, default 0
+        Relative uncertainty of the twin's noise levels (``GapSettings.noise_tolerance``).
+
+    Returns
+    -------
+    NoiseFloor
+        The data's floor without a twin floor. Otherwise the twin's, with the data's white
+        measurement noise on the output added in quadrature (a twin file states the process
+        and sensor noise, never the noise of the recorded position); and the data's floor
+        instead when it exceeds that by more than ``noise_tolerance``: the recording then
+        contradicts the twin's level. A twin floor of white noise (a sensor's: a twin file
+        gives levels, not colours) takes the data's autocorrelation. Its ``source`` says which
+        (``"twin"``, ``"twin+data"`` or ``"data"``).
+
+    Notes
+    -----
+    docs/gap.md §Noise floors. The data floors are read where the structured effects are
+    absent (differences, a high band, robust spreads), so a data floor above the twin's is more
+    noise, not an effect; the exceptions are high-frequency effects the estimators cannot tell
+    from noise (a broadband interference), which a twin with too low a level would otherwise
+    flag as well.
+    """
+    if twin is None:
+        return data
+    floor = twin
+    if len(twin.acf) == 1 and len(data.acf) > 1:
+        floor = NoiseFloor(twin.rms, twin.source, data.acf, twin.measurement)
+    if data.measurement > 0:
+        total = twin.rms**2 + data.measurement**2
+        weight = twin.rms**2 / total if total > 0 else 1.0
+        white = np.r_[1.0, np.zeros(len(twin.acf) - 1)]
+        acf = weight * twin.acf + (1 - weight) * white
+        floor = NoiseFloor(math.sqrt(total), "twin+data", acf, data.measurement)
+    return data if data.rms > floor.rms * (1.0 + noise_tolerance) else floor
 
 
 def effective_samples(acf: np.ndarray, n: int) -> float:

@@ -273,6 +273,7 @@ def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
     u_offset = us * (rig["u_offset_phys"] - rig["plant"]["k"] * rig["x_offset_phys"])
     return {
         "family": "rig",
+        "arm": "rig",
         "effect": effect,
         "module": "M1",
         "expected_effect": effect,
@@ -296,6 +297,7 @@ def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
 def generate_any_case(case_type: str, seed: int, **paper_options) -> GeneratedCase:
     """Generate a benchmark case: ``rig_<effect>`` from the rig family, else the paper asset.
 
+    A paper-asset case type may carry an arm (``no_noise__none``, dtwin/gap/arms.py).
     ``paper_options`` go to :func:`dtwin.gap.generator.generate_case` (``miscalibration``,
     ``noise_error``); the rig family has none.
     """

@@ -179,10 +179,17 @@ SENSITIVITY_JOB_PARAMS = {
 
 # --- the gap benchmark (docs/gap.md §Cases and rules): chunks of generated cases ---------------
 
+
+def gap_cases_per_type(case_type):
+    """Cases of one gap case type: ``cases_per_arm_effect`` for an arm's ``<arm>__<effect>``."""
+    benchmark = config["gap"]["benchmark"]
+    return benchmark["cases_per_arm_effect" if "__" in case_type else "cases_per_effect"]
+
+
 GAP_CASES = [
     f"{effect}_{number:02d}"
     for effect in config["gap"]["benchmark"]["effects"]
-    for number in range(config["gap"]["benchmark"]["cases_per_effect"])
+    for number in range(gap_cases_per_type(effect))
 ]
 
 

@@ -1,0 +1,199 @@
+"""The gap benchmark's arms (dtwin/gap/arms.py): conditions, forms and answer keys."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dtwin._validation import DtwinValueError
+from dtwin.gap.arms import (
+    NEAR_CATALOGUE,
+    NOISY_X_FRACTION,
+    TWO_EFFECT_PAIRS,
+    UNSEEN_FORMS,
+    WRONG_NOISE_ERROR,
+    actuator_form,
+    continuous_chain,
+    hysteresis_offset,
+    split_case_type,
+    stiction_plant,
+)
+from dtwin.gap.generator import ARM_EFFECTS, NOMINAL_TWIN, case_spec, generate_case
+from dtwin.gap.rigs import generate_any_case
+from dtwin.modules import plant_response
+
+N = 1200
+
+
+def _case(case_type, seed=3, **kwargs):
+    return generate_case(case_type, seed, n_samples=N, **kwargs)
+
+
+def test_every_arm_case_type_generates_with_its_arm_in_the_key():
+    for arm, effects in ARM_EFFECTS.items():
+        for effect in effects[:2]:
+            case_type = effect if arm == "default" else f"{arm}__{effect}"
+            key = _case(case_type, magnitude=0.5).key
+            assert key["arm"] == arm, case_type
+    assert generate_any_case("rig_none", 1, n_samples=None).key["arm"] == "rig"
+
+
+def test_case_spec_and_split_name_the_arm():
+    effects = ["none", "no_noise__none", "two__coulomb_friction+sensor_bias_drift"]
+    spec = case_spec("two__coulomb_friction+sensor_bias_drift_04", effects, 1000)
+    assert spec["arm"] == "two" and spec["seed"] == 1000 + 2000 + 4
+    assert case_spec("none_01", effects)["arm"] == "default"
+    assert split_case_type("near__backlash") == ("near", "backlash")
+
+
+@pytest.mark.parametrize(
+    "bad", ["no_noise__stiction", "near__coulomb_friction", "bogus__none", "two__none"]
+)
+def test_an_effect_outside_its_arm_is_refused(bad):
+    with pytest.raises(DtwinValueError, match="must be one of"):
+        _case(bad)
+
+
+def test_conditions_arms_keep_the_default_recording_and_change_only_their_condition():
+    seed = 11
+    base = _case("coulomb_friction", seed)
+    no_noise = _case("no_noise__coulomb_friction", seed)
+    assert no_noise.recording.equals(base.recording)
+    assert "noise" not in no_noise.twin["twin"] and "noise" in base.twin["twin"]
+
+    wrong = _case("wrong_noise__coulomb_friction", seed)
+    truth = wrong.key["noise_true"]
+    ratios = [wrong.twin["twin"]["noise"][k] / truth[k] for k in truth]
+    assert np.allclose(np.abs(np.array(ratios) - 1), WRONG_NOISE_ERROR)
+
+    noisy = _case("noisy_x__coulomb_friction", seed)
+    assert {"v", "z"}.isdisjoint(noisy.recording.columns)
+    extra = noisy.recording["x"] - base.recording["x"]
+    assert np.std(extra) == pytest.approx(NOISY_X_FRACTION * np.std(base.recording["x"]), rel=0.1)
+    assert noisy.recording["y_A"].equals(base.recording["y_A"])
+
+
+def test_continuous_asset_is_converged_and_is_not_the_twins_recursion():
+    seed = 5
+    euler = _case("none", seed)
+    cont = _case("continuous__none", seed)
+    assert "discretisation" not in cont.twin["twin"]
+    x_euler, x_cont = euler.recording["x"].to_numpy(), cont.recording["x"].to_numpy()
+    spread = np.std(x_cont)
+    # same command and noise, a different discretisation: close but not equal
+    assert 0.01 < np.std(x_cont - x_euler) / spread < 0.5
+    # halving the sub-step moves the solution far less than the Euler recursion differs from it
+    u = np.sin(np.arange(600) * 0.05) + np.sign(np.sin(np.arange(600) * 0.011))
+    zeros = np.zeros(600)
+    runs = [
+        continuous_chain(u, NOMINAL_TWIN, None, zeros, zeros, {"A": 0.0, "B": 0.0}, substeps=s)
+        for s in (20, 40)
+    ]
+    assert np.max(np.abs(runs[0]["x"] - runs[1]["x"])) < 1e-6 * np.max(np.abs(runs[1]["x"]))
+    p = NOMINAL_TWIN["plant"]
+    x_rec = plant_response(runs[1]["u_act"], p["m"], p["c"], p["k"], NOMINAL_TWIN["dt"]).x
+    assert np.max(np.abs(x_rec - runs[1]["x"])) > 1e-3 * np.max(np.abs(runs[1]["x"]))
+
+
+def test_unseen_forms_are_answered_by_the_nearest_catalogue_effect():
+    for effect, mapping in UNSEEN_FORMS.items():
+        key = _case(f"unseen__{effect}", magnitude=0.7).key
+        assert key["module"] in mapping
+        assert key["expected_effect"] == mapping[key["module"]] and key["in_list"]
+        assert key["nearest_catalogue"] == f"{effect} -> {key['expected_effect']}"
+
+
+def test_near_catalogue_effects_are_answered_unexplained_in_their_module():
+    for effect, modules in NEAR_CATALOGUE.items():
+        key = _case(f"near__{effect}", magnitude=0.7).key
+        assert key["expected_effect"] == "unexplained" and not key["in_list"]
+        assert key["module"] in modules and key["snr"] > 1
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_two_effects_are_answered_by_the_one_with_the_larger_snr(seed):
+    first, second = TWO_EFFECT_PAIRS[seed % len(TWO_EFFECT_PAIRS)]
+    key = _case(f"two__{first}+{second}", seed).key
+    effects = key["effects"]
+    assert [e["effect"] for e in effects] == [first, second]
+    assert effects[0]["module"] != effects[1]["module"]
+    larger = max(effects, key=lambda e: e["snr"])
+    assert (key["expected_effect"], key["module"]) == (larger["effect"], larger["module"])
+
+
+def test_backlash_holds_its_output_until_the_input_crosses_the_play():
+    u = np.r_[np.linspace(0, 1, 11), np.linspace(1, 0.85, 4), np.linspace(0.85, 0, 9)]
+    out = actuator_form(u, {"effect": "backlash", "b": 0.1}, 0.02)
+    assert out[10] == pytest.approx(0.9)
+    assert np.allclose(out[10:15], 0.9)  # a reversal of 0.15 < 2b moves nothing
+    assert out[-1] == pytest.approx(0.1)
+
+
+def test_rate_limit_bounds_every_step():
+    u = np.r_[np.zeros(5), np.ones(30)]
+    out = actuator_form(u, {"effect": "rate_limit", "rate": 2.0}, 0.02)
+    assert np.max(np.abs(np.diff(out))) <= 2.0 * 0.02 + 1e-12
+    assert out[-1] == pytest.approx(1.0)
+
+
+def test_hysteresis_offset_follows_the_direction_of_motion():
+    x = np.r_[np.linspace(0, 1, 50), np.linspace(1, 0, 50)]
+    h = hysteresis_offset(x, {"H": 0.2, "width": 0.05})
+    assert h[45] == pytest.approx(0.2, rel=0.05) and h[95] == pytest.approx(-0.2, rel=0.05)
+
+
+def test_stiction_holds_the_mass_until_the_breakaway_force():
+    u = np.r_[np.full(50, 0.4), np.full(50, 0.6)]
+    x, v = stiction_plant(u, 1.0, 0.4, 0.0, 0.02, np.zeros(100), {"Fs": 0.5, "Fc": 0.2})
+    assert np.all(x[:51] == 0) and np.all(v[:51] == 0)
+    assert x[-1] > 0 and v[-1] > 0
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.3, 0.6])
+def test_data_floor_of_coloured_sensor_noise_is_not_biased_low(phi):
+    from dtwin.gap.noise import data_noise_floor
+
+    rng = np.random.default_rng(4)
+    n = 4000
+    white = rng.standard_normal(n)
+    noise = np.empty(n)
+    noise[0] = white[0]
+    for k in range(1, n):
+        noise[k] = phi * noise[k - 1] + np.sqrt(1 - phi * phi) * white[k]
+    slow = np.sin(np.arange(n) * 0.01)  # a smooth structured part the floor must ignore
+    floor = data_noise_floor("M2a", {}, 0.03 * noise + 0.05 * slow, 0.0 * slow, {}, 0.02)
+    assert floor.rms == pytest.approx(0.03, rel=0.08)
+    assert np.r_[floor.acf, 0.0][1] == pytest.approx(phi, abs=0.08)
+
+
+def test_reconciled_floor_adds_the_positions_measurement_noise_and_trusts_larger_data():
+    from dtwin.gap.noise import NoiseFloor, reconcile_noise_floor
+
+    twin = NoiseFloor(0.03, "twin", np.array([1.0, 0.5, 0.25]))
+    quiet = NoiseFloor(0.02, "data", np.array([1.0]))
+    assert reconcile_noise_floor(None, quiet) is quiet
+    assert reconcile_noise_floor(twin, quiet) is twin
+    loud = NoiseFloor(0.04, "data", np.array([1.0, 0.3]))
+    assert reconcile_noise_floor(twin, loud) is loud  # the twin's level is understated
+    assert reconcile_noise_floor(twin, loud, noise_tolerance=0.1) is loud
+    assert reconcile_noise_floor(twin, loud, noise_tolerance=0.4) is twin  # within tolerance
+    white = NoiseFloor(0.03, "twin", np.array([1.0]))
+    coloured = reconcile_noise_floor(white, NoiseFloor(0.029, "data", np.array([1.0, 0.6, 0.36])))
+    assert coloured.rms == 0.03 and coloured.acf.tolist() == [1.0, 0.6, 0.36]
+    measured = NoiseFloor(0.035, "data", np.array([1.0, 0.2, 0.0]), measurement=0.04)
+    floor = reconcile_noise_floor(twin, measured)
+    assert floor.rms == pytest.approx(0.05) and floor.source == "twin+data"
+    assert floor.acf[1] == pytest.approx(0.5 * 0.03**2 / 0.05**2)
+
+
+def test_plant_data_floor_reads_the_noisy_positions_measurement_noise():
+    from dtwin.gap.noise import data_noise_floor
+
+    for case_type, expected in (("none", 0.0), ("noisy_x__none", NOISY_X_FRACTION)):
+        case = _case(case_type, 8)
+        rec, plant = case.recording, case.twin["twin"]["plant"]
+        floor = data_noise_floor(
+            "M1", {"u_act": rec["u_act"].to_numpy()}, rec["x"].to_numpy(), None, plant, 0.02
+        )
+        truth = expected * np.std(_case("none", 8).recording["x"])
+        assert floor.measurement == pytest.approx(truth, abs=0.1 * 0.01 * np.std(rec["x"]))
