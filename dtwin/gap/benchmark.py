@@ -95,7 +95,9 @@ def wilson_interval(successes: int, n: int, level: float = 0.95) -> tuple[float,
     if n == 0:
         return math.nan, math.nan
     low, high = proportion_confint(int(successes), int(n), alpha=1 - level, method="wilson")
-    return float(low), float(high)
+    rate = successes / n
+    # at k = 0 or k = n the formula's bound can pass k/n by round-off (1e-17)
+    return min(float(low), rate), max(float(high), rate)
 
 
 def _paper_truth(effect: str, params: Mapping[str, Any], key: Mapping[str, Any], dt: float):
