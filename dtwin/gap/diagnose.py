@@ -123,7 +123,8 @@ class GapSettings:
     significance : float, default 0.01
         Probability that noise alone exceeds the threshold (a one-sided test).
     min_gap : float, default 0.005
-        Smallest normalised gap worth reporting, whatever the noise.
+        Smallest normalised excess gap (``√(gap² − floor²)``) worth reporting, whatever the
+        noise.
     min_share : float, default 0.5
         Share of the choosing part's excess gap the best candidate must remove to explain it.
     choose_frac : float, default 0.5

@@ -47,10 +47,12 @@ DEFINITIONS: dict[str, str] = {
     "noise_floor": "the gap the module's own noise explains (twin noise levels; from the data "
     "when the twin gives none); one floor per module, the same for every candidate",
     "threshold": "noise floor × (1 + noise_tolerance) × the upper (1 − significance) quantile of "
-    "a noise RMS over the effective sample size before the scoring part, at least min_gap",
-    "gap_before, gap_calibrated": "choosing part: the twin's local gap, and that gap after "
+    "a noise RMS over the effective sample size before the scoring part; the excess over the "
+    "floor must reach min_gap",
+    "gap_before, gap_calibrated": "the twin's local gap (choosing part), and the gap after "
     "re-fitting the module's linear parameters within calibration_tolerance of nominal on the "
-    "training part (calibration slack removed); they decide where the gap lies",
+    "training part (calibration slack removed; training and choosing parts): it decides where "
+    "the gap lies",
     "excess gap": "sqrt(max(gap² − noise_floor², 0)): the part of the gap above what noise "
     "explains",
     "raw_shrink_pct": "shrink 1 of 3, the whole error: 100·(1 − gap_after / gap_before) of the "
