@@ -260,6 +260,11 @@ class Diagnosis:
     settings: GapSettings
     series: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
+    @property
+    def shrink_pct(self) -> float | None:
+        """The headline shrink: ``own_shrink_pct`` (``shrink_pct`` of ``dtwin.gap/1`` readers)."""
+        return self.own_shrink_pct
+
 
 def twin_from_mapping(mapping: Any, dt: float | None = None) -> TwinParams:
     """Return :class:`TwinParams` from a twin file's content (docs/gap.md §Twin file).

@@ -105,6 +105,7 @@ def diagnosis_to_dict(diagnosis: Diagnosis) -> dict[str, Any]:
         "params": d.params,
         "confidence": d.confidence,
         **{key: getattr(d, key) for key in ("gap_before", "gap_refit", "gap_after")},
+        "shrink_pct": d.shrink_pct,
         **{key: getattr(d, key) for key, _ in SHRINKS},
         "excess_clipped": d.excess_clipped,
         "kpi_shrink_pct": d.kpi_shrink_pct,
