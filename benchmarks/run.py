@@ -167,21 +167,10 @@ def import_benchmarks(repeats: int = 3) -> dict:
 
 def hmm_benchmarks() -> list[dict]:
     rows = []
-    for n_steps in (1_000, 10_000, 100_000, 1_000_000):
-        max_iter = "500" if n_steps < 100_000 else "3"
-        for engine in ("dtwin", "hmmlearn"):
-            done = subprocess.run(
-                [PY, str(REPO / "benchmarks" / "hmm_fit.py"), engine, str(n_steps), "10", max_iter],
-                capture_output=True,
-                text=True,
-                check=True,
-                cwd=REPO,
-            )
-            rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
-            print(rows[-1], flush=True)
-    for engine in ("em-dtwin", "em-hmmlearn"):  # one EM iteration alone at T = 1e6 (issue 11)
+
+    def measure(*arguments: str) -> None:
         done = subprocess.run(
-            [PY, str(REPO / "benchmarks" / "hmm_fit.py"), engine, "1000000", "3"],
+            [PY, str(REPO / "benchmarks" / "hmm_fit.py"), *arguments],
             capture_output=True,
             text=True,
             check=True,
@@ -189,6 +178,13 @@ def hmm_benchmarks() -> list[dict]:
         )
         rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
         print(rows[-1], flush=True)
+
+    for n_steps in (1_000, 10_000, 100_000, 1_000_000):
+        max_iter = "500" if n_steps < 100_000 else "3"
+        for engine in ("dtwin", "hmmlearn"):
+            measure(engine, str(n_steps), "10", max_iter)
+    for engine in ("em-dtwin", "em-hmmlearn"):  # one EM iteration alone at T = 1e6 (issue 11)
+        measure(engine, "1000000", "3")
     return rows
 
 
