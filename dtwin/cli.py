@@ -126,7 +126,11 @@ def _diagnose(args: argparse.Namespace) -> int:
     result = _with_warning_notes(result, getattr(args, "warnings_caught", ()))
     atomic_write_folder(args.out, lambda tmp: write_report(result, tmp))
     own = result.own_shrink_pct
-    shrink = f", its own share of the gap −{own:.0f} %" if own is not None else ""
+    shrink = (
+        f", removes {own:.0f} % of the gap a linear re-fit leaves (own share, scoring part)"
+        if own is not None
+        else ""
+    )
     print(f"{result.module or '-'}: {result.effect}{shrink} -> {args.out}")
     return 0
 

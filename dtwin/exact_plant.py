@@ -170,6 +170,12 @@ def _linear_windows(drive: np.ndarray, x0: np.ndarray, v0: np.ndarray, a: np.nda
     return lfilter([1.0], den, forcing, axis=1)
 
 
+#: Up to this many windows of one length are stepped one after another on Python floats
+#: (~1.5 µs per step and window with a cubic force); more go in lockstep as numpy arrays
+#: (~20 µs per step whatever their number, the cost of a dozen ufunc calls on tiny arrays).
+SCALAR_WINDOWS = 8
+
+
 def _force_windows(drive, x0, v0, a, force_step: HoldMatrices, force: Force, inv_m):
     """Exact steps with a state-dependent force, all windows of one length in lockstep.
 
@@ -178,13 +184,20 @@ def _force_windows(drive, x0, v0, a, force_step: HoldMatrices, force: Force, inv
     input enters through ``drive`` (its own hold); the force, a continuous function of the
     state whatever holds the input, always enters with the first-order hold (trapezoidal), by
     one predictor-corrector pass: a force held over the sample (explicit) feeds energy into a
-    lightly damped plant and can diverge.
+    lightly damped plant and can diverge. A force with a ``scalar`` attribute (the same law
+    on Python floats) uses it when the windows are stepped one by one (:data:`SCALAR_WINDOWS`).
     """
     (a11, a12), (a21, a22) = a.tolist()
     (q1, q2), (r1, r2) = force_step.taps.tolist()
-    if drive.shape[0] == 1:  # one long window: plain floats (numpy calls on 1-element arrays
-        steps = (a11, a12, a21, a22, q1, q2, r1, r2)  # cost ~4× more per step)
-        return _force_single(drive[0], float(x0[0]), float(v0[0]), steps, force, inv_m)[None]
+    if drive.shape[0] <= SCALAR_WINDOWS:  # few windows: one after another on plain floats
+        steps = (a11, a12, a21, a22, q1, q2, r1, r2)
+        scalar = getattr(force, "scalar", force)
+        return np.stack(
+            [
+                _force_single(window, float(x), float(v), steps, scalar, inv_m)
+                for window, x, v in zip(drive, x0, v0, strict=True)
+            ]
+        )
     drive_x = np.ascontiguousarray(drive[..., 0].T)  # time-major: row j is step j of every
     drive_v = np.ascontiguousarray(drive[..., 1].T)  # window, contiguous (not a strided column)
     x, v = np.asarray(x0, dtype=float).copy(), np.asarray(v0, dtype=float).copy()

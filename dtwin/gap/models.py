@@ -199,10 +199,22 @@ def _simulate_sensor(data, lin, effect, theta, stop):
 
 
 def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float, *, arrays: bool):
-    """Return the candidate's plant force ``F(x, v)``, or None (``arrays``: numpy ufuncs)."""
+    """Return the candidate's plant force ``F(x, v)``, or None.
+
+    With ``arrays`` it takes numpy arrays (ufuncs) and carries the same law on Python floats as
+    its ``scalar`` attribute (:data:`dtwin.exact_plant.SCALAR_WINDOWS`).
+    """
     if effect is None or effect.stage != "force":
         return None
-    tanh, absolute = (np.tanh, np.abs) if arrays else (math.tanh, abs)
+    if arrays:
+        force = _force_law(effect, theta, velocity_std, np.tanh, np.abs)
+        force.scalar = _force_law(effect, theta, velocity_std, math.tanh, abs)
+        return force
+    return _force_law(effect, theta, velocity_std, math.tanh, abs)
+
+
+def _force_law(effect: Effect, theta: Sequence[float], velocity_std: float, tanh, absolute):
+    """Return ``F(x, v)`` of a plant effect, built on the given ``tanh`` and ``abs``."""
     if effect.name == "coulomb_friction":
         fc = float(theta[0])
         vs = max(FRICTION_SMOOTHING * velocity_std, 1e-300)

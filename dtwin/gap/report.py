@@ -266,8 +266,8 @@ def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
     ax.set_title("How far: before / after")
     title = {"none": "No gap beyond noise", "unexplained": f"{d.module}: unexplained gap"}.get(
         d.effect,
-        f"{d.module}: {d.effect}, its own share of the gap −{(d.own_shrink_pct or 0):.0f} % "
-        "(scoring part)",
+        f"{d.module}: {d.effect}, own share {(d.own_shrink_pct or 0):.0f} % "
+        "(excess gap beyond a linear re-fit removed, scoring part)",
     )
     fig.suptitle(title, fontsize=13, fontweight="bold")
     fig.tight_layout()
