@@ -48,6 +48,8 @@ from dtwin.modules import (
     plant_response,
 )
 
+_MAD_TO_STD = 1.482602218505602
+
 __all__ = [
     "LINEAR_PARAMS",
     "ModuleData",
@@ -119,11 +121,12 @@ def velocity_from_position(
     """Return the plant velocity implied by a position record, shape ``(n_samples,)``, units/s.
 
     The Euler plant defines ``x[k+1] = x[k] + dt·v[k]``, so ``v[k] = (x[k+1] − x[k])/dt``; the
-    position is first smoothed by a cubic Savitzky-Golay filter over 7 samples (exact for
-    smooth signals, it tames measurement noise). The last sample repeats the one before. An exact
-    discretisation needs the derivative at the sample itself: the 5-point central difference
-    (a cubic Savitzky-Golay derivative, exact for cubics). Each experiment (split at
-    ``restarts``) is differentiated on its own.
+    position is first smoothed by a cubic Savitzky-Golay filter over 7 samples, or more when
+    the position is noisy (:func:`_smoothing_window`: a position with 1 % white noise
+    restarted the Euler twin from velocities 7 % off, and the transients read as a gap). The
+    last sample repeats the one before. An exact discretisation needs the derivative at the
+    sample itself: the 5-point central difference (a cubic Savitzky-Golay derivative, exact for
+    cubics). Each experiment (split at ``restarts``) is differentiated on its own.
     """
     x = np.asarray(x, dtype=float)
     velocity = np.empty_like(x)
@@ -132,10 +135,38 @@ def velocity_from_position(
     return velocity
 
 
+#: Savitzky-Golay windows (samples) tried for the Euler plant's position smoothing.
+SMOOTHING_WINDOWS = (7, 11, 15, 21, 31, 45, 65, 91)
+
+
+def _smoothing_window(x: np.ndarray) -> int:
+    """Return the widest cubic Savitzky-Golay window whose residual is still only noise.
+
+    The noise's spread comes from fourth differences (``var(Δ⁴e) = 70·σ²`` for white noise; a
+    smooth signal's are negligible); a window is accepted while the robust spread of
+    ``x − smooth`` stays within 1.1 σ (a discrepancy principle). A noise-free position keeps
+    the narrowest window.
+    """
+    if len(x) < 2 * SMOOTHING_WINDOWS[0]:
+        return SMOOTHING_WINDOWS[0]
+    sigma = _MAD_TO_STD * float(np.median(np.abs(np.diff(x, 4)))) / math.sqrt(70.0)
+    if not sigma > 1e-6 * float(np.std(x)):
+        return SMOOTHING_WINDOWS[0]
+    window = SMOOTHING_WINDOWS[0]
+    for candidate in SMOOTHING_WINDOWS[1:]:
+        if len(x) < 2 * candidate:
+            break
+        residual = x - savgol_filter(x, candidate, 3)
+        if _MAD_TO_STD * float(np.median(np.abs(residual))) > 1.1 * sigma:
+            break
+        window = candidate
+    return window
+
+
 def _piece_velocity(x: np.ndarray, dt: float, discretisation: str) -> np.ndarray:
     if discretisation != EULER and len(x) >= 5:
         return savgol_filter(x, 5, 3, deriv=1, delta=dt)
-    smooth = savgol_filter(x, 7, 3) if len(x) >= 7 else x
+    smooth = savgol_filter(x, _smoothing_window(x), 3) if len(x) >= 7 else x
     velocity = np.empty_like(smooth)
     velocity[:-1] = np.diff(smooth) / dt
     velocity[-1] = velocity[-2]

@@ -71,12 +71,16 @@ class NoiseFloor:
     measurement : float, default 0
         The part of ``rms`` that is white measurement noise on the output (M1's position, read
         from the data; no twin file states it), output units.
+    identified : bool, default True
+        False for a data floor whose process noise could not be told from the model's own
+        error (:func:`_plant_data_floor`); it then never overrules a twin's floor.
     """
 
     rms: float
     source: str
     acf: np.ndarray
     measurement: float = 0.0
+    identified: bool = True
 
 
 def robust_std(values: np.ndarray) -> float:
@@ -298,16 +302,25 @@ def _plant_noise_moments(u, x, lin, dt):
     return var_process, var_meas, (var_process * process[0] / total if total > 0 else 1.0)
 
 
+#: Longest block (samples) on which :func:`_plant_data_floor` counts the process noise as
+#: identified: on longer blocks the Euler recursion's own error (block means in a
+#: second-order recursion, a miscalibrated twin) passes for process noise.
+MAX_IDENTIFIED_BLOCK = 4
+
+
 def _plant_data_floor(u: np.ndarray, x: np.ndarray, lin: dict, dt: float) -> NoiseFloor:
     """Process and measurement noise of the plant from the one-step error (method of moments).
 
     When measurement noise dominates the one-step error (fast sampling), the process noise is
     read on block averages of 2, 4, 8, … samples: over a step h its share grows like h⁴. The
     per-sample acceleration noise at dt is ``σ_h·√(h/dt)`` (white noise of fixed intensity).
+    The floor is ``identified`` when the process noise dominated on blocks of at most
+    :data:`MAX_IDENTIFIED_BLOCK` samples: a position measured with 1 % white noise read its
+    process noise on blocks of 16, 10–30× too large (the Euler recursion's own error).
     """
     u = u - lin.get("u_offset", 0.0)
     _, var_meas, _ = _plant_noise_moments(u, x, lin, dt)
-    factor, sigma_accel = 1, 0.0
+    factor, sigma_accel, share = 1, 0.0, 0.0
     while len(x) // factor >= 200:
         n_blocks = len(x) // factor
         xs = x[: n_blocks * factor].reshape(n_blocks, factor).mean(axis=1)
@@ -323,7 +336,8 @@ def _plant_data_floor(u: np.ndarray, x: np.ndarray, lin: dict, dt: float) -> Noi
     total = (sigma_accel * gain) ** 2 + var_meas
     weight = (sigma_accel * gain) ** 2 / total if total > 0 else 1.0
     mixed = weight * acf + (1 - weight) * np.r_[1.0, np.zeros(len(acf) - 1)]
-    return NoiseFloor(math.sqrt(total), "data", mixed, math.sqrt(var_meas))
+    identified = share >= 0.5 and factor <= MAX_IDENTIFIED_BLOCK
+    return NoiseFloor(math.sqrt(total), "data", mixed, math.sqrt(var_meas), identified)
 
 
 def reconcile_noise_floor(
@@ -346,9 +360,10 @@ def reconcile_noise_floor(
         The data's floor without a twin floor. Otherwise the twin's, with the data's white
         measurement noise on the output added in quadrature (a twin file states the process
         and sensor noise, never the noise of the recorded position); and the data's floor
-        instead when it exceeds that by more than ``noise_tolerance``: the recording then
-        contradicts the twin's level. A twin floor of white noise (a sensor's: a twin file
-        gives levels, not colours) takes the data's autocorrelation. Its ``source`` says which
+        instead when it exceeds that by more than ``noise_tolerance`` and its process noise
+        was ``identified``: the recording then contradicts the twin's level. A twin floor of
+        white noise (a sensor's: a twin file gives levels, not colours) takes the data's
+        autocorrelation. Its ``source`` says which
         (``"twin"``, ``"twin+data"`` or ``"data"``).
 
     Notes
@@ -370,7 +385,8 @@ def reconcile_noise_floor(
         white = np.r_[1.0, np.zeros(len(twin.acf) - 1)]
         acf = weight * twin.acf + (1 - weight) * white
         floor = NoiseFloor(math.sqrt(total), "twin+data", acf, data.measurement)
-    return data if data.rms > floor.rms * (1.0 + noise_tolerance) else floor
+    overruled = data.identified and data.rms > floor.rms * (1.0 + noise_tolerance)
+    return data if overruled else floor
 
 
 def effective_samples(acf: np.ndarray, n: int) -> float:
