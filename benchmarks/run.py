@@ -19,7 +19,8 @@ load average before and after it), medians where repeated. Sections (`python ben
   iteration alone at T = 1e6 through dtwin's engine and hmmlearn's stock GaussianHMM
   (``em-dtwin``, ``em-hmmlearn``: median of 3 of ``(t(3 iterations) − t(1)) / 2``, the
   iteration's tracemalloc peak and the process's peak RSS; benchmarks/hmm_fit.py);
-- ``gap``: `dtwin diagnose` on a 2,000-sample six-module recording and a 100,000-sample one.
+- ``gap``: `dtwin diagnose` on a 2,000-sample six-module recording and a 100,000-sample one,
+  and `--calibrate` on a 130,000-sample plant-only rig (issue 10's target: ≤ 30 s).
 """
 
 from __future__ import annotations
@@ -225,7 +226,22 @@ def gap_benchmarks() -> dict:
                 REPO,
             )
             results[f"diagnose_{n_samples}_samples_s"] = round(seconds, 2)
+        results["diagnose_rig_130000_samples_s"] = _plant_only_rig(folder)
     return results
+
+
+def _plant_only_rig(folder: Path) -> float:
+    """Seconds of `dtwin diagnose --calibrate` on a 130,000-sample plant-only rig recording.
+
+    Issue 10's speed target (≤ 30 s): the rig family's cubic-stiffness seed 2 (13.7 samples per
+    period, open loop, ``t, u_act, x`` only, no nominal parameters).
+    """
+    case = folder / "rig130k"
+    generate = [PY, "-m", "dtwin", "generate", "rig_cubic_stiffness", "--seed", "2"]
+    run([*generate, "--out", str(case), "--n-samples", "130000"], REPO)
+    diagnose = [PY, "-m", "dtwin", "diagnose", str(case / "recording.csv")]
+    options = ["--twin", str(case / "twin.yaml"), "--out", str(folder / "rig130k_out")]
+    return round(run([*diagnose, *options, "--calibrate"], REPO), 2)
 
 
 SECTIONS = {
