@@ -256,3 +256,11 @@ def test_a_quantizer_is_named_without_noise_levels_in_the_twin(seed):
     sensor = "sensor_A" if result.module == "M2a" else "sensor_B"
     before = result.params["noise_before"]
     assert before == pytest.approx(case.key["noise_true"][sensor], rel=0.3)
+
+
+def test_a_noisy_position_case_never_hides_its_effect_in_the_unrecorded_kpi():
+    """Arm (c) records no z, so a KPI (M4) effect could not be seen; none is drawn there."""
+    modules = {_case("noisy_x__parameter_mismatch", seed).key["module"] for seed in range(20)}
+    assert "M4" not in modules and len(modules) >= 3
+    default = {_case("parameter_mismatch", seed).key["module"] for seed in range(20)}
+    assert "M4" in default

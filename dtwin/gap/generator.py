@@ -578,7 +578,8 @@ def generate_case(
         else require_in_range("magnitude", magnitude, 0, 1)
     )
     n = int(rng.integers(1000, 5001)) if n_samples is None else int(n_samples)
-    module = module or _draw_module(effects[0], rng)
+    # a noisy-position recording has no z: a KPI (M4) effect could not be seen at all
+    module = module or _draw_module(effects[0], rng, "M4" if arm == "noisy_x" else None)
     dt = float(nominal["dt"])
     t = time_axis(n, dt)
     command, u_cmd = _excitation(rng, n, dt)
