@@ -63,6 +63,7 @@ __all__ = [
     "bic_by_k",
     "bic_row",
     "bic_minimum_bracketed",
+    "split_fits",
 ]
 
 logger = logging.getLogger(__name__)
@@ -429,7 +430,9 @@ def _fit_one_start(
     tol: float,
     var_floor: float,
     start: str = "dirichlet",
+    initial: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[dict[str, Any], GaussianHMM | None]:
+    """Run EM from one start: a random one (``start``, seeded) or ``initial`` (means, variances)."""
     row: dict[str, Any] = {
         "seed": seed,
         "log_likelihood": math.nan,
@@ -440,9 +443,13 @@ def _fit_one_start(
         "min_occupancy": math.nan,
         "message": "",
     }
-    means, variances, occupancy = START_METHODS[start](
-        X, n_states, np.random.default_rng(seed), var_floor
-    )
+    if initial is None:
+        means, variances, occupancy = START_METHODS[start](
+            X, n_states, np.random.default_rng(seed), var_floor
+        )
+    else:
+        means, variances = initial
+        occupancy = np.full(n_states, np.inf)
     if not np.all(occupancy >= MIN_OCCUPANCY) or not np.isfinite(means).all():
         row.update(status="degenerate", min_occupancy=float(np.min(occupancy)))
         row["message"] = f"random start left a state with < {MIN_OCCUPANCY} samples of weight"
@@ -479,6 +486,83 @@ def _fit_one_start(
     else:
         row.update(status="ok", converged=True)
     return row, model
+
+
+def _split_start(
+    means: np.ndarray, variances: np.ndarray, state: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Split ``state`` of a K-state fit in two: means ``μ ∓ ½σ`` (random signs per feature).
+
+    Returns the K + 1 means and variances (the new state last, with the split one's variances).
+    """
+    delta = 0.5 * np.sqrt(variances[state]) * rng.choice([-1.0, 1.0], size=means.shape[1])
+    new_means = np.vstack([means, means[state] + delta])
+    new_means[state] = means[state] - delta
+    return new_means, np.vstack([variances, variances[state]])
+
+
+def split_fits(
+    X: Any,
+    means: Any,
+    variances: Any,
+    *,
+    seed: int | Sequence[int] = 0,
+    first_restart: int = 1,
+    max_iter: int = 500,
+    tol: float = 1e-8,
+    var_floor: float = 1e-3,
+) -> tuple[pd.DataFrame, tuple[np.ndarray, np.ndarray] | None]:
+    """EM from every split of a K-state fit into K + 1 states (greedy growth of the model).
+
+    Parameters
+    ----------
+    X : array-like, shape (T, D)
+        z-scored features.
+    means, variances : array-like, shape (K, D)
+        Emission means and variances (z-units, z-units²) of the K-state fit to grow.
+    seed : int or sequence of int, default 0
+        Seed of the split directions.
+    first_restart : int, default 1
+        Number of the first split start in the returned table.
+    max_iter, tol, var_floor
+        As :func:`fit_hmm`.
+
+    Returns
+    -------
+    restarts : DataFrame
+        One row per split state (K rows, columns of :attr:`HmmFit.restarts`; ``seed`` −1,
+        ``message`` names the state split).
+    best : tuple of ndarray or None
+        Means and variances (K + 1, D) of the best usable split, None if none was usable.
+
+    Notes
+    -----
+    Start ``j`` keeps the K-state fit's emissions and replaces state ``j`` by two states with
+    means ``μ_j ∓ ½σ_j`` (a random sign per feature) and ``σ_j²``; π and A start uniform as
+    in every start. Random starts spread over many optima at K ≥ 10 (the residuals are smooth,
+    so many tilings of the run fit about equally well); growing the best K-state fit keeps
+    what it found (split-and-merge EM, Ueda et al. 2000; greedy mixture learning).
+    """
+    X = require_finite_array("X", X, ndim=2)
+    means = np.asarray(means, dtype=float)
+    variances = np.asarray(variances, dtype=float)
+    rng = np.random.default_rng(seed)
+    rows: list[dict[str, Any]] = []
+    best: tuple[float, np.ndarray, np.ndarray] | None = None
+    with threadpool_limits(limits=1):
+        for state in range(len(means)):
+            initial = _split_start(means, variances, state, rng)
+            row, model = _fit_one_start(
+                X, len(means) + 1, -1, max_iter, tol, var_floor, initial=initial
+            )
+            note = f"split of state {state + 1} of the K={len(means)} fit"
+            row["message"] = f"{note}; {row['message']}" if row["message"] else note
+            rows.append({"restart": first_restart + state, **row})
+            usable = model is not None and row["status"] != "degenerate"
+            if usable and (best is None or row["log_likelihood"] > best[0]):
+                best = (row["log_likelihood"], model.means_.copy(), _variances(model))
+    table = pd.DataFrame(rows, columns=list(_RESTART_COLUMNS))
+    return table, None if best is None else (best[1], best[2])
 
 
 def _restart_seeds(seed: int | Sequence[int], n_restarts: int) -> list[int]:
@@ -835,6 +919,7 @@ def bic_row(
     bic: float,
     converged: bool,
     source: str = "sweep",
+    n_random: int | None = None,
 ) -> dict[str, Any]:
     """Return one row of :func:`bic_by_k`'s table from a fit's table of starts.
 
@@ -848,17 +933,24 @@ def bic_row(
         Of the best start (:attr:`HmmFit.n_params`, ``bic``, ``converged``).
     source : str, default "sweep"
         ``sweep`` (fitted by the sweep) or ``given`` (a dedicated fit reused).
+    n_random : int, optional
+        The first ``n_random`` rows are random starts, the rest split starts
+        (:func:`split_fits`); None: all rows are random starts.
 
     Returns
     -------
     dict
         ``log_likelihood`` is the best over all starts, ``log_likelihood_half`` the best over
-        the first half (at least one), so their difference shows whether doubling the starts
-        still helped.
+        the first half of the random starts (at least one) and every split start, so their
+        difference shows whether doubling the random starts still helped; ``n_starts`` counts
+        the random starts, ``n_split_starts`` the split ones.
     """
     usable = ~restarts["status"].isin(["failed", "degenerate"])
     values = restarts["log_likelihood"].where(usable)
-    half = max(1, len(restarts) // 2)
+    n_random = len(restarts) if n_random is None else int(n_random)
+    half = max(1, n_random // 2)
+    in_half = np.arange(len(restarts)) < half
+    in_half[n_random:] = True
     return {
         "K": int(n_states),
         "log_likelihood": float(values.max()),
@@ -866,10 +958,51 @@ def bic_row(
         "bic": float(bic),
         "converged": bool(converged),
         "n_usable": int(usable.sum()),
-        "log_likelihood_half": float(values.iloc[:half].max()),
-        "n_starts": len(restarts),
+        "log_likelihood_half": float(values[in_half].max()),
+        "n_starts": n_random,
+        "n_split_starts": len(restarts) - n_random,
         "source": source,
     }
+
+
+def _sweep_row(
+    X: np.ndarray,
+    k: int,
+    n_restarts: int,
+    entropy: list[int],
+    grow_from: tuple[np.ndarray, np.ndarray] | None,
+    fit_options: Mapping[str, Any],
+) -> tuple[dict[str, Any], tuple[np.ndarray, np.ndarray]]:
+    """One K of :func:`bic_by_k`: random starts, then the splits of the best K − 1 fit."""
+    fit = fit_hmm(X, k, n_restarts=n_restarts, seed=[*entropy, k], **fit_options)
+    restarts, best = fit.restarts, (np.array(fit.means), np.array(fit.sds) ** 2)
+    log_likelihood, converged = fit.log_likelihood, fit.converged
+    if grow_from is not None and len(grow_from[0]) == k - 1:
+        em = {
+            key: fit_options[key] for key in ("max_iter", "tol", "var_floor") if key in fit_options
+        }
+        splits, grown = split_fits(
+            X, *grow_from, seed=[*entropy, k, 2], first_restart=n_restarts + 1, **em
+        )
+        restarts = pd.concat([restarts, splits], ignore_index=True)
+        usable = splits[~splits["status"].isin(["failed", "degenerate"])]
+        if grown is not None and usable["log_likelihood"].max() > log_likelihood:
+            top = usable.loc[usable["log_likelihood"].idxmax()]
+            log_likelihood, converged, best = (
+                float(top["log_likelihood"]),
+                bool(top["converged"]),
+                grown,
+            )
+    bic = -2.0 * log_likelihood + fit.n_params * math.log(len(X))
+    return bic_row(k, restarts, fit.n_params, bic, converged, n_random=n_restarts), best
+
+
+def _given_params(row: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:
+    """Pop a given row's emission means and sds (z-units) as (means, variances), if present."""
+    means, sds = row.pop("means_z", None), row.pop("sds_z", None)
+    if means is None or sds is None:
+        return None
+    return np.asarray(means, dtype=float), np.asarray(sds, dtype=float) ** 2
 
 
 def bic_by_k(
@@ -881,6 +1014,7 @@ def bic_by_k(
     k_max: int | None = None,
     stop_after_rises: int = 2,
     given: Mapping[int, Mapping[str, Any]] | None = None,
+    split_starts: bool = False,
     **fit_options: Any,
 ) -> pd.DataFrame:
     """Fit one HMM per number of states and tabulate the BIC (paper §5, Eq. (26)).
@@ -895,7 +1029,7 @@ def bic_by_k(
         Random starts per K (CovarianceAnalysis.Rmd: 5).
     seed : int or sequence of int, default 0
         K's starts derive from ``SeedSequence([*seed, K])``, so a K's result does not depend
-        on which other K are swept.
+        on which other K are swept (without ``split_starts``).
     k_max : int, optional
         Extend K one by one past ``max(ks)`` until :func:`bic_minimum_bracketed` (the BIC rose
         ``stop_after_rises`` times in a row) or ``K = k_max``. None: ``ks`` only.
@@ -903,16 +1037,20 @@ def bic_by_k(
         Consecutive rises that bracket the minimum.
     given : mapping of int to dict, optional
         Rows (:func:`bic_row`) to use as they are for their K: the dedicated K = 4 fit of
-        Figs. 4/7, so that the sweep and the figures share one fit.
+        Figs. 4/7, so that the sweep and the figures share one fit. A row may carry the fit's
+        ``means_z`` and ``sds_z`` (K, D) for ``split_starts``; they are not tabulated.
+    split_starts : bool, default False
+        Also start EM from every split of the best fit at K − 1 (:func:`split_fits`; seed
+        ``[*seed, K, 2]``) when K − 1 was swept just before, and keep the best of all starts.
     **fit_options
-        Passed to :func:`fit_hmm` (``max_iter``, ``tol``, ``var_floor``).
+        Passed to :func:`fit_hmm` (``max_iter``, ``tol``, ``var_floor``, ``start``).
 
     Returns
     -------
     DataFrame
         One row per K (:func:`bic_row`): ``K``, ``log_likelihood``, ``n_params``, ``bic``
         (``−2·logL + n_params·log T``), ``converged``, ``n_usable``, ``log_likelihood_half``,
-        ``n_starts``, ``source``.
+        ``n_starts``, ``n_split_starts``, ``source``.
     """
     X = require_finite_array("X", X, ndim=2)
     ks = sorted(_require_count("ks[]", k, 1) for k in ks)
@@ -922,22 +1060,27 @@ def bic_by_k(
     given = dict(given or {})
     k_last = max(ks) if k_max is None else max(max(ks), _require_count("k_max", k_max, 1))
     rows: list[dict[str, Any]] = []
+    best: tuple[np.ndarray, np.ndarray] | None = None
     for k in [*ks, *range(max(ks) + 1, k_last + 1)]:
         if k > max(ks) and bic_minimum_bracketed([r["bic"] for r in rows], stop_after_rises):
             break
         if k in given:
             row = dict(given[k])
+            best = _given_params(row)
+            row.setdefault("n_split_starts", 0)
         else:
-            fit = fit_hmm(X, k, n_restarts=n_restarts, seed=[*entropy, k], **fit_options)
-            row = bic_row(k, fit.restarts, fit.n_params, fit.bic, fit.converged)
+            grow_from = best if split_starts else None
+            row, best = _sweep_row(X, k, n_restarts, entropy, grow_from, fit_options)
         rows.append(row)
         logger.info(
-            "bic_by_k K=%d: logL=%.3f (first half of the starts %.3f) BIC=%.3f (%d/%d usable)",
+            "bic_by_k K=%d: logL=%.3f (first half of the random starts %.3f) BIC=%.3f "
+            "(%d/%d usable, %d split starts)",
             k,
             row["log_likelihood"],
             row["log_likelihood_half"],
             row["bic"],
             row["n_usable"],
-            row["n_starts"],
+            row["n_starts"] + row["n_split_starts"],
+            row["n_split_starts"],
         )
     return pd.DataFrame(rows)

@@ -20,6 +20,7 @@ from dtwin.hmm import (
     filtered_posteriors,
     fit_hmm,
     n_hmm_params,
+    split_fits,
     to_hmmlearn,
     zscore,
 )
@@ -265,6 +266,54 @@ def test_bic_sweep_extends_k_until_the_minimum_is_bracketed():
     assert table.loc[table["bic"].idxmin(), "K"] == 3
     assert (table["log_likelihood"] >= table["log_likelihood_half"]).all()
     assert (table["n_starts"] == 4).all() and set(table["source"]) == {"sweep"}
+
+
+def test_split_fits_grow_the_missing_state():
+    X = three_state_data(n_per=80)
+    two = fit_hmm(X, 2, n_restarts=3, seed=0)
+    table, best = split_fits(X, two.means, two.sds**2, seed=1, first_restart=4)
+    assert table["restart"].tolist() == [4, 5] and (table["seed"] == -1).all()
+    assert table["message"].str.startswith("split of state").all()
+    means, variances = best
+    # the three blocks' centres: x = -3, 0, 3 (one of the two states held two blocks)
+    np.testing.assert_allclose(np.sort(means[:, 0]), [-3.0, 0.0, 3.0], atol=0.2)
+    assert table["log_likelihood"].max() == pytest.approx(
+        fit_hmm(X, 3, n_restarts=3, seed=0).log_likelihood, abs=1e-3
+    )
+    assert variances.shape == (3, 2)
+
+
+def test_bic_sweep_with_split_starts_never_loses_to_random_starts():
+    rng = np.random.default_rng(4)
+    # a smooth signal: many tilings fit about equally well, as the residuals of the paper
+    X = np.cumsum(rng.normal(size=(400, 2)), axis=0)
+    X = (X - X.mean(axis=0)) / X.std(axis=0)
+    plain = bic_by_k(X, [2, 3, 4, 5], n_restarts=2, seed=3)
+    grown = bic_by_k(X, [2, 3, 4, 5], n_restarts=2, seed=3, split_starts=True)
+    assert grown["n_split_starts"].tolist() == [0, 2, 3, 4]
+    assert (grown["n_starts"] == 2).all()
+    # the random starts are the same, so the best of all starts is at least theirs
+    assert (grown["log_likelihood"] >= plain["log_likelihood"] - 1e-9).all()
+    assert (grown["log_likelihood_half"] >= plain["log_likelihood_half"] - 1e-9).all()
+    assert (grown["bic"] <= plain["bic"] + 1e-6).all()
+
+
+def test_bic_sweep_grows_from_a_given_fit_without_tabulating_its_parameters():
+    X = three_state_data(n_per=80)
+    two = fit_hmm(X, 2, n_restarts=3, seed=0)
+    given = {
+        2: {
+            **bic_by_k(X, [2], n_restarts=1, seed=9).iloc[0].to_dict(),
+            "means_z": two.means.tolist(),
+            "sds_z": two.sds.tolist(),
+        }
+    }
+    table = bic_by_k(X, [2, 3], n_restarts=1, seed=0, given=given, split_starts=True)
+    assert "means_z" not in table and "sds_z" not in table
+    assert table["n_split_starts"].tolist() == [0, 2]
+    assert table.loc[1, "log_likelihood"] == pytest.approx(
+        fit_hmm(X, 3, n_restarts=3, seed=0).log_likelihood, abs=1e-3
+    )
 
 
 # --- crosscheck against depmixS4 ------------------------------------------------------------

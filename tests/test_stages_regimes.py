@@ -236,6 +236,7 @@ def test_bic_sweep_per_dataset_does_not_depend_on_the_other(scenario, twin_run, 
         "n_usable",
         "log_likelihood_half",
         "n_starts",
+        "n_split_starts",
         "source",
     ]
     assert list(both["n_features"]) == [6, 6, 10, 10]

@@ -144,8 +144,9 @@ def k_star_detail(dist: Mapping[str, Any]) -> str:
     --------
     >>> k_star_detail({"n": 3, "n_starts": 4, "counts": {"12": 2, "14": 1}, "bracketed": 3,
     ...                "stable": 1, "k8_beyond_start_noise": 3, "main_run": 14,
-    ...                "main_run_n_starts": 20}).split("; ")[:3]
-    ['K* in 3 draws: 12 (2), 14 (1)', 'bracketed in 3', 'stable (best of 2 vs 4 starts) in 1']
+    ...                "main_run_n_starts": 20}).split("; ")[:3]  # doctest: +NORMALIZE_WHITESPACE
+    ['K* in 3 draws: 12 (2), 14 (1)', 'bracketed in 3',
+     'stable (best of 2 vs 4 random starts) in 1']
     """
     counts = ", ".join(f"{k} ({c})" for k, c in dist["counts"].items())
     half = max(1, dist["n_starts"] // 2)
@@ -153,7 +154,7 @@ def k_star_detail(dist: Mapping[str, Any]) -> str:
         [
             f"K* in {dist['n']} draws: {counts}",
             f"bracketed in {dist['bracketed']}",
-            f"stable (best of {half} vs {dist['n_starts']} starts) in {dist['stable']}",
+            f"stable (best of {half} vs {dist['n_starts']} random starts) in {dist['stable']}",
             f"BIC(8) − min above twice that gain in {dist['k8_beyond_start_noise']}",
             f"main run K* = {dist['main_run']} ({dist['main_run_n_starts']} starts)",
         ]

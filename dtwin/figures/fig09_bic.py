@@ -180,11 +180,14 @@ def _stability_check(table: pd.DataFrame) -> Check:
             "at_k": int(near.loc[gain.idxmax(), "K"]),
         }
     n_starts = int(table["n_starts"].max())
+    splits = " random starts, each with the splits of the best K − 1 fit" * bool(
+        table.get("n_split_starts", pd.Series([0])).max()
+    )
     return Check(
         id="best_loglik_stable_in_starts",
         kind="claim",
         statement=f"project target: the best log-likelihood is stable in the EM starts (best of "
-        f"{n_starts // 2} vs best of {n_starts}, every K up to K* + 2, both data sets)",
+        f"{n_starts // 2} vs best of {n_starts}{splits}, every K up to K* + 2, both data sets)",
         expected=f"gain < {STABLE_LOGLIK:g} log-likelihood units",
         observed=worst,
         passed=all(w["max_gain"] < STABLE_LOGLIK for w in worst.values()),

@@ -181,9 +181,11 @@ def given_bic_row(model: Mapping[str, Any]) -> dict[str, Any]:
     """Return the BIC-table row of a dedicated fit from its summary (:func:`hmm_summary`).
 
     The nominal fit of Fig. 4 and the fault fit of Fig. 7 are the sweep's points at their K,
-    so that the figures and the BIC curve share one fit (``source = "given"``).
+    so that the figures and the BIC curve share one fit (``source = "given"``). The row also
+    carries the fit's ``means_z`` and ``sds_z``, from which the sweep grows K + 1
+    (``bic.split_starts``); :func:`dtwin.hmm.bic_by_k` does not tabulate them.
     """
-    return bic_row(
+    row = bic_row(
         model["n_states"],
         pd.DataFrame(model["restarts"]),
         model["n_params"],
@@ -191,6 +193,7 @@ def given_bic_row(model: Mapping[str, Any]) -> dict[str, Any]:
         model["converged"],
         "given",
     )
+    return {**row, "means_z": model["means_z"], "sds_z": model["sds_z"]}
 
 
 def bic_sweep(
@@ -209,7 +212,8 @@ def bic_sweep(
         The ``bic`` section: ``ks`` (always fitted), ``n_restarts`` (starts per K; the best
         of the first half is reported beside the best of all), optional ``k_max`` and
         ``stop_after_rises`` (extend K past ``max(ks)`` until the BIC rose that many times in
-        a row, at most to ``k_max``).
+        a row, at most to ``k_max``) and ``split_starts`` (also grow the best K − 1 fit by
+        splitting each of its states, :func:`dtwin.hmm.split_fits`).
     hmm : mapping
         The ``hmm`` section (``seed`` and the EM options).
     models : mapping of str to dict, optional
@@ -237,6 +241,7 @@ def bic_sweep(
             seed=hmm_seed(hmm, f"bic_{name}"),
             k_max=bic.get("k_max"),
             stop_after_rises=bic.get("stop_after_rises", 2),
+            split_starts=bool(bic.get("split_starts", False)),
             given=None if model is None else {model["n_states"]: given_bic_row(model)},
             **em_options,
         )

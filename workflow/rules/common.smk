@@ -269,6 +269,6 @@ DRAW_SECTIONS = {
 DRAW_ACF = {k: config["acf"][k] for k in ("ljungbox_lags", "significance", "strong_lag1")}
 # A draw's BIC sweep: Fig. 9's K range and stopping rule with the per-draw EM starts.
 DRAW_BIC = {
-    **{k: config["bic"][k] for k in ("ks", "k_max", "stop_after_rises")},
+    **{k: config["bic"][k] for k in ("ks", "k_max", "stop_after_rises", "split_starts")},
     "n_restarts": config["draws"]["bic"]["n_restarts"],
 }
