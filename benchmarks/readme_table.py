@@ -1,0 +1,129 @@
+"""Print the README's performance table from benchmarks/results.json (`make bench` writes it).
+
+Usage: ``python benchmarks/readme_table.py [results.json]``. Every number in the table is read
+from the file; each row names the section it comes from, its date and the 1-minute load average
+before and after that section ran (the machine's core count heads the table). A section the
+file lacks is left out.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results.json"
+
+
+def cpu_total(by_rule: dict) -> float:
+    """CPU seconds summed over every rule's jobs (the rules' `benchmark:` files)."""
+    return sum(row["cpu_s"] for row in by_rule.values())
+
+
+def when(section: dict) -> str:
+    """``date, load a → b`` of a results.json section."""
+    before, after = section.get("load_1min_before"), section.get("load_1min_after")
+    load = f", load {before:.1f} → {after:.1f}" if before is not None else ""
+    return f"{section['date']}{load}"
+
+
+def dag_rows(dag: dict) -> list[tuple[str, str, str]]:
+    r = dag["results"]
+    return [
+        ("paper DAG (fig01–fig11) cold, `--cores 2`", f"{r['cold_cores2_s']:.1f} s", "≤ 20 s"),
+        ("same, `--cores 1`", f"{r['cold_cores1_s']:.1f} s", "≤ 35 s"),
+        ("same, CPU s summed over its jobs", f"{cpu_total(r['by_rule']):.1f} CPU s", "–"),
+        ("no-op rerun", f"{r['noop_rerun_s']:.2f} s", "≤ 2 s"),
+    ]
+
+
+def figures_rows(figures: dict) -> list[tuple[str, str, str]]:
+    r = figures["results"]
+    return [
+        (
+            "`make figures` cold (every artifact), `--cores 2`",
+            f"{r['cold_cores2_s']:.1f} s",
+            "≤ 45 s",
+        ),
+        ("same, CPU s summed over its jobs", f"{cpu_total(r['by_rule']):.1f} CPU s", "–"),
+    ]
+
+
+def hmm_rows(hmm: dict) -> list[tuple[str, str, str]]:
+    rows = {(r["engine"], r["T"]): r for r in hmm["results"]}
+    out = []
+    em = rows.get(("em-dtwin", 1_000_000))
+    if em:
+        stock = rows.get(("em-hmmlearn", 1_000_000))
+        beside = f" (hmmlearn {stock['seconds_per_iteration']:.2f} s)" if stock else ""
+        out.append(
+            (
+                "one EM iteration at T = 1e6 (K 4, D 10), wall",
+                f"{em['seconds_per_iteration']:.2f} s{beside}",
+                "≤ 0.3 s",
+            )
+        )
+        out.append(("same, peak RSS of the process", f"{em['peak_mb']:.0f} MB", "≤ 300 MB"))
+    fits = [t for t in (10_000, 100_000, 1_000_000) if ("dtwin", t) in rows]
+    if fits:
+        ours = " / ".join(f"{rows[('dtwin', t)]['seconds_per_iteration']:.3f}" for t in fits)
+        theirs = " / ".join(
+            f"{rows[('hmmlearn', t)]['seconds_per_iteration']:.3f}"
+            for t in fits
+            if ("hmmlearn", t) in rows
+        )
+        label = " / ".join(f"1e{len(str(t)) - 1}" for t in fits)
+        out.append(
+            (
+                f"whole 10-start fit, s per EM iteration at T = {label}",
+                f"{ours} (hmmlearn {theirs})",
+                "–",
+            )
+        )
+    return out
+
+
+def gap_rows(gap: dict) -> list[tuple[str, str, str]]:
+    r = gap["results"]
+    seconds = f"{r['diagnose_2000_samples_s']:.1f} / {r['diagnose_100000_samples_s']:.1f} s"
+    return [("`dtwin diagnose`, 2,000 / 100,000 samples (CLI)", seconds, "–")]
+
+
+def imports_rows(imports: dict) -> list[tuple[str, str, str]]:
+    cpu = sorted(row["cpu_s"] for row in imports["results"].values())
+    median = cpu[len(cpu) // 2]
+    return [
+        (
+            f"a script's imports, CPU s (median / max of {len(cpu)})",
+            f"{median:.2f} / {cpu[-1]:.2f}",
+            "–",
+        )
+    ]
+
+
+ROWS = {
+    "dag": dag_rows,
+    "figures": figures_rows,
+    "hmm": hmm_rows,
+    "gap": gap_rows,
+    "imports": imports_rows,
+}
+
+
+def table(results: dict) -> str:
+    """The markdown table of ``results`` (the parsed results.json)."""
+    machine = results.get("machine", {})
+    lines = [
+        f"| what ({machine.get('cpus', '?')} cores) | measured | section, date, load | target |",
+        "|---|---|---|---|",
+    ]
+    for name, rows in ROWS.items():
+        if name in results:
+            for what, value, target in rows(results[name]):
+                lines.append(f"| {what} | {value} | `{name}`, {when(results[name])} | {target} |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    path = Path(sys.argv[1]) if len(sys.argv) > 1 else RESULTS
+    print(table(json.loads(path.read_text())))
