@@ -140,22 +140,20 @@ def _annotate_n(ax: Axes, xs: Sequence[float], ns: Sequence[int]) -> None:
         )
 
 
+def _wilson_points(ax: Axes, x: np.ndarray, rates, fmt: str) -> tuple:
+    """Draw rates at ``x`` with their Wilson 95 % intervals; return ``_rate_arrays(rates)``."""
+    rate, low, high, n = _rate_arrays(rates)
+    yerr = [rate - low, high - rate]
+    ax.errorbar(x, rate, yerr=yerr, fmt=fmt, color=OURS_COLOR, ms=3.5, lw=1.0, capsize=2)
+    return rate, low, high, n
+
+
 def draw_accuracy(ax: Axes, metrics: Mapping[str, Any]) -> None:
     """Panel C: effect accuracy per magnitude bin, Wilson 95 % intervals, n per bin."""
     rates = list(metrics["accuracy_by_magnitude"].values())
     edges = np.array([r["edges"] for r in rates], dtype=float).reshape(-1, 2)
     centres = edges.mean(axis=1)
-    rate, low, high, n = _rate_arrays(rates)
-    ax.errorbar(
-        centres,
-        rate,
-        yerr=[rate - low, high - rate],
-        fmt="o-",
-        color=OURS_COLOR,
-        ms=3.5,
-        lw=1.0,
-        capsize=2,
-    )
+    _, low, _, n = _wilson_points(ax, centres, rates, "o-")
     _annotate_n(ax, centres, n)
     floor = np.nanmin(low) if np.isfinite(low).any() else 0.5
     ax.set_ylim(min(0.5, float(floor) - 0.05) - 0.08, 1.03)
@@ -178,17 +176,7 @@ def draw_reliability(ax: Axes, metrics: Mapping[str, Any]) -> None:
     ax.plot(line, line, color=R_COLOR, lw=0.8, ls="--")
     if rows:
         confidence = np.array([r["mean_confidence"] for r in rows], dtype=float)
-        rate, low, high, n = _rate_arrays(rows)
-        ax.errorbar(
-            confidence,
-            rate,
-            yerr=[rate - low, high - rate],
-            fmt="o",
-            color=OURS_COLOR,
-            ms=3.5,
-            lw=1.0,
-            capsize=2,
-        )
+        rate, _, _, n = _wilson_points(ax, confidence, rows, "o")
         for x, y, count in zip(confidence, rate, n, strict=True):  # n beside each point
             # left of the point, inside the axes (below a bar at 0 it met the tick labels)
             left = x > 0.15

@@ -38,6 +38,7 @@ from dtwin.gap.effects import (
     smooth_quantize,
     soft_saturation,
 )
+from dtwin.gap.noise import robust_std
 from dtwin.modules import (
     EULER,
     LINEAR_PARAMS,
@@ -47,8 +48,6 @@ from dtwin.modules import (
     lag_response,
     plant_response,
 )
-
-_MAD_TO_STD = 1.482602218505602
 
 __all__ = [
     "LINEAR_PARAMS",
@@ -149,7 +148,7 @@ def _smoothing_window(x: np.ndarray) -> int:
     """
     if len(x) < 2 * SMOOTHING_WINDOWS[0]:
         return SMOOTHING_WINDOWS[0]
-    sigma = _MAD_TO_STD * float(np.median(np.abs(np.diff(x, 4)))) / math.sqrt(70.0)
+    sigma = robust_std(np.diff(x, 4)) / math.sqrt(70.0)
     if not sigma > 1e-6 * float(np.std(x)):
         return SMOOTHING_WINDOWS[0]
     window = SMOOTHING_WINDOWS[0]
@@ -157,7 +156,7 @@ def _smoothing_window(x: np.ndarray) -> int:
         if len(x) < 2 * candidate:
             break
         residual = x - savgol_filter(x, candidate, 3)
-        if _MAD_TO_STD * float(np.median(np.abs(residual))) > 1.1 * sigma:
+        if robust_std(residual) > 1.1 * sigma:
             break
         window = candidate
     return window
