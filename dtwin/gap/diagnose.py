@@ -48,6 +48,7 @@ from dtwin.gap.effects import (
     UNEXPLAINED,
     Effect,
     Scales,
+    effect_by_name,
     effects_for_module,
     quantization_variance,
     quantizer_log_density,
@@ -127,6 +128,11 @@ class GapSettings:
         noise.
     min_share : float, default 0.5
         Share of the choosing part's excess gap the best candidate must remove to explain it.
+    min_linear_share : float, default 0.9
+        The same for a candidate of linear form (``parameter_mismatch``, a sensor gain): the
+        twin re-fitted inside its own model class is exact when such a candidate is the answer,
+        so it leaves only noise (true cases remove 96–100 %; a near-catalogue nonlinearity such
+        as backlash or hysteresis that the re-fit only approximates removes 51–79 %).
     choose_frac : float, default 0.5
         Share of the samples after the training part that is the **choosing part** (every
         decision: where, which, ``unexplained``); the rest is the **scoring part** (every
@@ -140,6 +146,7 @@ class GapSettings:
     significance: float = 0.01
     min_gap: float = 0.005
     min_share: float = 0.5
+    min_linear_share: float = 0.9
     choose_frac: float = 0.5
 
     def __post_init__(self) -> None:
@@ -148,6 +155,7 @@ class GapSettings:
         require_in_range("gap.significance", self.significance, 1e-9, 0.5)
         require_in_range("gap.min_gap", self.min_gap, 0.0, 1.0)
         require_in_range("gap.min_share", self.min_share, 0.0, 1.0)
+        require_in_range("gap.min_linear_share", self.min_linear_share, 0.0, 1.0)
         require_in_range("gap.choose_frac", self.choose_frac, 0.1, 0.9)
 
     @classmethod
@@ -882,9 +890,9 @@ def _choose(flagged: list[_ModuleWork], ranked: Mapping[str, list], settings: Ga
     """Return ``(source, chosen)``: the source module's work and its winning candidate.
 
     The source is the flagged module furthest above its threshold (``gap_cal/threshold``);
-    ``chosen`` is its best-scored candidate if that removes at least ``min_share`` of the
-    choosing part's excess gap, else None (docs/gap.md §Which). Both are None when nothing is
-    flagged. Every number used here is the choosing part's.
+    ``chosen`` is its best-scored candidate if that removes at least its required share of the
+    choosing part's excess gap (:func:`required_share`), else None (docs/gap.md §Which). Both
+    are None when nothing is flagged. Every number used here is the choosing part's.
     """
     source = max(flagged, key=lambda w: w.gap_cal / w.threshold) if flagged else None
     chosen = None
@@ -892,8 +900,20 @@ def _choose(flagged: list[_ModuleWork], ranked: Mapping[str, list], settings: Ga
         if not ranked[source.name]:
             return source, None
         best = ranked[source.name][0]
-        chosen = best if best.choosing_share_pct >= 100 * settings.min_share else None
+        needed = required_share(best.effect, settings)
+        chosen = best if best.choosing_share_pct >= 100 * needed else None
     return source, chosen
+
+
+def required_share(effect: str, settings: GapSettings) -> float:
+    """Return the share of the excess gap candidate ``effect`` must remove to be the answer.
+
+    ``min_linear_share`` for a candidate of linear form (``Effect.linear_form``: inside the
+    twin's own model class, exact when right), ``min_share`` for the others, whose forms may
+    only approximate a measured effect (docs/gap.md §Which).
+    """
+    linear = effect_by_name(effect).linear_form
+    return settings.min_linear_share if linear else settings.min_share
 
 
 def _chain_before_after(rec, twin, works, t, source, chosen) -> tuple[dict, dict]:

@@ -122,6 +122,10 @@ class Effect:
         ``starts(scales) -> [theta0, ...]``: starting points of the multi-start fit.
     typical : callable
         ``typical(scales) -> [scale, ...]``: a typical magnitude of each parameter.
+    linear_form : bool
+        True when the candidate stays inside the twin's linear model class (a re-fit of the
+        linear parameters, a sensor gain): if it is the right answer the re-fitted twin is exact,
+        so it must remove nearly all of the excess gap (``GapSettings.min_linear_share``).
     """
 
     name: str
@@ -133,6 +137,7 @@ class Effect:
     bounds: Callable[[Scales], Bounds]
     starts: Callable[[Scales], list[list[float]]]
     typical: Callable[[Scales], list[float]]
+    linear_form: bool = False
 
     @property
     def n_params(self) -> int:
@@ -485,6 +490,7 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [(0.1, 10.0)],
         lambda s: [[1.0]],
         lambda s: [0.1],
+        linear_form=True,
     ),
     Effect(
         "sensor_bias_drift",
@@ -518,6 +524,7 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [],
         lambda s: [[]],
         lambda s: [],
+        linear_form=True,
     ),
 )
 

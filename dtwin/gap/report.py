@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from dtwin.artifacts import atomic_write, to_jsonable, write_json
-from dtwin.gap.diagnose import Diagnosis
+from dtwin.gap.diagnose import Diagnosis, required_share
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -69,7 +69,8 @@ DEFINITIONS: dict[str, str] = {
     "kpi_shrink_pct": "100·(1 − chain gap after / chain gap before) of the end-to-end signal "
     "(kpi_signal: z when recorded), scoring part; null when the source is not upstream of it",
     "choosing_share_pct": "the excess gap a candidate removes on the choosing part, against its "
-    "own floor (a quantizer's includes its rounding); the winner needs min_share of it",
+    "own floor (a quantizer's includes its rounding); the winner needs min_share of it "
+    "(min_linear_share for a candidate of linear form: parameter_mismatch, sensor_scale_error)",
     "score": "n_eff·deviance + n_params·ln(n_eff) on the choosing part (deviance ln MSE; a "
     "quantizer's its own density's), relative to the best candidate",
     "confidence": "BIC weight of the chosen candidate among the module's candidates",
@@ -135,14 +136,26 @@ def _fmt(value: Any, digits: int = 3) -> str:
     return str(value)
 
 
+def _unexplained_headline(d: Diagnosis) -> str:
+    """Return the first line of an ``unexplained`` answer: the closest candidate and its bar."""
+    own = [c for c in d.candidates if c.module == d.module]
+    if not own:
+        return f"**Gap in {d.module}, unexplained**: the module has no candidate effect."
+    best = min(own, key=lambda c: c.score)
+    needed = required_share(best.effect, d.settings)
+    kind = "linear-form " if needed != d.settings.min_share else ""
+    return (
+        f"**Gap in {d.module}, unexplained**: the best-scored candidate, {best.effect}, removes "
+        f"{best.choosing_share_pct:.0f} % of the excess gap on the choosing part; a "
+        f"{kind}candidate must remove {needed:.0%} to explain it."
+    )
+
+
 def _headline(d: Diagnosis) -> str:
     if d.effect == "none":
         return "**No gap beyond the noise**: every diagnosed module is within its noise threshold."
     if d.effect == "unexplained":
-        return (
-            f"**Gap in {d.module}, unexplained**: no candidate effect removes at least "
-            f"{d.settings.min_share:.0%} of its excess gap on the choosing part."
-        )
+        return _unexplained_headline(d)
     params = ", ".join(f"{k} = {v:.4g}" for k, v in d.params.items())
     kpi = (
         f"; end-to-end {d.kpi_signal} gap −{d.kpi_shrink_pct:.0f} %"
