@@ -128,11 +128,12 @@ class GapSettings:
         noise.
     min_share : float, default 0.5
         Share of the choosing part's excess gap the best candidate must remove to explain it.
-    min_linear_share : float, default 0.9
+    min_linear_share : float, default 0.75
         The same for a candidate of linear form (``parameter_mismatch``, a sensor gain): the
         twin re-fitted inside its own model class is exact when such a candidate is the answer,
-        so it leaves only noise (true cases remove 96–100 %; a near-catalogue nonlinearity such
-        as backlash or hysteresis that the re-fit only approximates removes 51–79 %).
+        so it leaves little but noise (right answers of the arms' benchmark seeds removed
+        75.5–100 %, n = 72; backlash or hysteresis read as one removed 50–75 %, docs/gap.md
+        §Which).
     choose_frac : float, default 0.5
         Share of the samples after the training part that is the **choosing part** (every
         decision: where, which, ``unexplained``); the rest is the **scoring part** (every
@@ -146,7 +147,7 @@ class GapSettings:
     significance: float = 0.01
     min_gap: float = 0.005
     min_share: float = 0.5
-    min_linear_share: float = 0.9
+    min_linear_share: float = 0.75
     choose_frac: float = 0.5
 
     def __post_init__(self) -> None:
