@@ -240,6 +240,41 @@ def test_a_noisy_positions_velocity_is_smoothed_over_a_window_its_noise_allows()
     assert error_wide < error_narrow / 3
 
 
+def test_a_noisy_positions_euler_run_starts_where_its_smoothing_is_centred():
+    """The Euler plant started from the edge of the smoothing window began 0.06 units/s off;
+    with ``lead`` (half the window) it starts where the smoothing is centred, from the smoothed
+    position. A noise-free position keeps its recorded samples and no lead."""
+    from dtwin.gap.models import plant_state_from_position
+
+    dt, t = 0.02, np.arange(3000) * 0.02
+    x = np.sin(2.0 * t) + 0.4 * np.sin(0.7 * t + 1.0)
+    noisy = x + 0.01 * np.std(x) * np.random.default_rng(2).normal(size=len(x))
+    position, _, lead = plant_state_from_position(x, dt)
+    assert lead == 0 and np.array_equal(position, x)
+    position, velocity, lead = plant_state_from_position(noisy, dt)
+    assert lead >= 10
+    true_velocity = np.append(np.diff(x) / dt, 0.0)  # the Euler plant's forward difference
+    assert abs(velocity[lead] - true_velocity[lead]) < abs(velocity[0] - true_velocity[0]) / 3
+    assert abs(position[lead] - x[lead]) < 0.005 * np.std(x)
+
+
+@pytest.mark.parametrize("seed", [54000, 54005])
+def test_a_true_plant_behind_a_noisy_position_is_within_its_noise(seed):
+    """Arm (c) without an effect and with the asset's own parameters: the Euler run started
+    at the edge of the smoothing read a training-part gap of 0.0145 for a floor of 0.011, and
+    M1 was flagged; started at its lead it reads `none`."""
+    from dtwin.gap.diagnose import diagnose, twin_discretisation, twin_from_mapping
+    from dtwin.gap.recording import recording_from_frame
+
+    case = generate_any_case("noisy_x__none", seed, miscalibration=0.0, noise_error=0.0)
+    recording = recording_from_frame(case.recording)
+    twin = twin_from_mapping(case.twin, dt=recording.dt)
+    result = diagnose(recording, twin, discretisation=twin_discretisation(case.twin))
+    plant = result.modules["M1"]
+    assert plant.gap_calibrated < plant.threshold
+    assert (result.module, result.effect) == (None, "none")
+
+
 @pytest.mark.parametrize("seed", [25000, 25001, 25002])
 def test_a_quantizer_is_named_without_noise_levels_in_the_twin(seed):
     """Arm (a): the noise before a quantizer is its maximum-likelihood value, not the data

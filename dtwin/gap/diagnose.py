@@ -67,8 +67,8 @@ from dtwin.gap.models import (
     ModuleData,
     plant_bandwidth_hz,
     plant_horizon,
+    plant_state_from_position,
     simulate_module,
-    velocity_from_position,
     window_noise_gain,
 )
 from dtwin.gap.noise import (
@@ -331,11 +331,23 @@ def _module_data(name: str, rec: Recording, t: np.ndarray, layout: _Layout) -> M
     module = next(m for m in MODULES if m.name == name)
     output = rec.signals[module.output]
     scheme = layout.scheme if name == "M1" else EULER
-    velocity = inputs.get("v")
+    velocity, position, lead = inputs.get("v"), None, 0
     if name == "M1":
-        velocity = velocity_from_position(output, rec.dt, scheme, layout.restarts)
+        position, velocity, lead = plant_state_from_position(
+            output, rec.dt, scheme, layout.restarts
+        )
     return ModuleData(
-        name, inputs, output, rec.dt, t, velocity, None, scheme, restarts=layout.restarts
+        name,
+        inputs,
+        output,
+        rec.dt,
+        t,
+        velocity,
+        None,
+        scheme,
+        restarts=layout.restarts,
+        position=position,
+        lead=lead,
     )
 
 
