@@ -20,6 +20,7 @@ import numpy as np
 
 from dtwin.artifacts import atomic_write, to_jsonable, write_json
 from dtwin.gap.diagnose import Diagnosis, required_share
+from dtwin.gap.effects import effect_by_name
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -143,7 +144,7 @@ def _unexplained_headline(d: Diagnosis) -> str:
         return f"**Gap in {d.module}, unexplained**: the module has no candidate effect."
     best = min(own, key=lambda c: c.score)
     needed = required_share(best.effect, d.settings)
-    kind = "linear-form " if needed != d.settings.min_share else ""
+    kind = "linear-form " if effect_by_name(best.effect).linear_form else ""
     return (
         f"**Gap in {d.module}, unexplained**: the best-scored candidate, {best.effect}, removes "
         f"{best.choosing_share_pct:.0f} % of the excess gap on the choosing part; a "
