@@ -324,6 +324,25 @@ def test_gap_benchmark_draws_the_paper_family_only():
     assert artifact.caption.endswith("2 cases of other families are in the JSON only.")
 
 
+def test_gap_benchmark_draws_each_arm_and_the_rig_family_in_panel_f():
+    """Issues 10 and 16: the arms and the rig family are rows of the figure, not only JSON."""
+    from dtwin.gap.benchmark import benchmark_metrics
+
+    paper = benchmark_table().assign(family="paper", arm="default")
+    noisy = benchmark_table().assign(family="paper", arm="noisy_x")
+    rig = benchmark_table().head(4).assign(family="rig", arm="rig")
+    table = pd.concat([paper, noisy, rig], ignore_index=True)
+    metrics = benchmark_metrics(table)
+    artifact = gap_benchmark(table, metrics, [], TARGETS)
+    assert len(artifact.figure.axes) == 6
+    arms = artifact.figure.axes[5]
+    labels = [label.get_text() for label in arms.get_yticklabels()]
+    assert labels == ["default (12)", "(c) noisy x, no v, z (12)", "rig family (4)"]
+    check = print_check(artifact.figure)
+    assert check.passed, check.observed
+    assert artifact.caption.endswith("4 cases of other families are in panel F and the JSON.")
+
+
 def test_a_bic_minimum_inside_the_sweep_away_from_k8_gets_its_cause():
     from dtwin.artifacts import Check
 

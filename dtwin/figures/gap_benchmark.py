@@ -7,7 +7,8 @@ effect's own share first, one mark per case, on the confusion matrix's rows),
 :func:`draw_accuracy` (effect accuracy per magnitude bin with Wilson intervals and the number
 of cases), :func:`draw_reliability` (the reliability table: accuracy against mean confidence
 per confidence bin) and :func:`draw_parameter_errors` (fitted against true parameter, one dot
-per case). The scoring, the intervals included, is :mod:`dtwin.gap.benchmark`'s; this module
+per case), and with several arms or a rig family :func:`draw_arms` (each arm's and family's
+accuracies). The scoring, the intervals included, is :mod:`dtwin.gap.benchmark`'s; this module
 only draws its table and metrics.
 """
 
@@ -23,6 +24,7 @@ from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact
 from dtwin.figures._style import OURS_COLOR, R_COLOR, new_figure, panel_title, unitless
+from dtwin.gap.arms import ARMS, DEFAULT_ARM
 
 __all__ = [
     "draw_confusion",
@@ -30,6 +32,8 @@ __all__ = [
     "draw_accuracy",
     "draw_reliability",
     "draw_parameter_errors",
+    "draw_arms",
+    "arm_groups",
     "plot_gap_benchmark",
     "gap_benchmark",
 ]
@@ -168,7 +172,8 @@ def draw_accuracy(ax: Axes, metrics: Mapping[str, Any]) -> None:
 def draw_reliability(ax: Axes, metrics: Mapping[str, Any]) -> None:
     """Panel E: the reliability table, accuracy (Wilson 95 %) against mean confidence per bin.
 
-    The diagonal is perfect calibration, the band ±10 points around it the target.
+    The diagonal is perfect calibration, the band ±10 points around it the target; the number
+    of cases per bin is listed in the lower right corner, lowest confidence first.
     """
     rows = metrics["reliability"]
     line = np.array([0.0, 1.0])
@@ -176,25 +181,23 @@ def draw_reliability(ax: Axes, metrics: Mapping[str, Any]) -> None:
     ax.plot(line, line, color=R_COLOR, lw=0.8, ls="--")
     if rows:
         confidence = np.array([r["mean_confidence"] for r in rows], dtype=float)
-        rate, _, _, n = _wilson_points(ax, confidence, rows, "o")
-        for x, y, count in zip(confidence, rate, n, strict=True):  # n beside each point
-            # left of the point, inside the axes (below a bar at 0 it met the tick labels)
-            left = x > 0.15
-            ax.annotate(
-                f"{count}",
-                (x, y),
-                xytext=(-4 if left else 4, 0),
-                textcoords="offset points",
-                ha="right" if left else "left",
-                va="center",
-                fontsize=7,
-            )
+        _, _, _, n = _wilson_points(ax, confidence, rows, "o")
+        # the bins crowd near confidence 1 (their labels overlapped on 810 cases): one line
+        ax.text(
+            0.97,
+            0.03,
+            "n: " + ", ".join(str(count) for count in n),
+            transform=ax.transAxes,
+            ha="right",
+            va="bottom",
+            fontsize=7,
+        )
     ax.set_xlim(0, 1.02)
     ax.set_ylim(0, 1.05)
     ax.set_xlabel("mean confidence of the bin")
     ax.set_ylabel("accuracy")
     unitless(ax, "xy")
-    panel_title(ax, "E", "Reliability (n per bin)")
+    panel_title(ax, "E", "Reliability")
 
 
 def draw_parameter_errors(ax: Axes, table: pd.DataFrame, target: float) -> None:
@@ -225,16 +228,95 @@ def draw_parameter_errors(ax: Axes, table: pd.DataFrame, target: float) -> None:
     panel_title(ax, "D", "Parameter error")
 
 
+#: Panel F's row labels: short names of the arms (dtwin/gap/arms.py ``ARMS``) and the rig family.
+_GROUP_LABELS = {
+    DEFAULT_ARM: "default",
+    "no_noise": "(a) no noise levels",
+    "wrong_noise": "(b) noise levels ±25 %",
+    "noisy_x": "(c) noisy x, no v, z",
+    "continuous": "(d) continuous asset",
+    "unseen": "(e) unseen forms",
+    "near": "(f) near-catalogue",
+    "two": "(g) two effects",
+    "rig": "rig family",
+}
+
+#: Panel F's accuracies: (metric of :func:`dtwin.gap.benchmark._family_metrics`, label, marker).
+_ARM_MARKS = (
+    ("module_accuracy", "module", "o"),
+    ("effect_accuracy", "effect", "s"),
+    ("none_accuracy", "none", "^"),
+    ("unexplained_accuracy", "out-of-list → unexplained", "D"),
+)
+
+
+def arm_groups(metrics: Mapping[str, Any]) -> list[tuple[str, Mapping[str, Any]]]:
+    """Return panel F's rows: ``(label, metrics)`` per arm of the paper family, then the rig family.
+
+    Empty when there is one arm and no rig family (the default benchmark's figure keeps five
+    panels then).
+    """
+    arms = metrics.get("arms") or {}
+    order = [DEFAULT_ARM, *ARMS]
+    groups = [
+        (_GROUP_LABELS.get(arm, arm), arms[arm])
+        for arm in sorted(arms, key=lambda a: order.index(a) if a in order else len(order))
+    ]
+    if metrics.get("rig"):
+        groups.append((_GROUP_LABELS["rig"], metrics["rig"]))
+    return groups if len(groups) > 1 else []
+
+
+def draw_arms(ax: Axes, groups: Sequence[tuple[str, Mapping[str, Any]]]) -> None:
+    """Panel F: per arm (and the rig family) its accuracies with Wilson 95 % intervals.
+
+    One row per group, top to bottom in the order given; a metric with no case in the group is
+    not drawn. The row label gives the number of cases.
+    """
+    offsets = np.linspace(-0.27, 0.27, len(_ARM_MARKS))
+    for (name, label, marker), offset in zip(_ARM_MARKS, offsets, strict=True):
+        rows, rates = [], []
+        for i, (_, group) in enumerate(groups):
+            interval = group["intervals"][name]
+            if interval["n"]:
+                rows.append(i + offset)
+                rates.append(interval)
+        if not rates:
+            continue
+        rate, low, high, _ = _rate_arrays(rates)
+        ax.errorbar(
+            rate,
+            rows,
+            xerr=[rate - low, high - rate],
+            fmt=marker,
+            color=OURS_COLOR,
+            mfc=OURS_COLOR if marker in ("o", "s") else "white",
+            ms=3.5,
+            lw=0.8,
+            capsize=1.5,
+            label=label,
+        )
+    ax.set_yticks(range(len(groups)), [f"{label} ({group['n_cases']})" for label, group in groups])
+    ax.set_ylim(len(groups) - 0.5, -0.5)
+    ax.set_xlim(0, 1.02)
+    ax.set_xlabel("accuracy (Wilson 95 %)")
+    unitless(ax, "x")
+    ax.grid(axis="x", alpha=0.2)
+    ax.legend(loc="best", fontsize=7, ncol=2, frameon=True)
+    panel_title(ax, "F", "By arm and family (cases)")
+
+
 def plot_gap_benchmark(
     table: pd.DataFrame,
     metrics: Mapping[str, Any],
     targets: Mapping[str, float],
     no_effect: str = "none",
 ) -> Figure:
-    """Draw the benchmark (five panels; the scoring is :mod:`dtwin.gap.benchmark`'s).
+    """Draw the benchmark (five or six panels; the scoring is :mod:`dtwin.gap.benchmark`'s).
 
     Above: confusion matrix and the three shrinks on shared rows, accuracy by magnitude; below:
-    the parameter errors and the reliability table.
+    the parameter errors and the reliability table; when the cases come from more than one arm
+    or family, a last row with each one's accuracies (:func:`draw_arms`).
 
     Parameters
     ----------
@@ -247,8 +329,16 @@ def plot_gap_benchmark(
     no_effect : str
         The effect name of cases without an effect.
     """
-    figure = new_figure(7.0)
-    grid = figure.add_gridspec(2, 3, width_ratios=[1.5, 0.75, 1.0], height_ratios=[1.5, 1.0])
+    groups = arm_groups(metrics)
+    if groups:
+        figure = new_figure(7.3 + 0.17 * len(groups))
+        heights = [1.5, 1.0, 0.12 * len(groups) + 0.2]
+    else:
+        figure = new_figure(7.0)
+        heights = [1.5, 1.0]
+    grid = figure.add_gridspec(
+        len(heights), 3, width_ratios=[1.5, 0.75, 1.0], height_ratios=heights
+    )
     ax_matrix = figure.add_subplot(grid[0, 0])
     draw_confusion(ax_matrix, table)
     draw_shrinks(
@@ -259,7 +349,17 @@ def plot_gap_benchmark(
         figure.add_subplot(grid[1, 0:2]), table, targets.get("median_parameter_error", 0.15)
     )
     draw_reliability(figure.add_subplot(grid[1, 2]), metrics)
+    if groups := arm_groups(metrics):
+        draw_arms(figure.add_subplot(grid[2, :]), groups)
     return figure
+
+
+def _others_sentence(others: int, panel_f: bool) -> str:
+    """Return the caption's note on the cases of other families (not in panels A–E)."""
+    if not others:
+        return ""
+    where = "in panel F and the JSON" if panel_f else "in the JSON only"
+    return f" {others} cases of other families are {where}."
 
 
 def _misses(table: pd.DataFrame, n_shown: int = 3) -> str:
@@ -359,7 +459,7 @@ def gap_benchmark(
         f"{_accuracy(metrics, 'effect')}, none {_accuracy(metrics, 'none')}, out-of-list → "
         f"unexplained {_accuracy(metrics, 'unexplained')} (Wilson 95 %). "
         f"{_parameter_sentence(metrics)}" + _misses(table)
-    ) + (f" {others} cases of other families are in the JSON only." if others else "")
+    ) + _others_sentence(others, bool(arm_groups(metrics)))
     return FigureArtifact(
         "gap_benchmark",
         figure,
