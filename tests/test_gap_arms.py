@@ -362,3 +362,16 @@ def test_a_true_linear_form_effect_clears_the_linear_share(case_type, seed):
         c for c in result.candidates if c.module == result.module and c.effect == result.effect
     )
     assert chosen.choosing_share_pct >= 100 * GapSettings().min_linear_share
+
+
+@pytest.mark.parametrize(
+    "case_type, seed", [("sensor_bias_drift", 9000), ("no_noise__sensor_bias_drift", 27007)]
+)
+def test_a_drift_that_is_not_a_line_is_named_with_its_curvature(case_type, seed):
+    """A drift of the generator's wandering shape (0.8·s + 0.2·sin²(1.4πs)) read `unexplained`
+    with the straight-line candidate, fitted on the training part and extrapolated; the drift
+    whose rate changes exponentially names it."""
+    case, result = _diagnose_case(case_type, seed)
+    assert case.key["params"]["form"] == "linear_plus_wander"
+    assert (result.module, result.effect) == (case.key["module"], "sensor_bias_drift")
+    assert result.params["curvature"] != 0.0

@@ -41,3 +41,18 @@ def test_quantization_variance_memory_does_not_grow_with_the_noise_to_step_ratio
     tracemalloc.stop()
     assert np.isfinite(value) and value > 0
     assert peak < 50 * 2**20, f"peak {peak / 2**20:.1f} MB"
+
+
+def test_bias_drift_is_a_line_at_zero_curvature_and_settles_or_accelerates_otherwise():
+    from dtwin.gap.effects import bias_drift
+
+    t = np.linspace(0.0, 20.0, 401)
+    assert np.array_equal(bias_drift(t, 0.3, 0.0), 0.3 * t)
+    settling = bias_drift(t, 0.3, 0.5)
+    assert settling[-1] == pytest.approx(0.3 / 0.5 * (1 - np.exp(-10.0)))
+    assert np.all(np.diff(settling) > 0) and np.all(np.diff(settling, 2) < 0)
+    accelerating = bias_drift(t, 0.3, -0.05)
+    assert np.all(np.diff(accelerating, 2) > 0)
+    # the initial rate is `rate` whatever the curvature
+    for curvature in (0.5, 1e-12, -0.05):
+        assert (bias_drift(t[:2], 0.3, curvature)[1] / t[1]) == pytest.approx(0.3, rel=0.03)

@@ -46,6 +46,8 @@ __all__ = [
     "soft_saturation",
     "deadzone",
     "fractional_delay",
+    "bias_drift",
+    "DRIFT_CURVATURE_MAX",
     "smooth_quantize",
     "quantization_variance",
     "quantizer_log_density",
@@ -158,6 +160,25 @@ def soft_saturation(u: np.ndarray, limit: float, sharpness: float) -> np.ndarray
 def deadzone(u: np.ndarray, width: float) -> np.ndarray:
     """Return ``sign(u)·max(|u| − D, 0)``: no output inside ``|u| < D``."""
     return np.sign(u) * np.maximum(np.abs(u) - width, 0.0)
+
+
+#: Largest |curvature·duration| of ``sensor_bias_drift``: the drift's rate changes at most
+#: e^10-fold over the recording.
+DRIFT_CURVATURE_MAX = 10.0
+
+
+def bias_drift(t: np.ndarray, rate: float, curvature: float) -> np.ndarray:
+    """Return a sensor's drift ``rate·(1 − exp(−ρ·t))/ρ`` at times ``t`` (s), shape of ``t``.
+
+    A drift whose rate changes exponentially, ``rate·exp(−ρ·t)``: ``ρ > 0`` settles (a sensor
+    warming up, the first-order thermal drift), ``ρ < 0`` accelerates, ``ρ = 0`` is the
+    straight line ``rate·t``. A straight line fitted on the training part overshot a settling
+    drift on the choosing part: strong drifts (signal-to-noise 4–8) read ``unexplained``.
+    """
+    t = np.asarray(t, dtype=float)
+    if abs(curvature) * float(np.max(np.abs(t), initial=0.0)) < 1e-9:
+        return rate * t
+    return rate * -np.expm1(-curvature * t) / curvature
 
 
 def fractional_delay(u: np.ndarray, delay_samples: float) -> np.ndarray:
@@ -495,13 +516,16 @@ EFFECTS: tuple[Effect, ...] = (
     Effect(
         "sensor_bias_drift",
         ("M2a", "M2b"),
-        ("rate",),
-        ("output units / s",),
+        ("rate", "curvature"),
+        ("output units / s", "1 / s"),
         "output",
-        "y = lag + bias + rate·t",
-        lambda s: [(-100.0 * s.output_std / s.duration, 100.0 * s.output_std / s.duration)],
-        lambda s: [[0.0]],
-        lambda s: [0.1 * s.output_std / s.duration],
+        "y = lag + bias + rate·(1 − exp(−ρ·t))/ρ,  ρ = curvature (ρ = 0: rate·t)",
+        lambda s: [
+            (-100.0 * s.output_std / s.duration, 100.0 * s.output_std / s.duration),
+            (-DRIFT_CURVATURE_MAX / s.duration, DRIFT_CURVATURE_MAX / s.duration),
+        ],
+        lambda s: [[0.0, 0.0], [0.0, 3.0 / s.duration], [0.0, -1.0 / s.duration]],
+        lambda s: [0.1 * s.output_std / s.duration, 1.0 / s.duration],
     ),
     Effect(
         "sensor_delay",

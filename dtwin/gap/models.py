@@ -33,6 +33,7 @@ from dtwin.exact_plant import exact_plant_response, free_response_basis, hold_ma
 from dtwin.gap.effects import (
     Effect,
     Scales,
+    bias_drift,
     deadzone,
     fractional_delay,
     smooth_quantize,
@@ -262,7 +263,7 @@ def _simulate_sensor(data, lin, effect, theta, stop):
     if effect.name == "sensor_scale_error":
         return theta[0] * lag + bias
     if effect.name == "sensor_bias_drift":
-        return lag + bias + theta[0] * data.t[:stop]
+        return lag + bias + bias_drift(data.t[:stop], theta[0], theta[1])
     if effect.name == "sensor_quantization":
         step, offset, before = theta
         return offset + smooth_quantize(lag + bias - offset, step, before)
