@@ -302,7 +302,15 @@ def draw_arms(ax: Axes, groups: Sequence[tuple[str, Mapping[str, Any]]]) -> None
     ax.set_xlabel("accuracy (Wilson 95 %)")
     unitless(ax, "x")
     ax.grid(axis="x", alpha=0.2)
-    ax.legend(loc="best", fontsize=7, ncol=2, frameon=True)
+    # above the axes, right of the title: inside, it covered the wide intervals of small arms
+    ax.legend(
+        loc="lower right",
+        bbox_to_anchor=(1.0, 1.0),
+        fontsize=7,
+        ncol=2,
+        frameon=False,
+        borderaxespad=0.2,
+    )
     panel_title(ax, "F", "By arm and family (cases)")
 
 
