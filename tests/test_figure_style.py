@@ -389,3 +389,13 @@ def test_the_sweeps_failed_targets_and_fig11_balanced_claim_get_causes():
         "optimiser: medians over m_A = m_B ours 36.4 %, our HMM on R's exact signals 39.7 %, "
         "R's re-run 24.9 %; with 10 EM starts"
     )
+
+
+def test_panel_f_names_every_arm_of_the_gap_layer():
+    """The figures layer may not import dtwin.gap, so panel F keeps its own arm labels: they
+    must cover every arm of dtwin/gap/arms.py, the default arm and the rig family."""
+    from dtwin.figures.gap_benchmark import _GROUP_LABELS
+    from dtwin.gap.arms import ARMS, DEFAULT_ARM
+
+    assert set(_GROUP_LABELS) == {DEFAULT_ARM, *ARMS, "rig"}
+    assert list(_GROUP_LABELS)[1 : 1 + len(ARMS)] == list(ARMS)

@@ -24,7 +24,6 @@ from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact
 from dtwin.figures._style import OURS_COLOR, R_COLOR, new_figure, panel_title, unitless
-from dtwin.gap.arms import ARMS, DEFAULT_ARM
 
 __all__ = [
     "draw_confusion",
@@ -228,9 +227,10 @@ def draw_parameter_errors(ax: Axes, table: pd.DataFrame, target: float) -> None:
     panel_title(ax, "D", "Parameter error")
 
 
-#: Panel F's row labels: short names of the arms (dtwin/gap/arms.py ``ARMS``) and the rig family.
+#: Panel F's rows, in order: short names of the arms (dtwin/gap/arms.py ``ARMS``; the figures
+#: layer does not import the gap layer) and the rig family.
 _GROUP_LABELS = {
-    DEFAULT_ARM: "default",
+    "default": "default",
     "no_noise": "(a) no noise levels",
     "wrong_noise": "(b) noise levels ±25 %",
     "noisy_x": "(c) noisy x, no v, z",
@@ -257,7 +257,7 @@ def arm_groups(metrics: Mapping[str, Any]) -> list[tuple[str, Mapping[str, Any]]
     panels then).
     """
     arms = metrics.get("arms") or {}
-    order = [DEFAULT_ARM, *ARMS]
+    order = list(_GROUP_LABELS)
     groups = [
         (_GROUP_LABELS.get(arm, arm), arms[arm])
         for arm in sorted(arms, key=lambda a: order.index(a) if a in order else len(order))
