@@ -169,3 +169,30 @@ def test_metrics_are_grouped_by_arm():
     assert metrics["arms"]["b"]["intervals"]["effect_accuracy"]["k"] == 1
     assert set(benchmark_metrics(_table([1.0], [True]))["arms"]) == {"default"}
     assert TARGETS["median_own_shrink_pct"] == 70.0
+
+
+def test_out_of_list_cases_given_a_catalogue_label_are_counted():
+    """Issue 16, arm (f): at most 20 % of near-catalogue cases may get an in-list label."""
+    answers = ["unexplained", "coulomb_friction", "none", "unexplained", "sensor_scale_error"]
+    table = pd.DataFrame(
+        {
+            "effect": "stiction",
+            "expected_effect": "unexplained",
+            "in_list": False,
+            "magnitude": 0.5,
+            "confidence": [None, 0.9, None, None, 1.0],
+            "module_ok": True,
+            "effect_ok": [a == "unexplained" for a in answers],
+            "diagnosed_effect": answers,
+            "arm": "near",
+            **dict.fromkeys(
+                ("own_shrink_pct", "raw_shrink_pct", "excess_shrink_pct", "kpi_shrink_pct"), None
+            ),
+            "excess_clipped": None,
+            "param_error": float("nan"),
+        }
+    )
+    metrics = benchmark_metrics(table)
+    labelled = metrics["arms"]["near"]["intervals"]["out_of_list_labelled"]
+    assert (labelled["k"], labelled["n"]) == (2, 5)
+    assert metrics["unexplained_accuracy"] == pytest.approx(2 / 5)

@@ -253,6 +253,14 @@ def _rate(flags: pd.Series) -> dict[str, Any]:
     return {"k": k, "n": n, "rate": k / n if n else None, "low": low, "high": high}
 
 
+def _labelled(table: pd.DataFrame) -> pd.Series:
+    """Return, per case, whether its answer names a catalogue effect (not none/unexplained)."""
+    if "diagnosed_effect" not in table:
+        return pd.Series(False, index=table.index)
+    answers = table["diagnosed_effect"]
+    return answers.notna() & ~answers.isin([NONE, UNEXPLAINED])
+
+
 def _median(values: pd.Series) -> float | None:
     values = pd.to_numeric(values, errors="coerce").dropna()
     return float(values.median()) if len(values) else None
@@ -329,8 +337,10 @@ def _family_metrics(table: pd.DataFrame) -> dict[str, Any]:
     ``module_accuracy``: right module (or null for ``none``) over cases with an effect;
     ``effect_accuracy``: right module and effect over in-list cases; ``none_accuracy``;
     ``unexplained_accuracy``: out-of-list cases answered ``unexplained`` in the right module;
-    ``intervals``: each of them as ``{k, n, rate, low, high}`` (Wilson 95 %); the three
-    shrinks' medians over in-list cases diagnosed right (docs/gap.md §Scores).
+    ``out_of_list_labelled``: out-of-list cases answered with a catalogue effect instead (a
+    wrong label; issue 16's arm (f) allows at most 20 %); ``intervals``: each of them as
+    ``{k, n, rate, low, high}`` (Wilson 95 %); the three shrinks' medians over in-list cases
+    diagnosed right (docs/gap.md §Scores).
     """
     with_effect = table[table.expected_effect != NONE]
     in_list = table[table.in_list]
@@ -340,6 +350,7 @@ def _family_metrics(table: pd.DataFrame) -> dict[str, Any]:
         "effect_accuracy": in_list.effect_ok,
         "none_accuracy": table[table.expected_effect == NONE].effect_ok,
         "unexplained_accuracy": table[table.expected_effect == UNEXPLAINED].effect_ok,
+        "out_of_list_labelled": _labelled(table[table.expected_effect == UNEXPLAINED]),
     }
     intervals = {name: _rate(flags) for name, flags in groups.items()}
     bins = pd.cut(table.magnitude, list(MAGNITUDE_BINS), include_lowest=True)
