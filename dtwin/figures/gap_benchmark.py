@@ -357,7 +357,7 @@ def plot_gap_benchmark(
         figure.add_subplot(grid[1, 0:2]), table, targets.get("median_parameter_error", 0.15)
     )
     draw_reliability(figure.add_subplot(grid[1, 2]), metrics)
-    if groups := arm_groups(metrics):
+    if groups:
         draw_arms(figure.add_subplot(grid[2, :]), groups)
     return figure
 

@@ -127,7 +127,8 @@ class Effect:
     linear_form : bool
         True when the candidate stays inside the twin's linear model class (a re-fit of the
         linear parameters, a sensor gain): if it is the right answer the re-fitted twin is exact,
-        so it must remove nearly all of the excess gap (``GapSettings.min_linear_share``).
+        so it must remove more of the excess gap than other candidates
+        (``GapSettings.min_linear_share``).
     """
 
     name: str

@@ -160,18 +160,14 @@ def plant_state_from_position(
     effect. Otherwise ``position`` is ``x`` and ``lead`` 0. Shapes ``(n_samples,)``.
     """
     x = np.asarray(x, dtype=float)
-    velocity = velocity_from_position(x, dt, discretisation, restarts)
-    position, lead = x, 0
     if discretisation != EULER:
-        return position, velocity, lead
-    position = x.copy()
+        return x, velocity_from_position(x, dt, discretisation, restarts), 0
+    position, velocity, lead = x.copy(), np.empty_like(x), 0
     for start, end in _pieces(len(x), restarts):
-        piece = x[start:end]
-        if len(piece) < 7:
-            continue
-        window = _smoothing_window(piece)
+        smooth, window = _euler_smoothed(x[start:end])
+        velocity[start:end] = _forward_difference(smooth, dt)
         if window > SMOOTHING_WINDOWS[0]:
-            position[start:end] = savgol_filter(piece, window, 3)
+            position[start:end] = smooth
             lead = max(lead, window // 2)
     return position, velocity, lead
 
@@ -204,14 +200,26 @@ def _smoothing_window(x: np.ndarray) -> int:
     return window
 
 
-def _piece_velocity(x: np.ndarray, dt: float, discretisation: str) -> np.ndarray:
-    if discretisation != EULER and len(x) >= 5:
-        return savgol_filter(x, 5, 3, deriv=1, delta=dt)
-    smooth = savgol_filter(x, _smoothing_window(x), 3) if len(x) >= 7 else x
+def _euler_smoothed(x: np.ndarray) -> tuple[np.ndarray, int]:
+    """Return ``(x smoothed for the Euler plant, its window)``; under 7 samples ``(x, 0)``."""
+    if len(x) < 7:
+        return x, 0
+    window = _smoothing_window(x)
+    return savgol_filter(x, window, 3), window
+
+
+def _forward_difference(smooth: np.ndarray, dt: float) -> np.ndarray:
+    """Return ``(x[k+1] − x[k])/dt``, the last sample repeating the one before."""
     velocity = np.empty_like(smooth)
     velocity[:-1] = np.diff(smooth) / dt
     velocity[-1] = velocity[-2]
     return velocity
+
+
+def _piece_velocity(x: np.ndarray, dt: float, discretisation: str) -> np.ndarray:
+    if discretisation != EULER and len(x) >= 5:
+        return savgol_filter(x, 5, 3, deriv=1, delta=dt)
+    return _forward_difference(_euler_smoothed(x)[0], dt)
 
 
 def first_order_lag(u: np.ndarray, tau: float, dt: float, initial: float) -> np.ndarray:
