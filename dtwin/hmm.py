@@ -64,6 +64,7 @@ __all__ = [
     "bic_row",
     "bic_minimum_bracketed",
     "split_fits",
+    "STABLE_GAIN",
 ]
 
 logger = logging.getLogger(__name__)
@@ -965,25 +966,37 @@ def bic_row(
     }
 
 
-def _sweep_row(
+#: A K's best log-likelihood is "stable" when the second half of its random starts gains less
+#: (log-likelihood units; the bar of Fig. 9's stability check, ``fig09_bic.STABLE_LOGLIK``).
+STABLE_GAIN = 1.0
+
+
+def _grown_splits(
     X: np.ndarray,
     k: int,
-    n_restarts: int,
     entropy: list[int],
     grow_from: tuple[np.ndarray, np.ndarray] | None,
     fit_options: Mapping[str, Any],
+) -> tuple[pd.DataFrame | None, tuple[np.ndarray, np.ndarray] | None]:
+    """Return the splits of the best K − 1 fit (:func:`split_fits`), or (None, None)."""
+    if grow_from is None or len(grow_from[0]) != k - 1:
+        return None, None
+    em = {key: fit_options[key] for key in ("max_iter", "tol", "var_floor") if key in fit_options}
+    return split_fits(X, *grow_from, seed=[*entropy, k, 2], **em)
+
+
+def _combined_row(
+    fit: HmmFit,
+    splits: pd.DataFrame | None,
+    grown: tuple[np.ndarray, np.ndarray] | None,
+    n_samples: int,
 ) -> tuple[dict[str, Any], tuple[np.ndarray, np.ndarray]]:
-    """One K of :func:`bic_by_k`: random starts, then the splits of the best K − 1 fit."""
-    fit = fit_hmm(X, k, n_restarts=n_restarts, seed=[*entropy, k], **fit_options)
+    """Return the BIC row of a K's random and split starts, and the best emissions."""
+    n_random = len(fit.restarts)
     restarts, best = fit.restarts, (np.array(fit.means), np.array(fit.sds) ** 2)
     log_likelihood, converged = fit.log_likelihood, fit.converged
-    if grow_from is not None and len(grow_from[0]) == k - 1:
-        em = {
-            key: fit_options[key] for key in ("max_iter", "tol", "var_floor") if key in fit_options
-        }
-        splits, grown = split_fits(
-            X, *grow_from, seed=[*entropy, k, 2], first_restart=n_restarts + 1, **em
-        )
+    if splits is not None:
+        splits = splits.assign(restart=splits["restart"] + n_random)
         restarts = pd.concat([restarts, splits], ignore_index=True)
         usable = splits[~splits["status"].isin(["failed", "degenerate"])]
         if grown is not None and usable["log_likelihood"].max() > log_likelihood:
@@ -993,8 +1006,36 @@ def _sweep_row(
                 bool(top["converged"]),
                 grown,
             )
-    bic = -2.0 * log_likelihood + fit.n_params * math.log(len(X))
-    return bic_row(k, restarts, fit.n_params, bic, converged, n_random=n_restarts), best
+    bic = -2.0 * log_likelihood + fit.n_params * math.log(n_samples)
+    row = bic_row(fit.n_states, restarts, fit.n_params, bic, converged, n_random=n_random)
+    return row, best
+
+
+def _sweep_row(
+    X: np.ndarray,
+    k: int,
+    n_restarts: int,
+    entropy: list[int],
+    grow_from: tuple[np.ndarray, np.ndarray] | None,
+    fit_options: Mapping[str, Any],
+    max_restarts: int | None = None,
+) -> tuple[dict[str, Any], tuple[np.ndarray, np.ndarray]]:
+    """One K of :func:`bic_by_k`: random starts, then the splits of the best K − 1 fit.
+
+    With ``max_restarts``, the random starts are doubled (the seeds are prefix-stable, so the
+    first ones are the same fits) while the second half still gains :data:`STABLE_GAIN` or
+    more log-likelihood and the doubled count stays within ``max_restarts``.
+    """
+    splits, grown = _grown_splits(X, k, entropy, grow_from, fit_options)
+    n = n_restarts
+    while True:
+        fit = fit_hmm(X, k, n_restarts=n, seed=[*entropy, k], **fit_options)
+        row, best = _combined_row(fit, splits, grown, len(X))
+        gain = row["log_likelihood"] - row["log_likelihood_half"]
+        if max_restarts is None or gain < STABLE_GAIN or 2 * n > max_restarts:
+            return row, best
+        logger.info("bic_by_k K=%d: %d starts gain %.3f over %d; doubling", k, n, gain, n // 2)
+        n *= 2
 
 
 def _given_params(row: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:
@@ -1015,6 +1056,7 @@ def bic_by_k(
     stop_after_rises: int = 2,
     given: Mapping[int, Mapping[str, Any]] | None = None,
     split_starts: bool = False,
+    max_restarts: int | None = None,
     **fit_options: Any,
 ) -> pd.DataFrame:
     """Fit one HMM per number of states and tabulate the BIC (paper §5, Eq. (26)).
@@ -1042,6 +1084,10 @@ def bic_by_k(
     split_starts : bool, default False
         Also start EM from every split of the best fit at K − 1 (:func:`split_fits`; seed
         ``[*seed, K, 2]``) when K − 1 was swept just before, and keep the best of all starts.
+    max_restarts : int, optional
+        Double a K's random starts (``n_restarts``, ``2·n_restarts``, ...) while the second
+        half of them still gains :data:`STABLE_GAIN` or more log-likelihood over the first
+        (split starts counted in both halves), up to ``max_restarts``. None: ``n_restarts``.
     **fit_options
         Passed to :func:`fit_hmm` (``max_iter``, ``tol``, ``var_floor``, ``start``).
 
@@ -1070,7 +1116,7 @@ def bic_by_k(
             row.setdefault("n_split_starts", 0)
         else:
             grow_from = best if split_starts else None
-            row, best = _sweep_row(X, k, n_restarts, entropy, grow_from, fit_options)
+            row, best = _sweep_row(X, k, n_restarts, entropy, grow_from, fit_options, max_restarts)
         rows.append(row)
         logger.info(
             "bic_by_k K=%d: logL=%.3f (first half of the random starts %.3f) BIC=%.3f "

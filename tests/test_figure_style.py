@@ -357,7 +357,7 @@ def test_a_bic_minimum_inside_the_sweep_away_from_k8_gets_its_cause():
     stable = {"nominal_residuals": {"max_gain": 0.2, "at_k": 12}}
     noted = _with_interior_note(claim, {"nominal_residuals": 8}, stable)
     assert noted.note.startswith("minimum at K = 11 inside the sweep, on our draw; R's K = 8")
-    assert "not the optimiser" in noted.note
+    assert "moves no best fit" in noted.note
     assert _figure_causes([noted]) == {"nominal_residuals": "min K=11, not 8: our draw"}
     assert _interior_caption([noted]).startswith("Minimum at K = 11 (nominal residuals)")
     unstable = {"nominal_residuals": {"max_gain": 14.0, "at_k": 12}}

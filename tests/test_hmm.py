@@ -13,7 +13,9 @@ from scipy.stats import norm
 
 from dtwin._validation import DtwinValueError
 from dtwin.fault_injection import regime_features
+from dtwin.figures.fig09_bic import STABLE_LOGLIK
 from dtwin.hmm import (
+    STABLE_GAIN,
     HmmFitError,
     bic_by_k,
     bic_minimum_bracketed,
@@ -296,6 +298,28 @@ def test_bic_sweep_with_split_starts_never_loses_to_random_starts():
     assert (grown["log_likelihood"] >= plain["log_likelihood"] - 1e-9).all()
     assert (grown["log_likelihood_half"] >= plain["log_likelihood_half"] - 1e-9).all()
     assert (grown["bic"] <= plain["bic"] + 1e-6).all()
+
+
+def test_bic_sweep_doubles_the_starts_of_a_k_until_its_best_is_stable():
+    rng = np.random.default_rng(4)
+    # a smooth signal: random starts land in many optima, as on the paper's residuals
+    X = np.cumsum(rng.normal(size=(400, 2)), axis=0)
+    X = (X - X.mean(axis=0)) / X.std(axis=0)
+    plain = bic_by_k(X, [2, 3, 4, 5], n_restarts=2, seed=3)
+    doubled = bic_by_k(X, [2, 3, 4, 5], n_restarts=2, seed=3, max_restarts=16)
+    plain_gain = plain["log_likelihood"] - plain["log_likelihood_half"]
+    gain = doubled["log_likelihood"] - doubled["log_likelihood_half"]
+    assert (plain_gain >= STABLE_GAIN).any()  # the data need the doubling
+    assert set(doubled["n_starts"]) <= {2, 4, 8, 16} and doubled["n_starts"].max() > 2
+    # every K stops as soon as its second half gains nothing, or at the cap
+    assert ((gain < STABLE_GAIN) | (doubled["n_starts"] == 16)).all()
+    assert (doubled.loc[plain_gain < STABLE_GAIN, "n_starts"] == 2).all()
+    # the first starts are the same fits (prefix-stable seeds), so nothing is lost
+    assert (doubled["log_likelihood"] >= plain["log_likelihood"] - 1e-9).all()
+
+
+def test_the_sweeps_stability_bar_is_the_figures():
+    assert STABLE_GAIN == STABLE_LOGLIK
 
 
 def test_bic_sweep_grows_from_a_given_fit_without_tabulating_its_parameters():

@@ -185,8 +185,8 @@ def shorten(config: dict) -> None:
     small_sweep(config)
     config["gap"]["benchmark"].update(effects=["none", "coulomb_friction"], cases_per_effect=1)
     config["draws"].update(n_draws=2, chunk_size=2)
-    config["draws"]["bic"].update(n_draws=2, n_restarts=2, chunk_size=2)
-    config["bic"].update(n_restarts=4, k_max=10)
+    config["draws"]["bic"].update(n_draws=2, n_restarts=2, max_restarts=2, chunk_size=2)
+    config["bic"].update(n_restarts=4, max_restarts=4, k_max=10)
     config["ar_hmm"].update(n_restarts=2, k_max=10)
 
 

@@ -169,25 +169,38 @@ STABLE_LOGLIK = 1.0
 
 
 def _stability_check(table: pd.DataFrame) -> Check:
-    """Project target: the second half of the starts finds nothing better up to K* + 2."""
+    """Project target: the second half of the starts finds nothing better up to K* + 2.
+
+    Judged on the K the sweep fitted itself; the dedicated K = hmm.n_states fits of Figs. 4
+    and 7 (``source == "given"``, hmm.n_restarts starts) are reported beside, as
+    ``dedicated_fit_gain``: their starts are the hmm section's, not the sweep's.
+    """
+    swept = table if "source" not in table else table[table["source"] != "given"]
     worst = {}
-    for name, group in table.groupby("dataset", sort=False):
-        k_star = int(group.loc[group["bic"].idxmin(), "K"])
+    for name, group in swept.groupby("dataset", sort=False):
+        k_star = int(table.loc[table.loc[table["dataset"] == name, "bic"].idxmin(), "K"])
         near = group[group["K"] <= k_star + 2]
         gain = near["log_likelihood"] - near["log_likelihood_half"]
         worst[name] = {
             "max_gain": round(float(gain.max()), 3),
             "at_k": int(near.loc[gain.idxmax(), "K"]),
+            "max_starts": int(near["n_starts"].max()),
         }
-    n_starts = int(table["n_starts"].max())
-    splits = " random starts, each with the splits of the best K − 1 fit" * bool(
+        given = table[(table["dataset"] == name) & (table.get("source") == "given")]
+        if len(given):
+            dedicated = given["log_likelihood"] - given["log_likelihood_half"]
+            worst[name]["dedicated_fit_gain"] = round(float(dedicated.max()), 3)
+    n_starts = int(swept["n_starts"].min())
+    splits = ", each with the splits of the best K − 1 fit" * bool(
         table.get("n_split_starts", pd.Series([0])).max()
     )
     return Check(
         id="best_loglik_stable_in_starts",
         kind="claim",
         statement=f"project target: the best log-likelihood is stable in the EM starts (best of "
-        f"{n_starts // 2} vs best of {n_starts}{splits}, every K up to K* + 2, both data sets)",
+        f"the first half vs all of a K's random starts, {n_starts} doubled up to bic.max_restarts "
+        f"while the second half still gains{splits}; every K the sweep fitted up to K* + 2, both "
+        "data sets; the dedicated K = 4 fits of Figs. 4/7 are reported beside)",
         expected=f"gain < {STABLE_LOGLIK:g} log-likelihood units",
         observed=worst,
         passed=all(w["max_gain"] < STABLE_LOGLIK for w in worst.values()),
@@ -330,7 +343,10 @@ def _with_causes(
 def _interior_cause(gain: Mapping[str, Any] | None) -> str:
     """Return the cause of an interior minimum away from K = 8, from the start-stability check."""
     if gain and gain["max_gain"] < STABLE_LOGLIK:
-        return "draw (doubling the EM starts moves no best fit up to K* + 2: not the optimiser)"
+        return (
+            "draw (doubling the EM starts moves no best fit up to K* + 2; other kinds of EM "
+            "start can still reach better optima, README §Reproduction notes)"
+        )
     if gain:
         return (
             f"draw or optimiser (doubling the EM starts still gains {gain['max_gain']:.1f} "
@@ -365,7 +381,7 @@ def _moved(checks: Sequence[Check]) -> list[Check]:
 
 
 def _short_cause(check: Check) -> str:
-    return "our draw" if "not the optimiser" in (check.note or "") else "draw or optimiser"
+    return "our draw" if "moves no best fit" in (check.note or "") else "draw or optimiser"
 
 
 def _figure_causes(checks: Sequence[Check]) -> dict[str, str]:

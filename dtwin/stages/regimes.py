@@ -242,6 +242,7 @@ def bic_sweep(
             k_max=bic.get("k_max"),
             stop_after_rises=bic.get("stop_after_rises", 2),
             split_starts=bool(bic.get("split_starts", False)),
+            max_restarts=bic.get("max_restarts"),
             given=None if model is None else {model["n_states"]: given_bic_row(model)},
             **em_options,
         )

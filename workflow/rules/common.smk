@@ -271,4 +271,5 @@ DRAW_ACF = {k: config["acf"][k] for k in ("ljungbox_lags", "significance", "stro
 DRAW_BIC = {
     **{k: config["bic"][k] for k in ("ks", "k_max", "stop_after_rises", "split_starts")},
     "n_restarts": config["draws"]["bic"]["n_restarts"],
+    "max_restarts": config["draws"]["bic"]["max_restarts"],
 }
