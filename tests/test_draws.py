@@ -152,6 +152,11 @@ def test_a_draws_k_star_is_judged_with_fig09s_criteria():
     assert (nominal["max_gain"], nominal["at_k"], nominal["stable"]) == (3.0, 9, False)
     assert fault["margin_k8"] == pytest.approx(2.0) and fault["n_starts"] == 4
     assert nominal["k4_given"] and fault["k4_given"]
+    # a K whose starts were doubled: n_starts stays the sweep's base, max_starts says how far
+    record = _bic_record(0, {"fault_features": AT_8}, gain=0.0)
+    record["bic"][3]["n_starts"] = 16
+    doubled = judge_draw_bic(record)["k_star"]["fault_features"]
+    assert (doubled["n_starts"], doubled["max_starts"]) == (4, 16)
 
 
 def test_k_star_distribution_counts_draws_and_the_margin_over_start_noise():

@@ -46,8 +46,9 @@ def judge_draw_bic(record: Mapping[str, Any]) -> dict[str, Any]:
         ``draw``, ``claims`` (``fig09_bic:bic_minimum_at_k8_<data set>`` → K* = 8) and
         ``k_star``: per data set ``k_star``, ``k_last`` (largest K fitted), ``bracketed``,
         ``max_gain`` / ``at_k`` (log-likelihood the second half of the starts gained, at most,
-        up to K* + 2), ``stable`` (that gain below :data:`STABLE_LOGLIK`), ``n_starts`` and
-        ``k4_given`` (the K = 4 point is the draw's dedicated fit).
+        up to K* + 2), ``stable`` (that gain below :data:`STABLE_LOGLIK`), ``n_starts`` (random
+        starts per K; ``max_starts``: at most, after doubling) and ``k4_given`` (the K = 4
+        point is the draw's dedicated fit).
     """
     table = pd.DataFrame(record["bic"])
     given_check, bracket, stability = bracket_checks(table)
@@ -68,7 +69,8 @@ def judge_draw_bic(record: Mapping[str, Any]) -> dict[str, Any]:
             "max_gain": float(gain["max_gain"]),
             "at_k": int(gain["at_k"]),
             "stable": float(gain["max_gain"]) < STABLE_LOGLIK,
-            "n_starts": int(rows.loc[rows["source"] == "sweep", "n_starts"].max()),
+            "n_starts": int(rows.loc[rows["source"] == "sweep", "n_starts"].min()),
+            "max_starts": int(rows.loc[rows["source"] == "sweep", "n_starts"].max()),
             "k4_given": name in given,
             "margin_k8": margin,
         }
@@ -80,7 +82,7 @@ def k_star_table(judged: Sequence[Mapping[str, Any]]) -> pd.DataFrame:
     """Return one row per draw and data set (:func:`judge_draw_bic`'s ``k_star``).
 
     Columns: ``draw``, ``dataset`` and the ``k_star`` fields (``k_star``, ``k_last``,
-    ``bracketed``, ``max_gain``, ``at_k``, ``stable``, ``n_starts``, ``k4_given``,
+    ``bracketed``, ``max_gain``, ``at_k``, ``stable``, ``n_starts``, ``max_starts``, ``k4_given``,
     ``margin_k8``).
     """
     rows = [
@@ -108,7 +110,8 @@ def k_star_distributions(
     Returns
     -------
     dict
-        Per data set: ``n`` (draws), ``n_starts`` (per K and draw), ``counts`` (K → draws),
+        Per data set: ``n`` (draws), ``n_starts`` (per K and draw; ``max_starts`` after
+        doubling), ``counts`` (K → draws),
         ``median``, ``draw0``, ``main_run`` (K* with ``main_n_starts`` starts), ``paper``
         (8), ``k_at_paper`` (draws with K* = 8), ``bracketed`` and ``stable`` (draws),
         ``k8_beyond_start_noise`` (draws whose ``margin_k8`` exceeds twice ``max_gain``) and
@@ -121,7 +124,8 @@ def k_star_distributions(
         counts = pd.Series(values).value_counts().sort_index()
         out[name] = {
             "n": int(len(group)),
-            "n_starts": int(group["n_starts"].max()),
+            "n_starts": int(group["n_starts"].min()),
+            "max_starts": int(group["max_starts"].max()),
             "counts": {str(k): int(c) for k, c in counts.items()},
             "median": float(np.median(values)),
             "draw0": int(values[0]) if int(group["draw"].iloc[0]) == 0 else None,
@@ -146,7 +150,7 @@ def k_star_detail(dist: Mapping[str, Any]) -> str:
     ...                "stable": 1, "k8_beyond_start_noise": 3, "main_run": 14,
     ...                "main_run_n_starts": 20}).split("; ")[:3]  # doctest: +NORMALIZE_WHITESPACE
     ['K* in 3 draws: 12 (2), 14 (1)', 'bracketed in 3',
-     'stable (best of 2 vs 4 random starts) in 1']
+     'stable (best of 2 vs 4 random starts, doubled where unstable) in 1']
     """
     counts = ", ".join(f"{k} ({c})" for k, c in dist["counts"].items())
     half = max(1, dist["n_starts"] // 2)
@@ -154,7 +158,8 @@ def k_star_detail(dist: Mapping[str, Any]) -> str:
         [
             f"K* in {dist['n']} draws: {counts}",
             f"bracketed in {dist['bracketed']}",
-            f"stable (best of {half} vs {dist['n_starts']} random starts) in {dist['stable']}",
+            f"stable (best of {half} vs {dist['n_starts']} random starts, doubled where "
+            f"unstable) in {dist['stable']}",
             f"BIC(8) − min above twice that gain in {dist['k8_beyond_start_noise']}",
             f"main run K* = {dist['main_run']} ({dist['main_run_n_starts']} starts)",
         ]

@@ -570,5 +570,6 @@ def _caption(k_star: Mapping[str, Any]) -> str:
     never = all(d["k_at_paper"] == 0 for d in k_star.values())
     return (
         f"{head}; K* (the BIC minimum) across draws: median {medians} with {n_starts} EM "
-        "starts per K and draw" + (", never the paper's 8" if never else "")
+        "starts per K and draw (doubled where unstable)"
+        + (", never the paper's 8" if never else "")
     )
