@@ -200,7 +200,10 @@ def plot_sensitivity(
         ax.set_xticks(alphas)
         _label_facet(ax, i, j, axes.shape, mults_a[i], mults_b[j])
     if n_rep > 1:
-        handles[f"bars: {interval:.0%} interval of {n_rep} replicates"] = Line2D([], [], lw=0)
+        # a vertical bar in our colour: the legend check needs a glyph drawn in the figure
+        handles[f"bars: {interval:.0%} interval of {n_rep} replicates"] = Line2D(
+            [], [], ls="none", marker="|", ms=7, mew=0.8, color=OURS_COLOR
+        )
     order = sorted(handles, key=lambda k: (not k.startswith("ours"), k))
     figure.legend(
         [handles[k] for k in order], order, loc="outside lower center", ncol=2, handlelength=2.2
