@@ -207,7 +207,7 @@ def _replicate_entries(payload: Mapping[str, Any], level: float) -> dict[str, di
     if not block:
         return {}
     artifact = payload["artifact"]
-    if not isinstance(block.get("verdicts"), Mapping):
+    if not isinstance(block, Mapping) or not isinstance(block.get("verdicts"), Mapping):
         raise DtwinValueError(f"{artifact}: metrics.{REPLICATES_METRIC} has no 'verdicts' mapping")
     entries = {}
     for check_id, verdicts in block["verdicts"].items():
