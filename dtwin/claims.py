@@ -72,6 +72,14 @@ def wilson_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
 #: The artifact whose metrics give every paper claim's verdicts across random draws.
 DRAWS_ARTIFACT = "fig12_claims_across_draws"
 
+#: Metrics key of an artifact that judged its claims again on each replicate of its runs
+#: (Fig. 11's sweep, :func:`dtwin.figures._fig11_claims.claims_across_replicates`):
+#: ``{"n_replicates", "replicate0_is_figure", "verdicts": {check id: [bool per replicate]}}``.
+REPLICATES_METRIC = "claims_across_replicates"
+
+#: Where a reader gets more than the default single replicate of the sweep.
+MORE_REPLICATES = "more: sensitivity.n_replicates, e.g. config/draws_200.yaml"
+
 #: The gap benchmark's targets are defined for at least this many cases per effect.
 GAP_FULL_CASES_PER_EFFECT = 10
 
@@ -86,7 +94,8 @@ class ClaimsSummary:
         One per check: ``artifact``, ``id``, ``kind`` (``claim`` for the paper's claims,
         ``target`` for the project's own, ``crosscheck``, ``validity``), ``statement``,
         ``expected``, ``observed``, ``reference``, ``passed``, ``note`` and ``draws``
-        (``{k, n, low, high, draw0}`` across random draws, or None).
+        (``{k, n, low, high, draw0}`` across random draws, or across the replicates of
+        Fig. 11's sweep with ``unit: "replicates"``; None when not rerun).
     counts : dict
         ``{kind: {"passed": n, "failed": n}}``.
     """
@@ -122,7 +131,8 @@ def _attach_draws(rows: list[dict[str, Any]], draws: Mapping[str, Any]) -> list[
     """Give each paper claim its verdicts across draws; return validity rows for mismatches.
 
     Draw 0 is the main run, so its verdict must equal the figure's own, unless its entry says
-    ``draw0_is_main_run: false`` (Fig. 9's K* per draw with fewer EM starts than the figure).
+    ``draw0_is_main_run: false`` (Fig. 9's K* per draw with fewer EM starts than the figure;
+    Fig. 11 with several replicates, whose claims are judged on the mean over replicates).
     """
     mismatched = []
     for row in rows:
@@ -137,7 +147,8 @@ def _attach_draws(rows: list[dict[str, Any]], draws: Mapping[str, Any]) -> list[
             "artifact": DRAWS_ARTIFACT,
             "id": "draw0_verdicts_equal_the_figures",
             "kind": "validity",
-            "statement": "draw 0 (the configured seeds) gives every claim the figure's verdict",
+            "statement": "draw 0 (the configured seeds) gives every claim the figure's verdict "
+            "(Fig. 11: replicate 0 of a one-replicate sweep)",
             "expected": "0 claims that differ",
             "observed": mismatched or 0,
             "reference": None,
@@ -178,6 +189,45 @@ def _cause_check(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "note": None,
         "draws": None,
     }
+
+
+def _replicate_entries(payload: Mapping[str, Any], level: float) -> dict[str, dict[str, Any]]:
+    """Return the draws entries of an artifact that judged its claims per replicate.
+
+    Reads the payload's ``metrics[REPLICATES_METRIC]`` (none: ``{}``) and gives each claim
+    ``k`` of ``n`` replicates with its Wilson interval at ``level``, ``draw0`` (replicate 0's
+    verdict), ``draw0_is_main_run`` (``replicate0_is_figure``) and ``unit: "replicates"``.
+
+    Raises
+    ------
+    DtwinValueError
+        If a claim lists no verdict or the block lacks ``verdicts``.
+    """
+    block = (payload.get("metrics") or {}).get(REPLICATES_METRIC)
+    if not block:
+        return {}
+    artifact = payload["artifact"]
+    if not isinstance(block, Mapping) or not isinstance(block.get("verdicts"), Mapping):
+        raise DtwinValueError(f"{artifact}: metrics.{REPLICATES_METRIC} has no 'verdicts' mapping")
+    entries = {}
+    for check_id, verdicts in block["verdicts"].items():
+        if not verdicts:
+            raise DtwinValueError(
+                f"{artifact}: metrics.{REPLICATES_METRIC} lists no replicate for {check_id}"
+            )
+        k, n = sum(bool(v) for v in verdicts), len(verdicts)
+        low, high = wilson_interval(k, n, level)
+        entries[f"{artifact}:{check_id}"] = {
+            "k": k,
+            "n": n,
+            "share": k / n,
+            "low": low,
+            "high": high,
+            "draw0": bool(verdicts[0]),
+            "draw0_is_main_run": bool(block.get("replicate0_is_figure", n == 1)),
+            "unit": "replicates",
+        }
+    return entries
 
 
 def _gap_denominators(table: Any) -> dict[str, tuple[int, int]]:
@@ -237,11 +287,14 @@ def summarise_claims(
         Parsed artifact JSONs.
     project : sequence of str, default ()
         The project's own artifacts (``workflow/artifacts.yaml``: ``project``); their claims
-        are targets. The :data:`DRAWS_ARTIFACT` payload, if given, adds the draws column.
+        are targets. The :data:`DRAWS_ARTIFACT` payload, if given, adds the draws column; a
+        payload with ``metrics[REPLICATES_METRIC]`` (Fig. 11) adds its claims' verdicts
+        across its replicates to the same column.
     gap_table : DataFrame, optional
         ``results/gap/benchmark.csv``, for the (k, n) and interval of each gap target.
     level : float, default 0.95
-        Level of the gap targets' Wilson intervals.
+        Level of the Wilson intervals of the gap targets and of the claims across replicates
+        (those across draws come with their own, ``draws.interval``).
 
     Raises
     ------
@@ -249,17 +302,20 @@ def summarise_claims(
         If a payload lacks ``artifact`` or ``checks``.
     """
     rows: list[dict[str, Any]] = []
-    draws: Mapping[str, Any] | None = None
+    draws: dict[str, Any] = {}
+    has_draws = False
     gap_metrics: Mapping[str, Any] = {}
     for payload in payloads:
         if "artifact" not in payload or "checks" not in payload:
             raise DtwinValueError("an artifact JSON must have 'artifact' and 'checks' keys")
         rows += [_row(payload, check, project) for check in payload["checks"]]
         if payload["artifact"] == DRAWS_ARTIFACT:
-            draws = payload.get("metrics", {}).get("claims", {})
+            draws.update(payload.get("metrics", {}).get("claims", {}))
+            has_draws = True
+        draws.update(_replicate_entries(payload, level))
         if payload["artifact"] == "gap_benchmark":
             gap_metrics = payload.get("metrics", {})
-    if draws is not None:
+    if has_draws or draws:
         rows += _attach_draws(rows, draws)
     if gap_metrics:
         _attach_gap_cases(rows, gap_metrics, gap_table, level)
@@ -308,6 +364,12 @@ def _draw_cause(row: Mapping[str, Any]) -> str:
     if not entry:
         return ""
     k, n = entry["k"], entry["n"]
+    if entry.get("unit") == "replicates":
+        if n == 1:
+            return ""  # the main run's single replicate adds nothing to the verdict
+        if k == 0:
+            return f" (fails in all {n} sweep replicates: not the draw)"
+        return f" (holds in {k} of {n} sweep replicates: depends on the draw)"
     if k == 0:
         return f" (fails in all {n} random draws: not the draw)"
     return f" (holds in {k} of {n} random draws: depends on the draw)"
@@ -327,7 +389,11 @@ def _draws_cell(row: Mapping[str, Any]) -> str:
     entry = row.get("draws")
     if not entry:
         return "– (not rerun across draws)"
-    cell = f"{entry['k']} of {entry['n']} [{entry['low']:.2f}, {entry['high']:.2f}]"
+    k, n = entry["k"], entry["n"]
+    if entry.get("unit") == "replicates" and n == 1:
+        return f"{k} of 1 sweep replicate (the main run; {MORE_REPLICATES})"
+    unit = " sweep replicates" if entry.get("unit") == "replicates" else ""
+    cell = f"{k} of {n}{unit} [{entry['low']:.2f}, {entry['high']:.2f}]"
     return cell + (f"; {_cell(entry['detail'], 200)}" if entry.get("detail") else "")
 
 
@@ -352,7 +418,7 @@ _SECTIONS = (
             "R's code",
             "ours",
             "reproduced",
-            "holds in k of N draws [95 % interval]",
+            "holds in k of N draws (Fig. 11: sweep replicates) [95 % interval]",
         ),
     ),
     (
@@ -413,7 +479,9 @@ def claims_markdown(summary: ClaimsSummary) -> str:
         "Generated by the `claims` rule from every artifact's JSON in `paper_figures/`. "
         "A claim is a statement of the paper, checked on our own run (numpy's random stream "
         "differs from R's, so numbers agree in kind, not digit by digit) and on N random "
-        "draws of the single-draw pipeline (Fig. 12; draw 0 is the main run); a crosscheck "
+        "draws of the single-draw pipeline (Fig. 12; draw 0 is the main run), Fig. 11's "
+        "sweep claims on each replicate of the sweep alone (`sensitivity.n_replicates`, 1 by "
+        "default as in R; replicate 0 is the main run's seeds); a crosscheck "
         "runs our code on the R code's own signals, where agreement can be exact; validity "
         "checks say an artifact is sound.",
         "",

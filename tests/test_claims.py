@@ -208,3 +208,48 @@ def test_a_log_likelihood_prints_with_the_decimals_its_threshold_uses():
         ],
     }
     assert "| -2115.852 |" in claims_markdown(summarise_claims([payload]))
+
+
+def _sweep_payload(passed: bool, verdicts: list[bool], replicate0_is_figure: bool) -> dict:
+    return _claim(
+        "fig11_sensitivity",
+        "all_positive",
+        "paper §5: positive reductions in every configuration",
+        passed,
+        metrics={
+            "claims_across_replicates": {
+                "n_replicates": len(verdicts),
+                "replicate0_is_figure": replicate0_is_figure,
+                "verdicts": {"all_positive": verdicts},
+            }
+        },
+    )
+
+
+def test_sweep_claims_show_k_of_r_replicates():
+    text = claims_markdown(summarise_claims([_sweep_payload(True, [True, False, True], False)]))
+    line = next(line for line in text.splitlines() if "positive reductions" in line)
+    assert "| 2 of 3 sweep replicates [0.21, 0.94] |" in line
+    failed = summarise_claims([_sweep_payload(False, [False, True, False], False)])
+    assert "(holds in 1 of 3 sweep replicates: depends on the draw)" in claims_markdown(failed)
+    check = next(r for r in failed.rows if r["id"] == "draw0_verdicts_equal_the_figures")
+    assert check["passed"] is True  # several replicates: the figure judges their mean
+
+
+def test_the_default_single_replicate_says_so_and_is_compared_with_the_figure():
+    summary = summarise_claims([_sweep_payload(False, [False], True)])
+    text = claims_markdown(summary)
+    line = next(line for line in text.splitlines() if "positive reductions" in line)
+    assert "| 0 of 1 sweep replicate (the main run; more: sensitivity.n_replicates, e.g. " in line
+    assert "config/draws_200.yaml) |" in line and "random draws" not in line
+    check = next(r for r in summary.rows if r["id"] == "draw0_verdicts_equal_the_figures")
+    assert check["passed"] is True
+    mismatch = summarise_claims([_sweep_payload(True, [False], True)])
+    check = next(r for r in mismatch.rows if r["id"] == "draw0_verdicts_equal_the_figures")
+    assert check["observed"] == ["fig11_sensitivity:all_positive"]
+
+
+def test_a_replicate_block_without_verdicts_is_rejected():
+    payload = _sweep_payload(True, [], True)
+    with pytest.raises(DtwinValueError, match="lists no replicate for all_positive"):
+        summarise_claims([payload])

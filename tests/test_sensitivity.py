@@ -247,3 +247,68 @@ def test_a_failed_alpha_trend_claim_names_the_optimiser_with_the_slopes_of_each_
     assert "ours +0.42/-0.39; R's re-run +2.60/+13.05" in noted.note
     assert "Holds: ours no, R's re-run yes" in noted.note
     assert "Dirichlet start" in noted.note
+
+
+def _two_replicate_table():
+    """The paper's 36 configurations twice: replicate 0 rises with α (27–33 %), replicate 1
+    falls with α and goes negative (3 … −3 %)."""
+    grid = sweep_grid([0.2, 0.4, 0.6, 0.8], [0.5, 1.0, 1.5], [0.5, 1.0, 1.5], 2)
+
+    def value(p):
+        return 25.0 + 10.0 * p.alpha if p.replicate == 0 else 5.0 - 10.0 * p.alpha
+
+    return sweep_table(_fake_rows(grid, value), grid)
+
+
+def test_claims_are_judged_on_each_replicate_alone():
+    from dtwin.claims import REPLICATES_METRIC, summarise_claims
+    from dtwin.figures import _fig11_claims
+
+    table = _two_replicate_table()
+    axes = {"m_A": [0.5, 1.0, 1.5], "m_B": [0.5, 1.0, 1.5]}
+    block = _fig11_claims.claims_across_replicates(table, "code", [0.2, 0.4, 0.6, 0.8], axes)
+    assert block["n_replicates"] == 2 and block["replicate0_is_figure"] is False
+    verdicts = block["verdicts"]
+    # replicate 0: every value in 27-33 %, slope +10 %/unit α; replicate 1: below 0 %, slope -10
+    assert verdicts["all_positive"] == [True, False]
+    assert verdicts["range_23_40"] == [True, False]
+    assert verdicts["alpha_trend_sensor_B_degraded"] == [True, False]
+    # the claims rule reads the block under the same key: k = 1 of 2 with Wilson's interval
+    assert _fig11_claims.REPLICATES_METRIC == REPLICATES_METRIC
+    payload = {
+        "artifact": "fig11_sensitivity",
+        "checks": [
+            {
+                "id": "all_positive",
+                "kind": "claim",
+                "statement": "paper §5: positive everywhere",
+                "passed": True,
+            }
+        ],
+        "metrics": {REPLICATES_METRIC: block},
+    }
+    row = summarise_claims([payload]).rows[0]
+    assert (row["draws"]["k"], row["draws"]["n"], row["draws"]["unit"]) == (1, 2, "replicates")
+    assert row["draws"]["low"] == pytest.approx(0.0945, abs=1e-4)
+
+
+def test_one_replicates_verdicts_are_the_figures():
+    """With one replicate the figure's claims (on summarize_sweep's means) are replicate 0's."""
+    from dtwin.figures._fig11_claims import claims_across_replicates, sweep_claims
+
+    full = _two_replicate_table()
+    table = full[full["replicate"] == 1].assign(replicate=0).reset_index(drop=True)
+    alphas, axes = [0.2, 0.4, 0.6, 0.8], {"m_A": [0.5, 1.0, 1.5], "m_B": [0.5, 1.0, 1.5]}
+    summary = summarize_sweep(table).query("source == 'ours' and method == 'code'")
+    means = summary[["alpha", "m_A", "m_B"]].assign(value=summary["drmse_e1_mean"])
+    slopes = alpha_trends(table).query("source == 'ours' and method == 'code'")
+    figure = {
+        c.id: c.passed
+        for c in sweep_claims({"ours": sweep_claim_numbers(means, slopes)}, alphas, axes)
+    }
+    block = claims_across_replicates(table, "code", alphas, axes)
+    assert block["replicate0_is_figure"] is True
+    assert {k: v[0] for k, v in block["verdicts"].items()} == figure
+    assert figure["all_positive"] is False  # the check compares verdicts that can differ
+    with pytest.raises(DtwinValueError, match="no run of our own with correction 'other'"):
+        claims_across_replicates(table, "other", alphas, axes)

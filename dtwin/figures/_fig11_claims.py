@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dtwin._validation import DtwinValueError
 from dtwin.artifacts import Check
 from dtwin.sensitivity_sweep import alpha_trends, bimodality_coefficient
 
@@ -24,6 +25,8 @@ __all__ = [
     "GRID",
     "sweep_claim_numbers",
     "sweep_claims",
+    "REPLICATES_METRIC",
+    "claims_across_replicates",
 ]
 
 #: Paper §5: "ΔRMSE_e1 remaining in the ~23 %–40 % range", read with 3 percentage points slack.
@@ -35,6 +38,9 @@ BALANCED_RANGE_PCT = (23.0, 30.0)
 R_MODE_SPLIT_PCT = 32.0
 #: Columns naming one configuration of the sweep.
 GRID = ["alpha", "m_A", "m_B"]
+#: Key of the artifact's metrics that gives each claim's verdict per replicate; the claims
+#: rule (:func:`dtwin.claims.summarise_claims`) turns it into "holds in k of R replicates".
+REPLICATES_METRIC = "claims_across_replicates"
 
 
 def sweep_claim_numbers(means: pd.DataFrame, slopes: pd.DataFrame | None = None) -> dict:
@@ -256,3 +262,52 @@ def sweep_claims(
         Seven ``claim`` checks: three on the level of ΔRMSE_e1, four on the sweep's shape.
     """
     return [*_level_claims(numbers), *_shape_claims(numbers, _Rules(alphas, grid))]
+
+
+def claims_across_replicates(
+    table: pd.DataFrame, method: str, alphas: Sequence[float], grid: Mapping
+) -> dict[str, Any]:
+    """Return every sweep claim judged on each replicate's configuration values alone.
+
+    Parameters
+    ----------
+    table : DataFrame
+        Every run (:func:`dtwin.sensitivity_sweep.sweep_table`); only ``source = "ours"`` and
+        ``method`` are read.
+    method : str
+        The correction method the figure's claims are judged on.
+    alphas, grid
+        As for :func:`sweep_claims`.
+
+    Returns
+    -------
+    dict
+        ``n_replicates``; ``replicate0_is_figure`` (True with one replicate: the figure then
+        judges replicate 0's values, so its verdicts must equal replicate 0's); ``verdicts``:
+        per claim id, one bool per replicate (replicate 0 first). Each replicate's claims see
+        only its own 36 values and its own α-slopes (a claim that takes the median over
+        replicates takes it over that replicate alone).
+
+    Raises
+    ------
+    DtwinValueError
+        If ``table`` has no run of ``method`` on our own simulation.
+    """
+    runs = table[(table["source"] == "ours") & (table["method"] == method)]
+    if runs.empty:
+        raise DtwinValueError(f"the sweep has no run of our own with correction {method!r}")
+    trends = alpha_trends(runs)
+    verdicts: dict[str, list[bool]] = {}
+    replicates = sorted(int(r) for r in runs["replicate"].unique())
+    for replicate in replicates:
+        # the figure's order (summarize_sweep: α, m_A, m_B), so ties and sums fall alike
+        part = runs[runs["replicate"] == replicate].sort_values(GRID)
+        means = part[GRID].assign(value=part["drmse_e1_pct"]).reset_index(drop=True)
+        numbers = sweep_claim_numbers(means, trends[trends["replicate"] == replicate])
+        for check in sweep_claims({"ours": numbers}, alphas, grid):
+            verdicts.setdefault(check.id, []).append(bool(check.passed))
+    return {
+        "n_replicates": len(replicates),
+        "replicate0_is_figure": len(replicates) == 1,
+        "verdicts": verdicts,
+    }
