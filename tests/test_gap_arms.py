@@ -375,3 +375,24 @@ def test_a_drift_that_is_not_a_line_is_named_with_its_curvature(case_type, seed)
     assert case.key["params"]["form"] == "linear_plus_wander"
     assert (result.module, result.effect) == (case.key["module"], "sensor_bias_drift")
     assert result.params["curvature"] != 0.0
+
+
+def test_a_second_module_with_its_own_gap_is_said_to_need_a_second_effect():
+    """Arm (g): Coulomb friction in M1 and a bias drift on a sensor. The answer is one effect
+    (the module furthest above its threshold); the sensor's gap is reported as needing a
+    second effect, named when its best candidate clears the same bar."""
+    from dtwin.gap.diagnose import diagnose, twin_discretisation, twin_from_mapping
+    from dtwin.gap.recording import recording_from_frame
+    from dtwin.gap.report import diagnosis_to_dict, render_markdown
+
+    case = generate_any_case("two__coulomb_friction+sensor_bias_drift", 0)
+    recording = recording_from_frame(case.recording)
+    twin = twin_from_mapping(case.twin, dt=recording.dt)
+    result = diagnose(recording, twin, discretisation=twin_discretisation(case.twin))
+    assert (result.module, result.effect) == ("M1", "coulomb_friction")
+    (other,) = result.also_needed
+    assert (other["module"], other["effect"]) == ("M2a", "sensor_bias_drift")
+    assert other["gap_over_threshold"] > 1 and other["choosing_share_pct"] >= 50
+    assert result.modules["M2a"].status == "gap"
+    assert diagnosis_to_dict(result)["also_needed"] == [other]
+    assert "A second effect is needed**: M2a: sensor_bias_drift" in render_markdown(result)

@@ -196,3 +196,34 @@ def test_out_of_list_cases_given_a_catalogue_label_are_counted():
     labelled = metrics["arms"]["near"]["intervals"]["out_of_list_labelled"]
     assert (labelled["k"], labelled["n"]) == (2, 5)
     assert metrics["unexplained_accuracy"] == pytest.approx(2 / 5)
+
+
+def test_a_second_effect_is_scored_on_two_effect_cases_and_counted_as_false_elsewhere():
+    """Issue 16, arm (g): 'say when two are needed' -- named on a two-effect case, a false
+    alarm on a one-effect case."""
+    drift = {"module": "M2a", "effect": "sensor_bias_drift", "choosing_share_pct": 73.0}
+    scale = {"module": "M2b", "effect": "sensor_scale_error", "choosing_share_pct": 80.0}
+    base = {"in_list": True, "magnitude": 0.5, "n_samples": 1000, "module": "M1", "dt": 0.01}
+    base["params"] = {"Fc": 0.1}
+    two = {**base, "arm": "two", "effect": "coulomb_friction+sensor_bias_drift"}
+    two["expected_effect"] = "coulomb_friction"
+    one = {**base, "arm": "default", "effect": "coulomb_friction"}
+    one["expected_effect"] = "coulomb_friction"
+    answer = {"module": "M1", "effect": "coulomb_friction", "confidence": 1.0}
+    answer["params"] = {"Fc": 0.1}
+    table = score_cases(
+        [
+            ("two named", two, {**answer, "also_needed": [drift]}),
+            ("two other", two, {**answer, "also_needed": [scale]}),
+            ("two silent", two, answer),
+            ("one clean", one, {**answer, "also_needed": []}),
+            ("one false", one, {**answer, "also_needed": [scale]}),
+        ]
+    )
+    assert table["second_named"].tolist()[:3] == [True, False, False]
+    assert table["second_named"].iloc[3:].isna().all()
+    assert table["also_needed"].tolist()[-1] == "M2b:sensor_scale_error"
+    metrics = benchmark_metrics(table)
+    named = metrics["arms"]["two"]["intervals"]["second_effect_named"]
+    false = metrics["arms"]["default"]["intervals"]["false_second_effect"]
+    assert (named["k"], named["n"]) == (1, 3) and (false["k"], false["n"]) == (1, 2)

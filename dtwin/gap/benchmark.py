@@ -12,9 +12,11 @@ confidence; :func:`benchmark_checks` states the targets as checks. The figure is
 Table columns (:func:`score_cases`): ``case, family, arm, effect, module, expected_effect,
 in_list, magnitude, snr, n_samples, diagnosed_module, diagnosed_effect, confidence,
 raw_shrink_pct, own_shrink_pct, excess_shrink_pct, excess_clipped, refit_shrink_pct,
-kpi_shrink_pct, module_ok, effect_ok, param_name, param_true, param_fitted, param_error``
-(``refit_shrink_pct``: the excess shrink of the linear re-fit alone, what the own share leaves
-out).
+kpi_shrink_pct, module_ok, effect_ok, also_needed, second_named, param_name, param_true,
+param_fitted, param_error`` (``refit_shrink_pct``: the excess shrink of the linear re-fit
+alone, what the own share leaves out; ``also_needed``: the other modules the diagnosis says
+need a second effect, ``"M2a:sensor_bias_drift"`` joined by ``"; "``; ``second_named``: for
+a two-effect case, whether it names the other effect there).
 """
 
 from __future__ import annotations
@@ -29,6 +31,9 @@ from statsmodels.stats.proportion import proportion_confint
 
 from dtwin.artifacts import Check
 from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED
+
+#: The benchmark arm of two effects at once (:mod:`dtwin.gap.arms`, case type ``two__a+b``).
+TWO_ARM = "two"
 
 __all__ = [
     "TARGETS",
@@ -240,10 +245,28 @@ def score_cases(cases: Iterable[tuple[str, Mapping[str, Any], Mapping[str, Any]]
                 "kpi_shrink_pct": diagnosis.get("kpi_shrink_pct"),
                 "module_ok": bool(module_ok),
                 "effect_ok": effect_ok,
+                **_second_effect_columns(key, diagnosis),
                 **_parameter_columns(key, diagnosis, effect_ok),
             }
         )
     return pd.DataFrame(rows)
+
+
+def _second_effect_columns(key: Mapping[str, Any], diagnosis: Mapping[str, Any]) -> dict:
+    """Return ``also_needed`` (``module:effect; ...``) and ``second_named`` (two-effect cases).
+
+    A two-effect case's key names both effects (``effect = "<a>+<b>"``) and expects the larger;
+    ``second_named`` is True when ``also_needed`` names the other one (any module), None for
+    every other case.
+    """
+    others = diagnosis.get("also_needed") or []
+    named = [f"{o['module']}:{o['effect']}" for o in others]
+    second = None
+    if key.get("arm") == TWO_ARM:
+        pair = str(key["effect"]).split("+")
+        rest = [e for e in pair if e != key["expected_effect"]] or pair[1:]
+        second = bool(rest) and any(o["effect"] == rest[0] for o in others)
+    return {"also_needed": "; ".join(named), "second_named": second}
 
 
 def _rate(flags: pd.Series) -> dict[str, Any]:
@@ -259,6 +282,21 @@ def _labelled(table: pd.DataFrame) -> pd.Series:
         return pd.Series(False, index=table.index)
     answers = table["diagnosed_effect"]
     return answers.notna() & ~answers.isin([NONE, UNEXPLAINED])
+
+
+def _second_effect_flags(table: pd.DataFrame) -> dict[str, pd.Series]:
+    """Return ``second_effect_named`` (two-effect cases) and ``false_second_effect`` (others).
+
+    ``second_effect_named``: the diagnosis says a second effect is needed and names it;
+    ``false_second_effect``: a one-effect or ``none`` case told a second effect is needed.
+    """
+    if "also_needed" not in table:
+        return {}
+    two = table.arm == TWO_ARM
+    return {
+        "second_effect_named": table[two].second_named.fillna(False).astype(bool),
+        "false_second_effect": table[~two].also_needed.fillna("").astype(bool),
+    }
 
 
 def _median(values: pd.Series) -> float | None:
@@ -351,6 +389,7 @@ def _family_metrics(table: pd.DataFrame) -> dict[str, Any]:
         "none_accuracy": table[table.expected_effect == NONE].effect_ok,
         "unexplained_accuracy": table[table.expected_effect == UNEXPLAINED].effect_ok,
         "out_of_list_labelled": _labelled(table[table.expected_effect == UNEXPLAINED]),
+        **_second_effect_flags(table),
     }
     intervals = {name: _rate(flags) for name, flags in groups.items()}
     bins = pd.cut(table.magnitude, list(MAGNITUDE_BINS), include_lowest=True)

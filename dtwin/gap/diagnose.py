@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -240,8 +240,9 @@ class Diagnosis:
     ``gap_after``), ``own_shrink_pct`` (the effect's own share: excess of the twin with only
     its linear parameters re-fitted, ``gap_refit``, → ``gap_after``) and ``excess_shrink_pct``
     (excess over the module's one noise floor; ``excess_clipped`` when the gap after is within
-    the floor, i.e. 100 %). ``series`` holds scoring-part time series of the source module for
-    the figure.
+    the floor, i.e. 100 %). ``also_needed`` lists the other modules with a gap of their own
+    (:func:`_other_gaps`: a second effect is needed). ``series`` holds scoring-part time series
+    of the source module for the figure.
     """
 
     module: str | None
@@ -267,6 +268,7 @@ class Diagnosis:
     calibrated: tuple[str, ...]
     notes: tuple[str, ...]
     settings: GapSettings
+    also_needed: tuple[dict[str, Any], ...] = ()
     series: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -918,6 +920,38 @@ def _choose(flagged: list[_ModuleWork], ranked: Mapping[str, list], settings: Ga
     return source, chosen
 
 
+def _other_gaps(
+    flagged: Sequence[_ModuleWork],
+    source: _ModuleWork | None,
+    ranked: Mapping[str, list],
+    settings: GapSettings,
+) -> tuple[dict[str, Any], ...]:
+    """Return the flagged modules other than the source: where a second effect is needed.
+
+    Each is ``{module, effect, choosing_share_pct, gap_over_threshold}``, furthest above its
+    threshold first: ``effect`` is the module's best-scored candidate if it clears
+    :func:`required_share` on the choosing part (as the source's answer must), else
+    ``unexplained``. The answer itself is unchanged (issue 16, arm (g): name the larger
+    effect, say when two are needed).
+    """
+    others = sorted((w for w in flagged if w is not source), key=lambda w: -w.gap_cal / w.threshold)
+    found = []
+    for work in others:
+        best = ranked[work.name][0] if ranked.get(work.name) else None
+        explained = best is not None and best.choosing_share_pct >= 100 * required_share(
+            best.effect, settings
+        )
+        found.append(
+            {
+                "module": work.name,
+                "effect": best.effect if explained else UNEXPLAINED,
+                "choosing_share_pct": None if best is None else float(best.choosing_share_pct),
+                "gap_over_threshold": float(work.gap_cal / work.threshold),
+            }
+        )
+    return tuple(found)
+
+
 def required_share(effect: str, settings: GapSettings) -> float:
     """Return the share of the excess gap candidate ``effect`` must remove to be the answer.
 
@@ -1227,5 +1261,6 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
         calibrated=tuple(w.name for w in works.values() if w.calibrated),
         notes=tuple(notes),
         settings=settings,
+        also_needed=_other_gaps(flagged, source, ranked, settings),
         series=_scoring_series(recording, source, ranked, split.score),
     )

@@ -122,6 +122,7 @@ def diagnosis_to_dict(diagnosis: Diagnosis) -> dict[str, Any]:
             "train_frac": d.train_frac,
         },
         "calibrated": list(d.calibrated),
+        "also_needed": [dict(entry) for entry in d.also_needed],
         "notes": list(d.notes),
         "settings": asdict(d.settings),
         "definitions": DEFINITIONS,
@@ -152,9 +153,28 @@ def _unexplained_headline(d: Diagnosis) -> str:
     )
 
 
+def _also_needed_line(d: Diagnosis) -> str:
+    """Return the sentence naming the other modules with a gap of their own ('' if none)."""
+    if not d.also_needed:
+        return ""
+    parts = []
+    for other in d.also_needed:
+        share = other["choosing_share_pct"]
+        removes = "" if share is None else f", its best candidate removes {share:.0f} %"
+        parts.append(f"{other['module']}: {other['effect']}{removes}")
+    return (
+        f" **A second effect is needed**: {'; '.join(parts)} (a gap beyond its own noise "
+        "threshold; the answer above is the module furthest above its threshold)."
+    )
+
+
 def _headline(d: Diagnosis) -> str:
     if d.effect == "none":
         return "**No gap beyond the noise**: every diagnosed module is within its noise threshold."
+    return _answer_headline(d) + _also_needed_line(d)
+
+
+def _answer_headline(d: Diagnosis) -> str:
     if d.effect == "unexplained":
         return _unexplained_headline(d)
     params = ", ".join(f"{k} = {v:.4g}" for k, v in d.params.items())
