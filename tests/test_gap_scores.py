@@ -205,7 +205,7 @@ def test_a_second_effect_is_scored_on_two_effect_cases_and_counted_as_false_else
     scale = {"module": "M2b", "effect": "sensor_scale_error", "choosing_share_pct": 80.0}
     base = {"in_list": True, "magnitude": 0.5, "n_samples": 1000, "module": "M1", "dt": 0.01}
     base["params"] = {"Fc": 0.1}
-    two = {**base, "arm": "two", "effect": "coulomb_friction+sensor_bias_drift"}
+    two = {**base, "arm": "two", "effect": "two__coulomb_friction+sensor_bias_drift"}
     two["expected_effect"] = "coulomb_friction"
     one = {**base, "arm": "default", "effect": "coulomb_friction"}
     one["expected_effect"] = "coulomb_friction"

@@ -255,7 +255,8 @@ def score_cases(cases: Iterable[tuple[str, Mapping[str, Any], Mapping[str, Any]]
 def _second_effect_columns(key: Mapping[str, Any], diagnosis: Mapping[str, Any]) -> dict:
     """Return ``also_needed`` (``module:effect; ...``) and ``second_named`` (two-effect cases).
 
-    A two-effect case's key names both effects (``effect = "<a>+<b>"``) and expects the larger;
+    A two-effect case's key names both effects (``effect = "two__<a>+<b>"``) and expects the
+    larger;
     ``second_named`` is True when ``also_needed`` names the other one (any module), None for
     every other case.
     """
@@ -263,7 +264,7 @@ def _second_effect_columns(key: Mapping[str, Any], diagnosis: Mapping[str, Any])
     named = [f"{o['module']}:{o['effect']}" for o in others]
     second = None
     if key.get("arm") == TWO_ARM:
-        pair = str(key["effect"]).split("+")
+        pair = str(key["effect"]).split("__")[-1].split("+")
         rest = [e for e in pair if e != key["expected_effect"]] or pair[1:]
         second = bool(rest) and any(o["effect"] == rest[0] for o in others)
     return {"also_needed": "; ".join(named), "second_named": second}
