@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
+import jsonschema
 import numpy as np
 import pytest
 from scipy.signal import savgol_filter
@@ -394,5 +398,9 @@ def test_a_second_module_with_its_own_gap_is_said_to_need_a_second_effect():
     assert (other["module"], other["effect"]) == ("M2a", "sensor_bias_drift")
     assert other["gap_over_threshold"] > 1 and other["choosing_share_pct"] >= 50
     assert result.modules["M2a"].status == "gap"
-    assert diagnosis_to_dict(result)["also_needed"] == [other]
+    payload = diagnosis_to_dict(result)
+    assert payload["also_needed"] == [other]
+    root = Path(__file__).resolve().parents[1]
+    schema = json.loads((root / "workflow/schemas/diagnosis.schema.json").read_text())
+    jsonschema.validate(payload, schema)
     assert "A second effect is needed**: M2a: sensor_bias_drift" in render_markdown(result)

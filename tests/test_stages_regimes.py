@@ -20,7 +20,9 @@ from dtwin.stages.faults import (
 )
 from dtwin.stages.regimes import (
     SEED_STREAMS,
+    bic_dataset,
     bic_sweep,
+    concat_bic_tables,
     fit_nominal_regimes,
     hmm_seed,
     posterior_matrix,
@@ -243,6 +245,32 @@ def test_bic_sweep_per_dataset_does_not_depend_on_the_other(scenario, twin_run, 
     pd.testing.assert_frame_equal(both.iloc[:2], alone)
     with pytest.raises(DtwinValueError, match="datasets keys"):
         bic_sweep({"other": nominal}, bic, config["hmm"])
+
+
+def test_each_data_sets_sweep_as_its_own_job_joins_to_the_whole(
+    scenario, twin_run, config, tmp_path
+):
+    """Rule bic_sweep_dataset reads one data set; bic_sweep's join equals the one-job sweep."""
+    _, _, residuals = twin_run
+    residuals.iloc[:300].to_csv(tmp_path / "residuals.csv", index=False)
+    scenario.residuals.iloc[:300].to_csv(tmp_path / "faults.csv", index=False)
+    (tmp_path / "nominal.json").write_text(json.dumps({"n_states": 4}))
+    (tmp_path / "summary.json").write_text(json.dumps({"model": {"n_states": 4}}))
+    nominal, nominal_model = bic_dataset(
+        "nominal_residuals", tmp_path / "residuals.csv", tmp_path / "nominal.json"
+    )
+    faults, fault_model = bic_dataset(
+        "fault_features", tmp_path / "faults.csv", tmp_path / "summary.json"
+    )
+    assert list(nominal.columns) == list(RESIDUALS) and list(faults.columns) == list(FEATURES)
+    assert nominal_model == {"n_states": 4} and fault_model == {"n_states": 4}
+    bic = {"ks": [2, 3], "n_restarts": 2}
+    datasets = {"nominal_residuals": nominal, "fault_features": faults}
+    whole = bic_sweep(datasets, bic, config["hmm"])
+    parts = [bic_sweep({name: data}, bic, config["hmm"]) for name, data in datasets.items()]
+    pd.testing.assert_frame_equal(concat_bic_tables(parts), whole)
+    with pytest.raises(DtwinValueError, match="name must be one of"):
+        bic_dataset("other", tmp_path / "residuals.csv", tmp_path / "nominal.json")
 
 
 def test_bic_sweep_uses_the_dedicated_fit_at_its_k(twin_run, config):

@@ -56,6 +56,7 @@ AFTER_FAULTS = {
     "targeted_intervention",
     "fig05_correction_timeseries",
     "fig06_correction_distributions",
+    "bic_sweep_dataset",
     "bic_sweep",
     "fig09_bic",
     "mcda_actions",
@@ -311,6 +312,7 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.8))
     edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=3))
     assert planned_rules(workflow_copy) == {
+        "bic_sweep_dataset",
         "bic_sweep",
         "fig09_bic",
         "fig13_ar_hmm",

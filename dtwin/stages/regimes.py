@@ -12,15 +12,19 @@ uses share random draws and adding a use does not change the others.
 
 from __future__ import annotations
 
+import json
 import logging
+import os
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from dtwin._validation import DtwinValueError
+from dtwin.fault_injection import regime_features
 from dtwin.hmm import HmmFit, ZScored, bic_by_k, bic_row, fit_hmm, zscore
 from dtwin.stages.settings import EmSettings, HmmSettings
 from dtwin.state_tables import posterior_matrix, state_labels
@@ -37,7 +41,9 @@ __all__ = [
     "fit_nominal_regimes",
     "BIC_DATASETS",
     "given_bic_row",
+    "bic_dataset",
     "bic_sweep",
+    "concat_bic_tables",
 ]
 
 logger = logging.getLogger(__name__)
@@ -194,6 +200,30 @@ def given_bic_row(model: Mapping[str, Any]) -> dict[str, Any]:
         "given",
     )
     return {**row, "means_z": model["means_z"], "sds_z": model["sds_z"]}
+
+
+def bic_dataset(
+    name: str, features_csv: str | os.PathLike, model_json: str | os.PathLike
+) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """Return one BIC data set's raw features and the summary of its dedicated K-state fit.
+
+    ``nominal_residuals``: columns e0 … e4 of ``results/residuals.csv`` and
+    ``results/regimes/nominal_model.json``; ``fault_features``: the ten features
+    (:func:`dtwin.fault_injection.regime_features`) of ``results/faults/residuals.csv`` and the
+    ``model`` of ``results/faults/summary.json``. The inputs of :func:`bic_sweep` for one data set.
+    """
+    if name not in BIC_DATASETS:
+        raise DtwinValueError(f"name must be one of {BIC_DATASETS} (got {name!r})")
+    table = pd.read_csv(features_csv)
+    summary = json.loads(Path(model_json).read_text())
+    if name == "nominal_residuals":
+        return table[list(RESIDUALS)], summary
+    return regime_features(table), summary["model"]
+
+
+def concat_bic_tables(tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
+    """Return the per-data-set BIC tables (each :func:`bic_sweep`'s) as one, in the given order."""
+    return pd.concat(list(tables), ignore_index=True)
 
 
 def bic_sweep(

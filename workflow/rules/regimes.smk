@@ -1,6 +1,8 @@
 """Stage "regimes" (paper §4.2, §5): nominal_regimes → Fig. 4; bic_sweep → Fig. 9.
 
-bic_sweep also reads the fault scenario's residuals, so faults.smk is included first.
+bic_sweep_dataset runs the BIC sweep of each data set as its own job (the two run side by
+side); bic_sweep joins them. The fault features' sweep reads the fault scenario, so faults.smk
+is included first.
 """
 
 
@@ -64,22 +66,57 @@ rule fig04_hmm_posteriors:
         "../../scripts/fig04_hmm_posteriors.py"
 
 
-rule bic_sweep:
+#: Inputs of each data set's BIC sweep: its features and its dedicated K-state fit.
+BIC_INPUTS = {
+    "nominal_residuals": {
+        "features": rules.residuals.output.residuals,
+        "model": rules.nominal_regimes.output.model,
+    },
+    "fault_features": {
+        "features": rules.fault_regimes.output.residuals,
+        "model": rules.fault_regimes.output.summary,
+    },
+}
+
+
+rule bic_sweep_dataset:
     message:
         "Sweeping K = {params.bic[ks]} and on until the BIC rose {params.bic[stop_after_rises]} "
         "times in a row (K <= {params.bic[k_max]}; {params.bic[n_restarts]} EM starts each) on "
-        "the nominal residuals and the fault features"
+        "the {wildcards.dataset}"
     input:
-        lib=dtwin_sources("scripts/bic_sweep.py"),
-        residuals=rules.residuals.output.residuals,
-        fault_residuals=rules.fault_regimes.output.residuals,
-        nominal_model=rules.nominal_regimes.output.model,
-        fault_summary=rules.fault_regimes.output.summary,
+        lib=dtwin_sources("scripts/bic_sweep_dataset.py"),
+        features=lambda wildcards: BIC_INPUTS[wildcards.dataset]["features"],
+        model=lambda wildcards: BIC_INPUTS[wildcards.dataset]["model"],
     output:
-        table="results/bic_sweep.csv",
+        table="results/bic/{dataset}.csv",
+    wildcard_constraints:
+        dataset="|".join(BIC_INPUTS),
     params:
         bic=config["bic"],
         hmm={k: config["hmm"][k] for k in ("seed", "max_iter", "tol", "var_floor")},
+    log:
+        "logs/bic_sweep_dataset/{dataset}.log",
+    benchmark:
+        "benchmarks/rules/bic_sweep_dataset/{dataset}.tsv"
+    threads: 1
+    resources:
+        mem_mb=500,
+        runtime=10,
+    conda:
+        "../envs/dtwin.yaml"
+    script:
+        "../../scripts/bic_sweep_dataset.py"
+
+
+rule bic_sweep:
+    message:
+        "Joining the BIC sweeps of the nominal residuals and the fault features"
+    input:
+        lib=dtwin_sources("scripts/bic_sweep.py"),
+        tables=expand("results/bic/{dataset}.csv", dataset=BIC_INPUTS),
+    output:
+        table="results/bic_sweep.csv",
     log:
         "logs/bic_sweep.log",
     benchmark:
@@ -87,7 +124,7 @@ rule bic_sweep:
     threads: 1
     resources:
         mem_mb=500,
-        runtime=10,
+        runtime=2,
     conda:
         "../envs/dtwin.yaml"
     script:
