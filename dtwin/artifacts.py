@@ -47,9 +47,16 @@ __all__ = [
     "write_artifact",
     "to_jsonable",
     "load_yaml",
+    "REPLICATES_METRIC",
 ]
 
 CHECK_KINDS: tuple[str, ...] = ("validity", "claim", "crosscheck")
+
+#: Metrics key of an artifact that judged its claims again on each replicate of its runs
+#: (Fig. 11's sweep, :func:`dtwin.figures._fig11_claims.claims_across_replicates`):
+#: ``{"n_replicates", "replicate0_is_figure", "verdicts": {check id: [bool per replicate]}}``;
+#: the claims rule (:func:`dtwin.claims.summarise_claims`) turns it into "holds in k of R".
+REPLICATES_METRIC = "claims_across_replicates"
 
 
 class ArtifactValidityError(DtwinValueError):

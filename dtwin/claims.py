@@ -24,6 +24,7 @@ from typing import Any
 from scipy.stats import norm
 
 from dtwin._validation import DtwinValueError
+from dtwin.artifacts import REPLICATES_METRIC
 
 __all__ = ["wilson_interval", "ClaimsSummary", "summarise_claims", "claims_markdown"]
 
@@ -71,11 +72,6 @@ def wilson_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
 
 #: The artifact whose metrics give every paper claim's verdicts across random draws.
 DRAWS_ARTIFACT = "fig12_claims_across_draws"
-
-#: Metrics key of an artifact that judged its claims again on each replicate of its runs
-#: (Fig. 11's sweep, :func:`dtwin.figures._fig11_claims.claims_across_replicates`):
-#: ``{"n_replicates", "replicate0_is_figure", "verdicts": {check id: [bool per replicate]}}``.
-REPLICATES_METRIC = "claims_across_replicates"
 
 #: Where a reader gets more than the default single replicate of the sweep.
 MORE_REPLICATES = "more: sensitivity.n_replicates, e.g. config/draws_200.yaml"

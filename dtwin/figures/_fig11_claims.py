@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from dtwin._validation import DtwinValueError
-from dtwin.artifacts import Check
+from dtwin.artifacts import REPLICATES_METRIC, Check
 from dtwin.sensitivity_sweep import alpha_trends, bimodality_coefficient
 
 __all__ = [
@@ -38,9 +38,6 @@ BALANCED_RANGE_PCT = (23.0, 30.0)
 R_MODE_SPLIT_PCT = 32.0
 #: Columns naming one configuration of the sweep.
 GRID = ["alpha", "m_A", "m_B"]
-#: Key of the artifact's metrics that gives each claim's verdict per replicate; the claims
-#: rule (:func:`dtwin.claims.summarise_claims`) turns it into "holds in k of R replicates".
-REPLICATES_METRIC = "claims_across_replicates"
 
 
 def sweep_claim_numbers(means: pd.DataFrame, slopes: pd.DataFrame | None = None) -> dict:

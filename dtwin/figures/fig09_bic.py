@@ -175,11 +175,14 @@ def _stability_check(table: pd.DataFrame) -> Check:
     and 7 (``source == "given"``, hmm.n_restarts starts) are reported beside, as
     ``dedicated_fit_gain``: their starts are the hmm section's, not the sweep's.
     """
+    k_stars = {
+        name: int(group.loc[group["bic"].idxmin(), "K"])
+        for name, group in table.groupby("dataset", sort=False)
+    }
     swept = table if "source" not in table else table[table["source"] != "given"]
     worst = {}
     for name, group in swept.groupby("dataset", sort=False):
-        k_star = int(table.loc[table.loc[table["dataset"] == name, "bic"].idxmin(), "K"])
-        near = group[group["K"] <= k_star + 2]
+        near = group[group["K"] <= k_stars[name] + 2]
         gain = near["log_likelihood"] - near["log_likelihood_half"]
         worst[name] = {
             "max_gain": round(float(gain.max()), 3),

@@ -256,9 +256,8 @@ def _second_effect_columns(key: Mapping[str, Any], diagnosis: Mapping[str, Any])
     """Return ``also_needed`` (``module:effect; ...``) and ``second_named`` (two-effect cases).
 
     A two-effect case's key names both effects (``effect = "two__<a>+<b>"``) and expects the
-    larger;
-    ``second_named`` is True when ``also_needed`` names the other one (any module), None for
-    every other case.
+    larger; ``second_named`` is True when ``also_needed`` names the other one (any module),
+    None for every other case.
     """
     others = diagnosis.get("also_needed") or []
     named = [f"{o['module']}:{o['effect']}" for o in others]

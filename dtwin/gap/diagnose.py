@@ -915,9 +915,13 @@ def _choose(flagged: list[_ModuleWork], ranked: Mapping[str, list], settings: Ga
         if not ranked[source.name]:
             return source, None
         best = ranked[source.name][0]
-        needed = required_share(best.effect, settings)
-        chosen = best if best.choosing_share_pct >= 100 * needed else None
+        chosen = best if _clears_bar(best, settings) else None
     return source, chosen
+
+
+def _clears_bar(candidate, settings: GapSettings) -> bool:
+    """Return whether ``candidate`` removes its :func:`required_share` of the choosing gap."""
+    return candidate.choosing_share_pct >= 100 * required_share(candidate.effect, settings)
 
 
 def _other_gaps(
@@ -938,9 +942,7 @@ def _other_gaps(
     found = []
     for work in others:
         best = ranked[work.name][0] if ranked.get(work.name) else None
-        explained = best is not None and best.choosing_share_pct >= 100 * required_share(
-            best.effect, settings
-        )
+        explained = best is not None and _clears_bar(best, settings)
         found.append(
             {
                 "module": work.name,
