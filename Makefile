@@ -57,11 +57,11 @@ lock:
 	.lock-tools/bin/pip-compile --quiet --no-header --allow-unsafe --strip-extras --no-emit-index-url --no-emit-find-links --no-annotate $(PIP_COMPILE_ARGS) requirements.in -o requirements.lock
 	.lock-tools/bin/pip-compile --quiet --no-header --allow-unsafe --strip-extras --no-emit-index-url --no-emit-find-links --no-annotate $(PIP_COMPILE_ARGS) requirements-dev.in -o requirements-dev.lock
 
-# The measured EMPS axis (README §Example: EMPS): fit on the estimation experiment, score on the
-# validation experiment with pulses. The data are not in the repository (see the README).
+# The measured EMPS axis (docs/gap.md §Example: EMPS): fit on the estimation experiment, score on the
+# validation experiment with pulses. The data are not in the repository (docs/gap.md says where to get them).
 EMPS_DIR ?= ../shared/realdata/emps
 emps: $(STAMP)
-	@test -f $(EMPS_DIR)/recording_train.csv || { echo "EMPS data not found in $(EMPS_DIR): download it from https://www.nonlinearbenchmark.org (see README, Example: EMPS) or pass EMPS_DIR=..."; exit 1; }
+	@test -f $(EMPS_DIR)/recording_train.csv || { echo "EMPS data not found in $(EMPS_DIR): download it from https://www.nonlinearbenchmark.org (see docs/gap.md, Example: EMPS) or pass EMPS_DIR=..."; exit 1; }
 	$(BIN)/dtwin diagnose $(EMPS_DIR)/recording_train.csv --twin $(EMPS_DIR)/twin.yaml --heldout $(EMPS_DIR)/recording_pulses.csv --out results/emps
 
 clean-results:

@@ -1,9 +1,10 @@
-"""Print the README's performance table from benchmarks/results.json (`make bench` writes it).
+"""Write the performance table of docs/performance.md from benchmarks/results.json (`make bench`).
 
-Usage: ``python benchmarks/readme_table.py [results.json]``. Every number in the table is read
-from the file; each row names the section it comes from, its date and the 1-minute load average
-before and after that section ran (the machine's core count heads the table). A section the
-file lacks is left out.
+Usage: ``python benchmarks/readme_table.py [results.json] [--print]``: rewrites the table between
+the two marker lines of ``docs/performance.md`` (``--print`` prints it instead). Every number in
+the table is read from the file; each row names the section it comes from, its date and the
+1-minute load average before and after that section ran (the machine's core count heads the
+table). A section the file lacks is left out.
 """
 
 from __future__ import annotations
@@ -13,6 +14,9 @@ import sys
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results.json"
+DOC = Path(__file__).resolve().parents[1] / "docs" / "performance.md"
+BEGIN = "<!-- benchmarks/readme_table.py: begin -->"
+END = "<!-- benchmarks/readme_table.py: end -->"
 
 
 def cpu_total(by_rule: dict) -> float:
@@ -124,6 +128,19 @@ def table(results: dict) -> str:
     return "\n".join(lines)
 
 
+def with_table(doc: str, results: dict) -> str:
+    """``doc`` (the text of docs/performance.md) with the table between its markers replaced."""
+    head, begin, rest = doc.partition(BEGIN)
+    _, end, tail = rest.partition(END)
+    if not begin or not end:
+        raise ValueError(f"{DOC.name} lacks the marker lines {BEGIN!r} and {END!r}")
+    return f"{head}{BEGIN}\n{table(results)}\n{END}{tail}"
+
+
 if __name__ == "__main__":
-    path = Path(sys.argv[1]) if len(sys.argv) > 1 else RESULTS
-    print(table(json.loads(path.read_text())))
+    args = [a for a in sys.argv[1:] if a != "--print"]
+    results = json.loads((Path(args[0]) if args else RESULTS).read_text())
+    if "--print" in sys.argv:
+        print(table(results))
+    else:
+        DOC.write_text(with_table(DOC.read_text(), results))

@@ -1,4 +1,4 @@
-"""The library's layers and size limits, as the README's Architecture section states them.
+"""The library's layers and size limits, as the README's Layout section states them.
 
 Layers of ``dtwin/`` (who may import whom):
 

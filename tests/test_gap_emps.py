@@ -1,7 +1,8 @@
-"""The measured EMPS axis (README §Example: EMPS), where its data are present.
+"""The measured EMPS axis (docs/gap.md §Example: EMPS), where its data are present.
 
 The data are not in the repository: set DTWIN_EMPS_DIR or put the converted files in
-``../shared/realdata/emps`` beside the repository (README). Without them the test is skipped,
+``../shared/realdata/emps`` beside the repository (docs/gap.md §Example: EMPS says where to
+download them). Without them the test is skipped,
 saying where to put them.
 """
 
@@ -23,7 +24,7 @@ PUBLISHED_FC = 20.39  # N, Janot et al. 2019
 def test_emps_names_coulomb_friction_in_the_plant():
     if not (EMPS / "recording_train.csv").is_file():
         pytest.skip(
-            f"EMPS data not found in {EMPS}: set DTWIN_EMPS_DIR or see the README "
+            f"EMPS data not found in {EMPS}: set DTWIN_EMPS_DIR or see docs/gap.md "
             "(Example: EMPS) for where to download it"
         )
     import yaml

@@ -348,7 +348,7 @@ def _interior_cause(gain: Mapping[str, Any] | None) -> str:
     if gain and gain["max_gain"] < STABLE_LOGLIK:
         return (
             "draw (doubling the EM starts moves no best fit up to K* + 2; other kinds of EM "
-            "start can still reach better optima, README §Reproduction notes)"
+            "start can still reach better optima, docs/reproduction.md §Reproduction notes)"
         )
     if gain:
         return (
