@@ -7,8 +7,9 @@ Every figure rule writes ``paper_figures/<artifact>.json``::
                                    "observed": ..., "passed": ...}]}
 
 ``kind`` is ``validity`` (the artifact is sound; a failure fails the rule), ``claim`` (a
-statement of the paper, reported honestly, never failing the run) or ``crosscheck`` (agreement
-with the authors' R code on the same inputs).
+statement of the paper, reported honestly, never failing the run), ``target`` (one of the
+project's own goals, reported the same way) or ``crosscheck`` (agreement with the authors' R code
+on the same inputs).
 
 Writes are atomic: a temporary file in the target folder, then :func:`os.replace`, so a
 killed job never leaves a half-written output behind (:func:`atomic_write`); a folder of outputs
@@ -50,7 +51,9 @@ __all__ = [
     "REPLICATES_METRIC",
 ]
 
-CHECK_KINDS: tuple[str, ...] = ("validity", "claim", "crosscheck")
+#: ``validity`` (the artifact is sound; a failure fails the rule), ``claim`` (a statement of the
+#: paper), ``target`` (the project's own goal), ``crosscheck`` (agreement with the R code).
+CHECK_KINDS: tuple[str, ...] = ("validity", "claim", "target", "crosscheck")
 
 #: Metrics key of an artifact that judged its claims again on each replicate of its runs
 #: (Fig. 11's sweep, :func:`dtwin.figures._fig11_claims.claims_across_replicates`):

@@ -8,8 +8,10 @@ and the validity checks. A claim that does not reproduce is reported, never hidd
 failed validity check is an error.
 
 A ``claim`` check is the *paper's* when its artifact is a paper artifact and its statement
-quotes the paper (starts with ``paper``); every other claim is one of the project's own
-targets (the gap benchmark's, the sweep's optimiser expectations, ...).
+quotes the paper (starts with ``paper``). The project's own targets (the gap benchmark's, the
+sweep's optimiser expectations, ...) are ``target`` checks in their artifact's JSON; a
+``claim`` that does not quote the paper is counted as a target too. Every row is an
+:class:`dtwin.artifacts.Check` with its artifact (:func:`check_row`).
 """
 
 from __future__ import annotations
@@ -24,9 +26,9 @@ from typing import Any
 from scipy.stats import norm
 
 from dtwin._validation import DtwinValueError
-from dtwin.artifacts import REPLICATES_METRIC
+from dtwin.artifacts import REPLICATES_METRIC, Check
 
-__all__ = ["wilson_interval", "ClaimsSummary", "summarise_claims", "claims_markdown"]
+__all__ = ["wilson_interval", "ClaimsSummary", "check_row", "summarise_claims", "claims_markdown"]
 
 
 def wilson_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
@@ -104,23 +106,46 @@ class ClaimsSummary:
         return {"counts": self.counts, "checks": self.rows}
 
 
+def check_row(artifact: str, check: Check) -> dict[str, Any]:
+    """Return one row of ``claims.json``: ``check``'s fields, its ``artifact``, no ``draws`` yet.
+
+    Examples
+    --------
+    >>> row = check_row("figA", Check("c1", "claim", "paper §1: x", "> 1", 2.0, True))
+    >>> list(row)[:3], row["draws"]
+    (['artifact', 'id', 'kind'], None)
+    """
+    return {
+        "artifact": artifact,
+        "id": check.id,
+        "kind": check.kind,
+        "statement": check.statement,
+        "expected": check.expected,
+        "observed": check.observed,
+        "reference": check.reference,
+        "passed": bool(check.passed),
+        "note": check.note,
+        "draws": None,
+    }
+
+
 def _row(payload: Mapping[str, Any], check: Mapping[str, Any], project: Sequence[str]) -> dict:
+    """Return the row of one JSON check; a claim that does not quote the paper is a target."""
     kind = check["kind"]
     is_paper = payload["artifact"] not in project and str(check["statement"]).startswith("paper")
     if kind == "claim" and not is_paper:
         kind = "target"
-    return {
-        "artifact": payload["artifact"],
-        "id": check["id"],
-        "kind": kind,
-        "statement": check["statement"],
-        "expected": check.get("expected"),
-        "observed": check.get("observed"),
-        "reference": check.get("reference"),
-        "passed": bool(check["passed"]),
-        "note": check.get("note"),
-        "draws": None,
-    }
+    parsed = Check(
+        id=check["id"],
+        kind=kind,
+        statement=check["statement"],
+        expected=check.get("expected"),
+        observed=check.get("observed"),
+        passed=bool(check["passed"]),
+        reference=check.get("reference"),
+        note=check.get("note"),
+    )
+    return check_row(payload["artifact"], parsed)
 
 
 def _attach_draws(rows: list[dict[str, Any]], draws: Mapping[str, Any]) -> list[dict[str, Any]]:
@@ -138,24 +163,19 @@ def _attach_draws(rows: list[dict[str, Any]], draws: Mapping[str, Any]) -> list[
             same_run = entry.get("draw0_is_main_run", True)  # False: fewer EM starts per draw
             if same_run and bool(entry["draw0"]) != row["passed"]:
                 mismatched.append(f"{row['artifact']}:{row['id']}")
-    return [
-        {
-            "artifact": DRAWS_ARTIFACT,
-            "id": "draw0_verdicts_equal_the_figures",
-            "kind": "validity",
-            "statement": "draw 0 (the configured seeds) gives every claim the figure's verdict "
-            "(Fig. 11: replicate 0 of a one-replicate sweep)",
-            "expected": "0 claims that differ",
-            "observed": mismatched or 0,
-            "reference": None,
-            "passed": not mismatched,
-            "note": None,
-            "draws": None,
-        }
-    ]
+    check = Check(
+        id="draw0_verdicts_equal_the_figures",
+        kind="validity",
+        statement="draw 0 (the configured seeds) gives every claim the figure's verdict "
+        "(Fig. 11: replicate 0 of a one-replicate sweep)",
+        expected="0 claims that differ",
+        observed=mismatched or 0,
+        passed=not mismatched,
+    )
+    return [check_row(DRAWS_ARTIFACT, check)]
 
 
-#: The causes a failed paper claim or crosscheck names in its note (issue 12 item 5).
+#: The causes a failed paper claim or crosscheck names in its note.
 CAUSES: tuple[str, ...] = ("draw", "optimiser", "method")
 
 
@@ -172,19 +192,16 @@ def _cause_check(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         and not row["passed"]
         and not any(cause in (row["note"] or "") for cause in CAUSES)
     ]
-    return {
-        "artifact": "claims",
-        "id": "every_failed_claim_names_its_cause",
-        "kind": "validity",
-        "statement": "every failed paper claim and crosscheck has a note naming its cause: "
+    check = Check(
+        id="every_failed_claim_names_its_cause",
+        kind="validity",
+        statement="every failed paper claim and crosscheck has a note naming its cause: "
         + ", ".join(CAUSES),
-        "expected": "0 without a cause",
-        "observed": silent or 0,
-        "reference": None,
-        "passed": not silent,
-        "note": None,
-        "draws": None,
-    }
+        expected="0 without a cause",
+        observed=silent or 0,
+        passed=not silent,
+    )
+    return check_row("claims", check)
 
 
 def _replicate_entries(payload: Mapping[str, Any], level: float) -> dict[str, dict[str, Any]]:

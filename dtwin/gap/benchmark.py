@@ -473,7 +473,7 @@ def benchmark_checks(table: pd.DataFrame, metrics: Mapping[str, Any]) -> list[Ch
             checks.append(
                 Check(
                     f"target_{prefix}{name}",
-                    "claim",
+                    "target",
                     f"{source}: {name} {relation} {target} ({observed_metrics['n_cases']} cases)",
                     target,
                     observed,
