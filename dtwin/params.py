@@ -11,9 +11,14 @@ diagnoser) has exactly this shape::
     fusion: {alpha: 0.6}
     kpi: {w1: 1.0, w2: 0.2}
     noise: {actuator: 0.005, plant: 0.04, sensor_A: 0.03, sensor_B: 0.02}   # standard deviations
+    discretisation: euler   # how the plant's m, c, k map to samples (optional)
 
 Units: seconds for ``dt`` and every ``tau``; kg, N·s/m, N/m for the plant; signal units for
 biases and noise standard deviations (the plant noise is an acceleration, m/s²).
+``discretisation`` is one of :data:`dtwin.modules.DISCRETISATIONS`: ``euler`` (the paper's
+explicit Euler, the only one :func:`dtwin.physics.simulate_physics` runs) or an exact hold
+(``zoh``, ``foh``, ``bandlimited``: the gap diagnoser's plant, docs/gap.md §Modules); absent
+(None), the gap diagnoser chooses on the training part.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from dtwin._validation import (
+    DtwinTypeError,
     DtwinValueError,
     require_in_range,
     require_mapping,
@@ -30,6 +36,7 @@ from dtwin._validation import (
     require_number,
     require_positive,
 )
+from dtwin.modules import DISCRETISATIONS
 
 __all__ = [
     "ActuatorParams",
@@ -42,6 +49,7 @@ __all__ = [
     "CommandParams",
     "twin_params_from_mapping",
     "command_params_from_mapping",
+    "discretisation_from_mapping",
 ]
 
 
@@ -99,7 +107,8 @@ class TwinParams:
     """Physical parameters of the six-module twin (the ``twin:`` config section).
 
     Sections other than ``dt`` may be ``None`` when built with ``require_all=False``
-    (the gap diagnoser then calibrates that module from data).
+    (the gap diagnoser then calibrates that module from data). ``discretisation`` is the
+    plant's (module docstring); None when the mapping does not declare one.
     """
 
     dt: float
@@ -110,6 +119,7 @@ class TwinParams:
     fusion: FusionParams | None
     kpi: KpiParams | None
     noise: NoiseParams | None
+    discretisation: str | None = None
 
 
 @dataclass(frozen=True)
@@ -196,7 +206,7 @@ def twin_params_from_mapping(
     mapping = require_mapping(prefix, mapping)
     if "dt" not in mapping:
         raise DtwinValueError(f"{prefix} is missing key: dt")
-    unknown = sorted(set(mapping) - set(_SECTION_FIELDS) - {"dt"})
+    unknown = sorted(set(mapping) - set(_SECTION_FIELDS) - {"dt", "discretisation"})
     if unknown:
         raise DtwinValueError(f"{prefix} has unknown key(s): {', '.join(unknown)}")
     sections: dict[str, Any] = {}
@@ -207,7 +217,38 @@ def twin_params_from_mapping(
             raise DtwinValueError(f"{prefix} is missing key: {section}")
         else:
             sections[section] = None
-    return TwinParams(dt=require_positive(f"{prefix}.dt", mapping["dt"]), **sections)
+    return TwinParams(
+        dt=require_positive(f"{prefix}.dt", mapping["dt"]),
+        **sections,
+        discretisation=discretisation_from_mapping(mapping, prefix=prefix),
+    )
+
+
+def discretisation_from_mapping(mapping: Mapping[str, Any], *, prefix: str = "twin") -> str | None:
+    """Return the ``discretisation`` of a ``twin:``-shaped mapping, or None when absent.
+
+    Raises
+    ------
+    DtwinValueError, DtwinTypeError
+        If it is not one of :data:`dtwin.modules.DISCRETISATIONS`.
+
+    Examples
+    --------
+    >>> discretisation_from_mapping({"dt": 0.02, "discretisation": "euler"})
+    'euler'
+    """
+    value = mapping.get("discretisation")
+    if value is None:
+        return None
+    if not isinstance(value, str):
+        raise DtwinTypeError(
+            f"{prefix}.discretisation must be a string (got {type(value).__name__})"
+        )
+    if value not in DISCRETISATIONS:
+        raise DtwinValueError(
+            f"{prefix}.discretisation must be one of {', '.join(DISCRETISATIONS)} (got {value!r})"
+        )
+    return value
 
 
 def command_params_from_mapping(

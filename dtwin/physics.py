@@ -22,7 +22,7 @@ import pandas as pd
 
 from dtwin._validation import DtwinValueError, require_finite_array, require_min_length
 from dtwin.command import time_axis
-from dtwin.modules import PlantTrajectory, fuse, kpi, lag_response, plant_response
+from dtwin.modules import EULER, PlantTrajectory, fuse, kpi, lag_response, plant_response
 from dtwin.params import TwinParams
 from dtwin.wiring import MODULES, SIGNALS
 
@@ -210,7 +210,8 @@ def simulate_physics(twin: TwinParams, u_cmd: np.ndarray, rng: np.random.Generat
     Parameters
     ----------
     twin : TwinParams
-        Complete twin parameters (every section present).
+        Complete twin parameters (every section present; ``discretisation`` None or
+        ``"euler"``, the paper's).
     u_cmd : array, shape (n_steps,)
         Command (see :func:`dtwin.command.make_command`).
     rng : numpy.random.Generator
@@ -227,6 +228,11 @@ def simulate_physics(twin: TwinParams, u_cmd: np.ndarray, rng: np.random.Generat
     missing = [module.name for module in MODULES if getattr(twin, module.params) is None]
     if missing or twin.noise is None:
         raise DtwinValueError("simulate_physics needs every twin section (twin.noise included)")
+    if twin.discretisation not in (None, EULER):
+        raise DtwinValueError(
+            "twin.discretisation must be euler for the paper's simulator "
+            f"(got {twin.discretisation!r})"
+        )
     signals: Signals = {"u_cmd": u_cmd}
     for module in MODULES:
         signals.update(PHYSICS_STEPS[module.name](signals, twin, rng))

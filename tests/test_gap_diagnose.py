@@ -24,6 +24,7 @@ from dtwin.gap import (
     twin_from_mapping,
 )
 from dtwin.gap.effects import EFFECT_NAMES
+from dtwin.gap.generator import IN_LIST_EFFECTS
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = json.loads((ROOT / "workflow/schemas/diagnosis.schema.json").read_text())
@@ -212,3 +213,114 @@ def test_quantizer_on_a_sensor_with_coloured_noise_is_named(seed):
     assert (result.module, result.effect) == (module, "sensor_quantization")
     step = result.params["q"]
     assert step == pytest.approx(case.key["params"]["q"], rel=0.01)
+
+
+# --- the project's own twin against the project's own asset (issue 25 item 1) ---------------
+
+CONFIG = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+#: config/config.yaml's twin section as a twin file says it (declares euler) and without its
+#: discretisation (the diagnoser then chooses it on the training part).
+OWN_TWINS = {
+    "declared": CONFIG["twin"],
+    "silent": {k: v for k, v in CONFIG["twin"].items() if k != "discretisation"},
+}
+OWN_SEEDS = range(20)
+
+
+def _own_recording(seed: int) -> pd.DataFrame:
+    """The pipeline's own simulated recording (rule ``simulate``) with ``simulation.seed``."""
+    from dtwin.stages.twin import simulate_asset
+
+    simulation = {**CONFIG["simulation"], "seed": seed}
+    return simulate_asset(simulation, CONFIG["command"], CONFIG["twin"])
+
+
+def test_config_twin_declares_the_papers_euler_plant():
+    assert CONFIG["twin"]["discretisation"] == "euler"
+    assert twin_from_mapping(CONFIG["twin"]).discretisation == "euler"
+    assert twin_from_mapping(OWN_TWINS["silent"]).discretisation is None
+    with pytest.raises(ValueError, match=r"twin\.discretisation must be one of"):
+        twin_from_mapping({**CONFIG["twin"], "discretisation": "tustin"})
+
+
+@pytest.mark.parametrize("which", sorted(OWN_TWINS))
+def test_own_twin_reads_none_on_its_own_asset_for_20_seeds(which):
+    twin = twin_from_mapping(OWN_TWINS[which])
+    answers, used = [], set()
+    for seed in OWN_SEEDS:
+        result = diagnose(recording_from_frame(_own_recording(seed)), twin)
+        answers.append((seed, result.module, result.effect))
+        used.add(result.modules["M1"].discretisation)
+        assert result.twin_discretisation == OWN_TWINS[which].get("discretisation")
+    assert [a for a in answers if a[1:] != (None, "none")] == []
+    # silent: the training part picks the paper's Euler plant over the exact holds
+    assert used == {"euler"}
+
+
+def test_cli_reads_none_on_the_pipelines_asset_with_the_config_twin_section(tmp_path):
+    """The README's steps: config's twin section as TWIN.yaml, the physics table as recording."""
+    _own_recording(CONFIG["simulation"]["seed"]).to_csv(tmp_path / "physics.csv", index=False)
+    for which, twin in OWN_TWINS.items():
+        (tmp_path / f"{which}.yaml").write_text(yaml.safe_dump({"twin": twin}))
+        out = tmp_path / which
+        main(
+            [
+                "diagnose",
+                str(tmp_path / "physics.csv"),
+                "--twin",
+                str(tmp_path / f"{which}.yaml"),
+                "--out",
+                str(out),
+            ]
+        )
+        payload = json.loads((out / "diagnosis.json").read_text())
+        jsonschema.validate(payload, SCHEMA)
+        assert (payload["module"], payload["effect"]) == (None, "none")
+        assert payload["twin_discretisation"] == twin.get("discretisation")
+        assert payload["modules"]["M1"]["discretisation"] == "euler"
+        chosen = payload["modules"]["M1"]["discretisation_training_gap"]
+        if which == "silent":
+            assert chosen["euler"] < min(v for k, v in chosen.items() if k != "euler")
+        else:
+            assert chosen is None
+
+
+def _own_effect_answers(effect: str, seeds) -> list[tuple[bool, bool]]:
+    """``(declared right, silent right)`` per seed: the asset with ``effect`` at magnitude 0.8.
+
+    The generator runs the same Euler asset as the pipeline (nominal = config's twin section,
+    1000 samples, the generator's miscalibration and coloured noise).
+    """
+    rights = []
+    for seed in seeds:
+        case = generate_case(
+            effect, seed, magnitude=0.8, nominal=OWN_TWINS["silent"], n_samples=1000
+        )
+        recording = recording_from_frame(case.recording)
+        row = []
+        for declared in (True, False):
+            content = dict(case.twin["twin"])
+            if not declared:
+                content.pop("discretisation")
+            result = diagnose(recording, twin_from_mapping(content))
+            row.append(
+                (result.module, result.effect) == (case.key["module"], case.key["expected_effect"])
+            )
+        rights.append(tuple(row))
+    return rights
+
+
+@pytest.mark.parametrize("effect", sorted(IN_LIST_EFFECTS))
+def test_own_asset_with_an_effect_reads_it_whether_the_twin_declares_euler_or_not(effect):
+    rights = _own_effect_answers(effect, range(2))
+    assert all(silent or not declared for declared, silent in rights), rights
+
+
+@pytest.mark.slow
+def test_own_asset_with_each_effect_for_20_seeds_reads_as_well_silent_as_declared():
+    """Measured: declared 211/220 right, silent 209/220 (a Coulomb and a quadratic damping case
+    whose exact-hold twin's windows absorb part of the effect)."""
+    rights = [r for effect in IN_LIST_EFFECTS for r in _own_effect_answers(effect, OWN_SEEDS)]
+    declared = sum(d for d, _ in rights)
+    silent = sum(s for _, s in rights)
+    assert silent >= 0.9 * len(rights) and silent >= declared - 3, (declared, silent)

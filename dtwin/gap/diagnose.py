@@ -68,6 +68,7 @@ from dtwin.gap.models import (
     plant_bandwidth_hz,
     plant_horizon,
     plant_state_from_position,
+    plant_windows,
     simulate_module,
     window_noise_gain,
 )
@@ -82,8 +83,8 @@ from dtwin.gap.noise import (
 )
 from dtwin.gap.oe_reference import output_error_reference
 from dtwin.gap.recording import Recording, diagnosable_modules
-from dtwin.modules import DISCRETISATIONS, EULER
-from dtwin.params import TwinParams, twin_params_from_mapping
+from dtwin.modules import EULER
+from dtwin.params import TwinParams, discretisation_from_mapping, twin_params_from_mapping
 from dtwin.wiring import MODULES
 
 __all__ = [
@@ -202,6 +203,7 @@ class ModuleReport:
     discretisation: str | None = None
     horizon_samples: int | None = None
     reference_gap: float | None = None
+    discretisation_training_gap: dict[str, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -241,8 +243,10 @@ class Diagnosis:
     its linear parameters re-fitted, ``gap_refit``, → ``gap_after``) and ``excess_shrink_pct``
     (excess over the module's one noise floor; ``excess_clipped`` when the gap after is within
     the floor, i.e. 100 %). ``also_needed`` lists the other modules with a gap of their own
-    (:func:`_other_gaps`: a second effect is needed). ``series`` holds scoring-part time series
-    of the source module for the figure.
+    (:func:`_other_gaps`: a second effect is needed). ``twin_discretisation`` is the plant's
+    discretisation the twin declares (None: chosen on the training part; the one used is
+    ``modules["M1"].discretisation``). ``series`` holds scoring-part time series of the source
+    module for the figure.
     """
 
     module: str | None
@@ -269,6 +273,7 @@ class Diagnosis:
     notes: tuple[str, ...]
     settings: GapSettings
     also_needed: tuple[dict[str, Any], ...] = ()
+    twin_discretisation: str | None = None
     series: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -296,7 +301,6 @@ def twin_from_mapping(mapping: Any, dt: float | None = None) -> TwinParams:
         if not isinstance(mapping, Mapping):
             raise DtwinTypeError(f"twin must be a mapping (got {type(mapping).__name__})")
     mapping = dict(mapping)
-    mapping.pop("discretisation", None)
     if "dt" not in mapping and dt is not None:
         mapping["dt"] = dt
     return twin_params_from_mapping(mapping, require_all=False)
@@ -305,17 +309,15 @@ def twin_from_mapping(mapping: Any, dt: float | None = None) -> TwinParams:
 def twin_discretisation(mapping: Any) -> str | None:
     """Return the twin file's ``discretisation`` (docs/gap.md §Twin file), or None.
 
-    ``euler`` (the paper's twin), ``zoh`` or ``foh``; None (absent) lets the diagnoser choose
-    the exact hold that fits the training part best.
+    ``euler`` (the paper's twin), ``zoh``, ``foh`` or ``bandlimited``; None (absent) lets the
+    diagnoser choose among the four on the training part. :func:`twin_from_mapping` keeps the
+    same value in ``TwinParams.discretisation``.
     """
     if isinstance(mapping, Mapping) and isinstance(mapping.get("twin"), Mapping):
         mapping = mapping["twin"]
-    value = mapping.get("discretisation") if isinstance(mapping, Mapping) else None
-    if value is not None and value not in DISCRETISATIONS:
-        raise DtwinValueError(
-            f"twin file: discretisation must be one of {', '.join(DISCRETISATIONS)} (got {value!r})"
-        )
-    return value
+    if not isinstance(mapping, Mapping):
+        return None
+    return discretisation_from_mapping(mapping, prefix="twin file")
 
 
 # --- helpers ----------------------------------------------------------------------------
@@ -328,11 +330,13 @@ def _nominal_lin(name: str, twin: TwinParams) -> dict[str, float] | None:
     return {key: float(getattr(section, key)) for key in LINEAR_PARAMS[name]}
 
 
-def _module_data(name: str, rec: Recording, t: np.ndarray, layout: _Layout) -> ModuleData:
+def _module_data(
+    name: str, rec: Recording, t: np.ndarray, layout: _Layout, scheme: str = EULER
+) -> ModuleData:
+    """Return the module's recorded signals; the plant's state estimate follows ``scheme``."""
     inputs = module_inputs(name, rec.signals, rec.dt)
     module = next(m for m in MODULES if m.name == name)
     output = rec.signals[module.output]
-    scheme = layout.scheme if name == "M1" else EULER
     velocity, position, lead = inputs.get("v"), None, 0
     if name == "M1":
         position, velocity, lead = plant_state_from_position(
@@ -461,9 +465,15 @@ class _Layout:
     restarts: tuple[int, ...] = ()
 
     @property
-    def scheme(self) -> str:
-        """The plant's family: ``"euler"`` or an exact hold (its velocity estimate differs)."""
-        return self.holds[0]
+    def families(self) -> list[tuple[str, ...]]:
+        """The holds grouped by the plant's family: Euler alone, then the exact holds.
+
+        The two families estimate the plant's state differently (:func:`_module_data`), so
+        each is prepared on its own and the families compare their training gaps
+        (:func:`_module_twin`).
+        """
+        exact = tuple(h for h in self.holds if h != EULER)
+        return [(EULER,)] * (EULER in self.holds) + [exact] * bool(exact)
 
 
 def _exact_plant_floor(data: ModuleData, simulated, lin: dict, n_train: int) -> NoiseFloor:
@@ -574,6 +584,7 @@ class _ModuleWork:
     n_eff: float
     candidates: list[_Fitted] = field(default_factory=list)
     reference_gap: float | None = None
+    tried: dict[str, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -597,21 +608,13 @@ def _analyse_module(name, rec, twin, t, split: _Split, calibrate, settings, layo
     (docs/gap.md §Where).
     """
     n_train = split.n_train
-    data = _module_data(name, rec, t, layout)
-    norm = float(np.std(data.output)) or 1.0
     nominal = _nominal_lin(name, twin)
     calibrated = calibrate or nominal is None
-    provisional = _scales(data, n_train, 0.0, nominal or {})
-    data = replace(data, scales=provisional)
-    if name == "M1" and layout.scheme != EULER:
-        start = None if calibrated else nominal
-        data, lin_base = _prepare_exact_plant(
-            data, start, n_train, rec.n_samples - n_train, layout.holds
-        )
-    else:
-        lin_base = calibrate_linear(data, n_train) if calibrated else dict(nominal)
+    start = None if calibrated else nominal
+    data, lin_base, tried = _module_twin(name, rec, t, n_train, (nominal, start), settings, layout)
+    norm = float(np.std(data.output)) or 1.0
     sim_before = simulate_module(data, lin_base)
-    if name == "M1" and layout.scheme != EULER:
+    if data.discretisation != EULER:
         floor_data = _exact_plant_floor(data, sim_before, lin_base, n_train)
     else:
         floor_data = data_noise_floor(name, data.inputs, data.output, sim_before, lin_base, rec.dt)
@@ -623,12 +626,8 @@ def _analyse_module(name, rec, twin, t, split: _Split, calibrate, settings, layo
     gap_before = normalised_rms(data.output, sim_before, split.choose, norm)
     gap_cal = normalised_rms(data.output, sim_before, split.decide, norm)
     if not calibrated:
-        typical = linear_typical(name, lin_base, data.scales)
-        bounds = _in_band_bounds(lin_base, typical, settings.calibration_tolerance)
-        in_band = fit_candidate(
-            data, None, lin_base, n_train=n_train, free=list(bounds), lin_bounds=bounds
-        )
-        in_band_sim = simulate_module(data, in_band.lin)
+        in_band = _in_band_lin(data, lin_base, n_train, settings.calibration_tolerance)
+        in_band_sim = simulate_module(data, in_band)
         gap_cal = min(gap_cal, normalised_rms(data.output, in_band_sim, split.decide, norm))
     n_eff = effective_samples(floor.acf, split.n_choose)
     threshold = gap_threshold(
@@ -654,7 +653,76 @@ def _analyse_module(name, rec, twin, t, split: _Split, calibrate, settings, layo
         gap_cal,
         threshold,
         n_eff,
+        tried=tried,
     )
+
+
+def _in_band_lin(data: ModuleData, lin: dict, n_train: int, tolerance: float) -> dict:
+    """Return the linear parameters re-fitted within ``tolerance`` of ``lin`` (§Where)."""
+    typical = linear_typical(data.name, lin, data.scales)
+    bounds = _in_band_bounds(lin, typical, tolerance)
+    fitted = fit_candidate(data, None, lin, n_train=n_train, free=list(bounds), lin_bounds=bounds)
+    return fitted.lin
+
+
+def _module_twin(name, rec, t, n_train, twins, settings, layout) -> tuple:
+    """Return ``(data, lin_base, tried)``: the module's data and linear twin before any effect.
+
+    ``twins`` is ``(nominal, start)``: the twin file's linear parameters (None if absent; they
+    set the provisional scales) and those to use (None: calibrated on the training part). The
+    plant is prepared once per family of :attr:`_Layout.families` (exact holds: the best of them,
+    :func:`_prepare_exact_plant`); with two families (a twin file that declares no
+    discretisation) the one with the smaller training gap (:func:`_family_gaps`) is kept and
+    ``tried`` maps each family's discretisation to that gap (docs/gap.md §Twin file);
+    otherwise ``tried`` is None.
+    """
+    nominal, start = twins
+    families = layout.families if name == "M1" else [(EULER,)]
+    prepared = []
+    for holds in families:
+        data = _module_data(name, rec, t, layout, holds[0])
+        data = replace(data, scales=_scales(data, n_train, 0.0, nominal or {}))
+        if holds[0] != EULER:
+            n_held = rec.n_samples - n_train
+            prepared.append(_prepare_exact_plant(data, start, n_train, n_held, holds))
+        elif start is None:
+            prepared.append((data, calibrate_linear(data, n_train)))
+        else:
+            prepared.append((data, dict(start)))
+    if len(prepared) == 1:
+        return (*prepared[0], None)
+    tolerance = None if start is None else settings.calibration_tolerance
+    gaps = _family_gaps(prepared, n_train, tolerance)
+    tried = {data.discretisation: gap for (data, _), gap in zip(prepared, gaps, strict=True)}
+    data, lin = prepared[int(np.argmin(gaps))]
+    return data, lin, tried
+
+
+def _family_gaps(prepared, n_train: int, tolerance: float | None) -> list[float]:
+    """Return each family's normalised RMS training error, over the same windows and samples.
+
+    Every family is run over the windows of the windowed one (each restarted from the
+    recording; the Euler twin from its own state estimate) and scored on the samples all
+    of them score, so that neither a free run's drift nor a window's warm-up favours one. A
+    nominal twin is first re-fitted within ``tolerance`` of its parameters
+    (:func:`_in_band_lin`): the calibration slack the gap's location ignores too (§Where).
+    """
+    horizons = [data.horizon for data, _ in prepared if data.horizon is not None]
+    windows = None
+    if horizons:
+        windows = plant_windows(n_train, horizons[0], prepared[0][0].restarts)
+    sims = []
+    for data, lin in prepared:
+        if tolerance is not None:
+            lin = _in_band_lin(data, lin, n_train, tolerance)
+        segments = windows if data.discretisation == EULER else None
+        sims.append(simulate_module(data, lin, stop=n_train, segments=segments))
+    output = prepared[0][0].output[:n_train]
+    scored = np.logical_and.reduce([np.isfinite(sim) for sim in sims])
+    norm = float(np.std(prepared[0][0].output)) or 1.0
+    if not scored.any():
+        return [math.inf] * len(sims)
+    return [float(np.sqrt(np.mean((output - sim)[scored] ** 2))) / norm for sim in sims]
 
 
 def _finite(gap: float) -> float:
@@ -881,6 +949,17 @@ def _module_notes(works: Mapping[str, _ModuleWork], calibrate: bool) -> list[str
     """Return the report's notes on calibrated modules and on data vs twin noise floors."""
     notes = []
     for work in works.values():
+        if work.tried is not None:
+            others = ", ".join(
+                f"{hold} {gap:.4g}"
+                for hold, gap in work.tried.items()
+                if hold != work.data.discretisation
+            )
+            notes.append(
+                f"{work.name}: the twin file declares no discretisation; "
+                f"{work.data.discretisation} fits the training part best (training gap "
+                f"{work.tried[work.data.discretisation]:.4g}; {others})"
+            )
         if work.calibrated:
             why = "--calibrate" if calibrate else "no nominal parameters in the twin file"
             notes.append(f"{work.name}: linear twin fitted on the training part ({why})")
@@ -1094,6 +1173,7 @@ def _module_reports(rec, works, flagged, source, chosen, chains, split: _Split) 
             work.data.discretisation if name == "M1" else None,
             work.data.horizon,
             work.reference_gap,
+            work.tried,
         )
     return modules
 
@@ -1177,8 +1257,10 @@ def diagnose(
     settings : GapSettings, optional
         Decision constants.
     discretisation : {"euler", "zoh", "foh", "bandlimited"}, optional
-        The plant's discretisation (the twin file's ``discretisation``); None: the exact hold
-        (zero-order, first-order or band-limited) that fits the training part best.
+        The plant's discretisation; default ``twin.discretisation`` (the twin file's). When
+        both are None, the one of the four whose linear twin fits the training part best
+        (``Diagnosis.twin_discretisation`` is then None, ``modules["M1"].discretisation``
+        the one used).
     heldout : Recording, optional
         A separate validation experiment: the scoring part. The first ``round(train_frac·n)``
         samples of ``recording`` are the training part, the rest of it the choosing part.
@@ -1210,7 +1292,8 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
     train_frac, n_train, n_choose = _check_arguments(
         recording, twin, train_frac, heldout, settings.choose_frac
     )
-    holds = EXACT_HOLDS if discretisation is None else (discretisation,)
+    discretisation = discretisation or twin.discretisation
+    holds = (EULER, *EXACT_HOLDS) if discretisation is None else (discretisation,)
     layout = _Layout(holds)
     names = diagnosable_modules(recording.signals)
     _check_inputs_vary(recording, names, n_train)
@@ -1264,5 +1347,6 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
         notes=tuple(notes),
         settings=settings,
         also_needed=_other_gaps(flagged, source, ranked, settings),
+        twin_discretisation=discretisation,
         series=_scoring_series(recording, source, ranked, split.score),
     )

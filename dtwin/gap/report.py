@@ -122,6 +122,7 @@ def diagnosis_to_dict(diagnosis: Diagnosis) -> dict[str, Any]:
             "train_frac": d.train_frac,
         },
         "calibrated": list(d.calibrated),
+        "twin_discretisation": d.twin_discretisation,
         "also_needed": [dict(entry) for entry in d.also_needed],
         "notes": list(d.notes),
         "settings": asdict(d.settings),
