@@ -157,6 +157,29 @@ def test_clean_rig_is_calibrated_to_its_physics_and_names_no_effect():
     assert plant.gap_before < 1.25 * plant.noise_floor  # the linear twin is exact up to noise
 
 
+def test_free_run_rms_is_in_the_recordings_units_and_falls_with_the_effect():
+    """Issue 25 item 7: the scoring part simulated freely from its first sample."""
+    frame = _rig(0.3)
+    volts = diagnose(recording_from_frame(frame), twin_from_mapping({"dt": 0.002}))
+    frame["x"] *= 1000.0  # millivolts
+    millivolts = diagnose(recording_from_frame(frame), twin_from_mapping({"dt": 0.002}))
+    assert volts.effect == millivolts.effect == "coulomb_friction"
+    for key in ("free_run_rms_before", "free_run_rms_after"):
+        assert getattr(millivolts, key) == pytest.approx(1000 * getattr(volts, key), rel=0.02)
+    assert volts.free_run_rms_after < 0.5 * volts.free_run_rms_before
+    # the measurement noise (0.002 V) bounds the effect's free run from below
+    assert volts.free_run_rms_after > 0.002
+
+
+def test_free_run_rms_is_null_for_an_integrating_plant():
+    twin = twin_from_mapping({"dt": 0.002, "plant": {"m": 0.03, "c": 0.2, "k": 0.0}})
+    result = diagnose(recording_from_frame(_rig(0.3)), twin)
+    assert result.free_run_rms_before is None and result.free_run_rms_after is None
+    payload = diagnosis_to_dict(result)
+    jsonschema.validate(payload, SCHEMA)
+    assert payload["free_run_rms_before"] is None
+
+
 def test_cli_writes_a_valid_report(tmp_path, capsys):
     case = generate_case("actuator_deadzone", 1, magnitude=0.8, n_samples=1500)
     case.recording.to_csv(tmp_path / "rec.csv", index=False, float_format="%.12g")

@@ -246,7 +246,10 @@ class Diagnosis:
     (:func:`_other_gaps`: a second effect is needed). ``twin_discretisation`` is the plant's
     discretisation the twin declares (None: chosen on the training part; the one used is
     ``modules["M1"].discretisation``). ``series`` holds scoring-part time series of the source
-    module for the figure.
+    module for the figure. ``free_run_rms_before`` and ``free_run_rms_after`` are RMS errors
+    in the recording's units of the source module (M1 when there is none) simulated over the
+    scoring part from its first sample, with the linear twin and with the chosen effect
+    (:func:`_free_run_rms`; None for an integrating or unstable plant).
     """
 
     module: str | None
@@ -274,6 +277,8 @@ class Diagnosis:
     settings: GapSettings
     also_needed: tuple[dict[str, Any], ...] = ()
     twin_discretisation: str | None = None
+    free_run_rms_before: float | None = None
+    free_run_rms_after: float | None = None
     series: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -1198,6 +1203,45 @@ def _scoring_series(rec: Recording, source, ranked, scored: slice) -> dict[str, 
     return series
 
 
+def _free_run_rms(works: Mapping[str, _ModuleWork], source, chosen, split: _Split) -> dict:
+    """Return ``free_run_rms_before`` and ``free_run_rms_after`` (recording units) as a dict.
+
+    The source module's twin (M1's when there is no source; neither: both None) is run freely
+    over the scoring part from the recorded state at its first sample (no windows), with its
+    linear twin (calibrated, or the twin file's) and with the chosen effect (None when no
+    effect is chosen); each value is the RMS of recorded − simulated over the scoring part's
+    simulated samples, in the output's units, comparable to a published free-run simulation
+    error. A plant that is not strictly stable (``k = 0``: integrating, or ``c ≤ 0``) has no
+    free-run error worth reporting (its position drifts with any force error): both None
+    (docs/gap.md §How far).
+    """
+    work = source if source is not None else works.get("M1")
+    none = {"free_run_rms_before": None, "free_run_rms_after": None}
+    if work is None or (work.name == "M1" and not _strictly_stable(work.lin_base)):
+        return none
+    restarts = tuple(sorted({*work.data.restarts, split.n_choose}))
+    data = replace(work.data, horizon=None, restarts=restarts)
+    runs = {"free_run_rms_before": simulate_module(data, work.lin_base)}
+    if chosen is not None and work is source:
+        fitted = next(f for f in work.candidates if f.effect.name == chosen.effect)
+        runs["free_run_rms_after"] = simulate_module(
+            data, fitted.fit.lin, fitted.effect, fitted.fit.theta
+        )
+    return none | {key: _rms(data.output, sim, split.score) for key, sim in runs.items()}
+
+
+def _strictly_stable(lin: Mapping[str, float]) -> bool:
+    """Return whether the plant ``m·ẍ + c·ẋ + k·x = u`` is strictly stable (m, c, k > 0)."""
+    return all(float(lin.get(key, 0.0)) > 0 for key in ("m", "c", "k"))
+
+
+def _rms(recorded: np.ndarray, simulated: np.ndarray, part: slice) -> float | None:
+    """Return RMS(recorded − simulated) over ``part``'s finite samples (None if there are none)."""
+    error = (recorded - simulated)[part]
+    error = error[np.isfinite(error)]
+    return float(np.sqrt(np.mean(error**2))) if len(error) else None
+
+
 def _verdict(source, chosen) -> dict[str, Any]:
     """Return the answer's fields of :class:`Diagnosis` (module to ``excess_clipped``).
 
@@ -1348,5 +1392,6 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
         settings=settings,
         also_needed=_other_gaps(flagged, source, ranked, settings),
         twin_discretisation=discretisation,
+        **_free_run_rms(works, source, chosen, split),
         series=_scoring_series(recording, source, ranked, split.score),
     )

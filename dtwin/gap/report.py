@@ -75,6 +75,12 @@ DEFINITIONS: dict[str, str] = {
     "score": "n_eff·deviance + n_params·ln(n_eff) on the choosing part (deviance ln MSE; a "
     "quantizer's its own density's), relative to the best candidate",
     "confidence": "BIC weight of the chosen candidate among the module's candidates",
+    "free_run_rms_before, free_run_rms_after": "RMS of recorded − simulated output of the "
+    "source module (M1 when the answer is none) over the scoring part, in the recording's units, "
+    "the twin run freely from the recorded state at the scoring part's first sample: with the "
+    "linear twin (calibrated, or the twin file's) and with the chosen effect; null for a plant "
+    "that is not strictly stable (integrating: its free run drifts with any force error) and "
+    "after, when no effect is chosen",
 }
 
 #: The three shrinks (``Diagnosis`` field, short label), the effect's own share first.
@@ -112,6 +118,8 @@ def diagnosis_to_dict(diagnosis: Diagnosis) -> dict[str, Any]:
         "excess_clipped": d.excess_clipped,
         "kpi_shrink_pct": d.kpi_shrink_pct,
         "kpi_signal": d.kpi_signal,
+        "free_run_rms_before": d.free_run_rms_before,
+        "free_run_rms_after": d.free_run_rms_after,
         "modules": modules,
         "candidates": candidates,
         "recording": {
@@ -194,6 +202,22 @@ def _answer_headline(d: Diagnosis) -> str:
     )
 
 
+def _free_run_lines(d: Diagnosis) -> list[str]:
+    """Return the report's free-run sentence and a blank line ([] when there is none)."""
+    if d.free_run_rms_before is None:
+        return []
+    module = d.module or "M1"
+    after = (
+        f" → {d.free_run_rms_after:.4g} with the effect" if d.free_run_rms_after is not None else ""
+    )
+    return [
+        f"Free run of {module} over the scoring part from its first sample (recording units, "
+        f"comparable to published simulation errors): RMS {d.free_run_rms_before:.4g} with the "
+        f"linear twin{after}.",
+        "",
+    ]
+
+
 def render_markdown(diagnosis: Diagnosis, figure_name: str = "gap.png") -> str:
     """Return ``report.md``: the answer first, then per-module gaps, candidates, definitions."""
     d = diagnosis
@@ -209,6 +233,7 @@ def render_markdown(diagnosis: Diagnosis, figure_name: str = "gap.png") -> str:
         f"{d.n_choose - d.n_train} (choosing part), every shrink measured on the remaining "
         f"{d.n_samples - d.n_choose} (scoring part).",
         "",
+        *_free_run_lines(d),
         "## Where: per module",
         "",
         "| module | status | local gap (choosing) | after calibration slack | threshold "
