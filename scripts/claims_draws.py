@@ -13,7 +13,7 @@ from dtwin._script import start_rule
 start_rule(snakemake)
 
 from dtwin.artifacts import load_yaml, write_json
-from dtwin.figures._draw_claims import judge_draw
+from dtwin.stages.draw_claims import judge_draw
 from dtwin.reference.loaders import load_r_classification
 from dtwin.stages.draws import run_draw
 

@@ -89,7 +89,7 @@ def test_every_failed_target_carries_its_cause():
     assert by_id["ar_bic_chooses_the_injected_regimes"].note.startswith("method:")
     assert by_id["ar_accuracy_above_gaussian"].note.startswith("method:")
     assert by_id["ar_best_loglik_stable_in_starts"].note.startswith("optimiser:")
-    assert all(c.note for c in checks if c.kind == "claim" and not c.passed)
+    assert all(c.note for c in checks if c.kind in ("claim", "target") and not c.passed)
     # the same BIC gap within what more starts still change is the optimiser's
     close = ar_hmm_checks(
         _table([3000, 2000, 1000, 100, 300, 500], [0, 0, 400, 0, 0, 0]), summary, 9, 0.8

@@ -7,14 +7,10 @@ import pandas as pd
 import pytest
 
 from dtwin._validation import DtwinValueError
+from dtwin.claim_criteria import dynamics_off_window
 from dtwin.claims import wilson_interval
 from dtwin.figures._draw_bic import judge_draw_bic, k_star_distributions, k_star_table
-from dtwin.figures.fig12_claims_across_draws import (
-    BicDraws,
-    claims_across_draws,
-    collect_draws,
-    dynamics_off_window,
-)
+from dtwin.figures.fig12_claims_across_draws import BicDraws, claims_across_draws, collect_draws
 from dtwin.stages.draws import draw_seeds, run_draw, run_draw_bic
 
 

@@ -266,7 +266,9 @@ def test_every_figure_is_print_ready_with_its_caption(workflow_copy):
         assert (width, height) == (round(300 * width_in), round(300 * height_in)), artifact
         assert (folder / f"{artifact}.pdf").read_bytes().startswith(b"%PDF")
         if artifact.startswith(("fig05", "fig06", "fig11")):
-            failed = [c for c in payload["checks"] if c["kind"] == "claim" and not c["passed"]]
+            failed = [
+                c for c in payload["checks"] if c["kind"] in ("claim", "target") and not c["passed"]
+            ]
             assert all(c["note"] for c in failed), artifact
 
 
@@ -349,16 +351,27 @@ def test_a_library_edit_reruns_the_rules_that_import_it(workflow_copy):
             workflow_copy / "dtwin" / "residual_stats.py",
             workflow_copy / "dtwin" / "figures" / "fig01_pipeline.py",
             workflow_copy / "dtwin" / "bias_correction.py",
+            workflow_copy / "dtwin" / "figures" / "fig05_correction_timeseries.py",
         )
     }
-    residual_stats, pipeline, correction = edited
+    residual_stats, pipeline, correction, label = edited
     try:
+        # a figure's own edit (a label) reruns that figure and the claims page: no draw, since
+        # the draws judge with dtwin.claim_criteria and import no figure module
+        label.write_text(edited[label] + "\n# edited\n")
+        assert planned_rules(workflow_copy) == {"fig05_correction_timeseries", "claims"}
         # the draws' claims judge residual structure; their BIC sweeps do not import it
         judged = DRAWS - {"bic_draws"}
         residual_stats.write_text(edited[residual_stats] + "\n# edited\n")
-        assert planned_rules(workflow_copy) == {"fig03_residual_acf", "claims", *judged}
+        assert planned_rules(workflow_copy) == {
+            "fig05_correction_timeseries",
+            "fig03_residual_acf",
+            "claims",
+            *judged,
+        }
         pipeline.write_text(edited[pipeline] + "\n# edited\n")
         assert planned_rules(workflow_copy) == {
+            "fig05_correction_timeseries",
             "fig01_pipeline",
             "fig03_residual_acf",
             "claims",

@@ -161,7 +161,7 @@ def _level_claims(numbers: Mapping[str, dict]) -> list[Check]:
         ),
         Check(
             id="one_mode_with_restarts",
-            kind="claim",
+            kind="target",
             statement="r_notes.md §9: R's 36 values are bimodal (~24 % or ~40 %) because each "
             "configuration had one EM start and landed in one of two local optima; with several "
             "starts per fit ours should sit in one mode (Sarle's bimodality coefficient, > 5/9 "

@@ -27,7 +27,6 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import matplotlib.pyplot as plt
-import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
@@ -64,7 +63,6 @@ __all__ = [
     "panel_title",
     "save_figure",
     "publish_artifact",
-    "regime_spans",
     "shade_regimes",
 ]
 
@@ -309,27 +307,6 @@ def publish_artifact(
         [*artifact.checks, *checks],
         figure=artifact.figure_info(),
     )
-
-
-def regime_spans(t: Any, regimes: Any) -> list[tuple[str, float, float]]:
-    """Return the runs of equal regime labels as ``(regime, start, end)`` in seconds.
-
-    ``end`` is the start of the next run, or the last sample plus one sample period.
-
-    Examples
-    --------
-    >>> regime_spans([0.0, 0.5, 1.0, 1.5], ["a", "a", "b", "b"])
-    [('a', 0.0, 1.0), ('b', 1.0, 2.0)]
-    """
-    t = np.asarray(t, dtype=float)
-    labels = np.asarray(regimes, dtype=str)
-    step = float(t[1] - t[0]) if len(t) > 1 else 1.0
-    starts = np.flatnonzero(np.r_[True, labels[1:] != labels[:-1]])
-    ends = np.r_[starts[1:], len(t)]
-    return [
-        (str(labels[i]), float(t[i]), float(t[j]) if j < len(t) else float(t[-1] + step))
-        for i, j in zip(starts, ends, strict=True)
-    ]
 
 
 def shade_regimes(

@@ -12,6 +12,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
+from dtwin.claim_criteria import RMSE_RATIO, rmse_like_r
 from dtwin.figures._style import (
     BAND_COLOR,
     PHYSICS_COLOR,
@@ -25,16 +26,7 @@ from dtwin.figures._style import (
 from dtwin.reference.crosscheck_result import CrosscheckResult
 from dtwin.wiring import MODULES, RESIDUALS, Module
 
-__all__ = ["fig02_arx_vs_physics", "plot_arx_vs_physics", "RMSE_RATIO", "rmse_like_r"]
-
-#: "General agreement with noticeable discrepancies": every module's held-out RMSE within this
-#: factor of R's (r_numbers.yaml nominal_rmse_test_half), i.e. discrepancies of R's size.
-RMSE_RATIO = 1.5
-
-
-def rmse_like_r(rmse: dict[str, float], r_rmse: dict[str, float]) -> bool:
-    """Return True when every residual's RMSE is within a factor :data:`RMSE_RATIO` of R's."""
-    return all(1 / RMSE_RATIO <= rmse[e] / r_rmse[e] <= RMSE_RATIO for e in r_rmse)
+__all__ = ["fig02_arx_vs_physics", "plot_arx_vs_physics"]
 
 
 def _module_panel(

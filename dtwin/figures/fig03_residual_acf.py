@@ -11,6 +11,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
+from dtwin.claim_criteria import all_structured, not_white, strongly_autocorrelated
 from dtwin.figures._style import (
     BAND_COLOR,
     PHYSICS_COLOR,
@@ -134,7 +135,7 @@ def fig03_residual_acf(
                 statement=f"paper §4.1: {channel} decays slowly (strong autocorrelation)",
                 expected=f"lag-1 ACF > {strong:g}",
                 observed=lag1[channel],
-                passed=lag1[channel] > strong,
+                passed=strongly_autocorrelated(lag1[channel], strong),
                 reference=r_numbers["nominal_lag1_acf"][r_key],
             )
         )
@@ -145,7 +146,7 @@ def fig03_residual_acf(
                 statement=f"paper §4.1: {channel} is not white noise (Ljung-Box)",
                 expected=f"p < {alpha:g} at every tested lag",
                 observed=max_p[channel],
-                passed=max_p[channel] < alpha,
+                passed=not_white(max_p[channel], alpha),
             )
         )
     checks.append(
@@ -155,7 +156,7 @@ def fig03_residual_acf(
             statement="paper Fig. 3 caption: the six module residuals are structured (not white)",
             expected=f"Ljung-Box p < {alpha:g} for every channel and lag",
             observed=max_p,
-            passed=all(p < alpha for p in max_p.values()),
+            passed=all_structured(max_p, alpha),
         )
     )
     metrics = {

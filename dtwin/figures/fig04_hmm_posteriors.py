@@ -12,16 +12,12 @@ from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite, validity_probabilities
+from dtwin.claim_criteria import PERSISTENCE_DWELL_S, persistence_floor, regimes_are_persistent
 from dtwin.figures._style import STATE_COLORS, new_figure, panel_title, tex, unitless
 from dtwin.reference.crosscheck_result import CrosscheckResult
 from dtwin.state_tables import posterior_matrix
 
-__all__ = ["fig04_hmm_posteriors", "plot_hmm_posteriors", "PERSISTENCE_DWELL_S"]
-
-#: "Persistent": every state's expected dwell dt/(1 − A_kk) is at least this long (s) — the
-#: lag within which Fig. 7 requires a regime's posterior to rise (ONSET_LAG_S), so a shorter
-#: state could not carry a regime (A_kk >= 0.96 at dt = 0.02 s; was A_kk >= 0.5, 1 sample).
-PERSISTENCE_DWELL_S = 0.5
+__all__ = ["fig04_hmm_posteriors", "plot_hmm_posteriors"]
 
 
 #: Where R's nominal fit comes from, and why it compares in magnitude only.
@@ -199,9 +195,9 @@ def fig04_hmm_posteriors(
                 f"as: every state's expected dwell dt/(1 - A_kk) >= {PERSISTENCE_DWELL_S:g} s, "
                 "the onset tolerance of Fig. 7)"
             ),
-            expected=f"A_kk >= {1 - dt / PERSISTENCE_DWELL_S:.4f} for every state",
+            expected=f"A_kk >= {persistence_floor(dt):.4f} for every state",
             observed=dict(zip(summary["states"], np.round(self_prob, 4).tolist(), strict=True)),
-            passed=bool(np.all(self_prob >= 1 - dt / PERSISTENCE_DWELL_S)),
+            passed=regimes_are_persistent(self_prob, dt),
         ),
         *crosscheck.checks,
     ]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -12,6 +11,7 @@ from matplotlib.ticker import MaxNLocator
 from scipy.stats import gaussian_kde
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
+from dtwin.claim_criteria import REDUCED_PCT, residual_spread, tightened
 from dtwin.figures._correction_cause import unchanged_cause, window_stats
 from dtwin.figures._correction_metrics import metrics_beside_r
 from dtwin.figures._style import (
@@ -30,9 +30,6 @@ __all__ = [
     "kde_curve",
     "bw_nrd0",
 ]
-
-#: Variance or RMSE "reduced" when it falls by more than this many percent.
-REDUCED_PCT = 1.0
 
 #: Share of the samples inside the plotted x-range (the tails are drawn off-axis).
 CENTRAL_SHARE = 0.99
@@ -132,37 +129,11 @@ def plot_correction_distributions(
     return figure
 
 
-def _spread(residuals: pd.DataFrame) -> dict[str, Any]:
-    out = {}
-    for e in RESIDUALS:
-        before = residuals[f"{e}_before"].to_numpy()
-        after = residuals[f"{e}_smoothed"].to_numpy()
-        sd_b, sd_a = float(before.std()), float(after.std())
-        rmse_b, rmse_a = float(np.sqrt(np.mean(before**2))), float(np.sqrt(np.mean(after**2)))
-        out[e] = {
-            "sd_before": sd_b,
-            "sd_after": sd_a,
-            "dsd_pct": 100 * (sd_b - sd_a) / sd_b if sd_b > 0 else None,
-            "rmse_before": rmse_b,
-            "rmse_after": rmse_a,
-            "drmse_pct": 100 * (rmse_b - rmse_a) / rmse_b if rmse_b > 0 else None,
-            "median_before": float(np.median(before)),
-            "median_after": float(np.median(after)),
-        }
-    return out
-
-
-def _tightened(entry: dict[str, Any]) -> bool:
-    return all(
-        entry[key] is not None and entry[key] > REDUCED_PCT for key in ("dsd_pct", "drmse_pct")
-    )
-
-
 def fig06_correction_distributions(
     residuals: pd.DataFrame, metrics: pd.DataFrame, r_metrics: pd.DataFrame
 ) -> FigureArtifact:
     """Paper Fig. 6 with the spread of each residual before/after, beside R's table."""
-    spread = _spread(residuals)
+    spread = residual_spread(residuals)
     others = [e for e in RESIDUALS if e != "e0"]
     tables = metrics_beside_r(metrics, r_metrics)
     r_drmse = {e: tables["r"][e]["drmse_pct"] for e in RESIDUALS}
@@ -170,7 +141,7 @@ def fig06_correction_distributions(
     causes = {
         e: unchanged_cause(e, spread[e]["drmse_pct"] or 0.0, r_drmse[e], window[e])
         for e in others
-        if not _tightened(spread[e])
+        if not tightened(spread[e])
     }
     figure = plot_correction_distributions(residuals, causes)
     observed = {
@@ -191,7 +162,7 @@ def fig06_correction_distributions(
             expected=f"dsd > {REDUCED_PCT:g} % and dRMSE > {REDUCED_PCT:g} % for "
             + ", ".join(others),
             observed={e: observed[e] for e in others},
-            passed=all(_tightened(spread[e]) for e in others),
+            passed=all(tightened(spread[e]) for e in others),
             note=("; ".join(causes.values()) + " (as in Fig. 5)") if causes else None,
         ),
         Check(
@@ -203,7 +174,7 @@ def fig06_correction_distributions(
             ),
             expected=f"dsd <= {REDUCED_PCT:g} % or dRMSE <= {REDUCED_PCT:g} % for e0",
             observed=observed["e0"],
-            passed=not _tightened(spread["e0"]),
+            passed=not tightened(spread["e0"]),
         ),
     ]
     payload = {

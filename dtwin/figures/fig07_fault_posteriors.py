@@ -12,21 +12,21 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from dtwin.artifacts import FigureArtifact, validity_finite, validity_probabilities
+from dtwin.claim_criteria import regime_spans
+from dtwin.fault_claim_criteria import fault_claims, onset_lags
 from dtwin.fault_injection import REGIMES
-from dtwin.figures._fig07_claims import fault_claims, onset_lags
 from dtwin.figures._style import (
     OURS_COLOR,
     R_COLOR,
     REGIME_COLORS,
     new_figure,
     panel_title,
-    regime_spans,
     unitless,
 )
 from dtwin.reference.columns import R_RESTART_AGREEMENT_COLUMN
 from dtwin.reference.crosscheck_result import CrosscheckResult
 
-__all__ = ["fig07_fault_posteriors", "plot_fault_posteriors", "onset_lags"]
+__all__ = ["fig07_fault_posteriors", "plot_fault_posteriors"]
 
 
 def _strip(ax, t: np.ndarray, labels: np.ndarray, title: str) -> None:

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from dtwin.artifacts import Check, FigureArtifact, validity_finite
+from dtwin.artifacts import FigureArtifact, validity_finite
+from dtwin.fault_claim_criteria import feature_claims, feature_stats
 from dtwin.fault_injection import FEATURES, REGIMES, regime_features
 from dtwin.figures._style import (
     BASE_FONT_PT,
@@ -22,137 +21,7 @@ from dtwin.figures._style import (
 )
 from dtwin.hmm_basics import zscore
 
-__all__ = ["fig08_feature_separability", "plot_feature_separability", "feature_stats"]
-
-#: "Large shift": the Drift median exceeds every other regime's median by this many z-units.
-DRIFT_SHIFT_Z = 1.0
-#: "Pronounced change": DynamicsOff's IQR is this many times the largest other IQR, or its
-#: median moves this many z-units away from Nominal's.
-DYNAMICS_IQR_RATIO = 3.0
-DYNAMICS_SHIFT_Z = 1.0
-#: "Wider rather than shifted": SensorNoisy's sd exceeds Nominal's, and its mean moves less
-#: than this many Nominal sds.
-SENSOR_SHIFT_SD = 0.5
-
-
-def feature_stats(features: pd.DataFrame, regimes: np.ndarray) -> dict[str, Any]:
-    """Per feature and regime: median, quartiles, IQR, mean and sd (z-units)."""
-    out: dict[str, Any] = {}
-    for name in FEATURES:
-        out[name] = {}
-        for regime in REGIMES:
-            values = features[name].to_numpy()[regimes == regime]
-            if values.size == 0:
-                continue
-            q1, median, q3 = np.percentile(values, [25, 50, 75])
-            out[name][regime] = {
-                "n": int(values.size),
-                "median": float(median),
-                "q1": float(q1),
-                "q3": float(q3),
-                "iqr": float(q3 - q1),
-                "mean": float(values.mean()),
-                "sd": float(values.std(ddof=1)) if values.size > 1 else 0.0,
-            }
-    return out
-
-
-def _claim(
-    check_id: str,
-    statement: str,
-    expected: str,
-    needs: tuple[str, ...],
-    present: list[str],
-    evaluate,
-) -> Check:
-    """Return a claim check; not evaluable (failed, saying why) if a regime it needs is absent."""
-    missing = [r for r in needs if r not in present]
-    if missing:
-        return Check(check_id, "claim", statement, expected, {"absent_regimes": missing}, False)
-    observed, passed = evaluate()
-    return Check(check_id, "claim", statement, expected, observed, bool(passed))
-
-
-def _drift_claim(stats: dict[str, Any], present: list[str]) -> Check:
-    def evaluate():
-        shift = {
-            name: stats[name]["Drift"]["median"]
-            - max(stats[name][r]["median"] for r in REGIMES if r != "Drift")
-            for name in ("e_abs_sum", "e_rms", "e3")
-        }
-        return shift, all(v >= DRIFT_SHIFT_Z for v in shift.values())
-
-    return _claim(
-        "drift_stands_out_in_aggregates_and_e3",
-        "paper §4.4: the drift regime stands out with large positive shifts in e_abs_sum, "
-        "e_rms and e3 (read here as: Drift median above every other regime's median by "
-        f">= {DRIFT_SHIFT_Z:g} z-units)",
-        f">= {DRIFT_SHIFT_Z:g}",
-        REGIMES,
-        present,
-        evaluate,
-    )
-
-
-def _dynamics_claim(stats: dict[str, Any], present: list[str]) -> Check:
-    def evaluate():
-        observed = {}
-        for name in ("e1", "e4"):
-            entry = stats[name]
-            other_iqr = max(entry[r]["iqr"] for r in REGIMES if r != "DynamicsOff")
-            observed[name] = {
-                "iqr_ratio": entry["DynamicsOff"]["iqr"] / other_iqr if other_iqr else None,
-                "median_shift_z": entry["DynamicsOff"]["median"] - entry["Nominal"]["median"],
-            }
-        passed = all(
-            (d["iqr_ratio"] or 0) >= DYNAMICS_IQR_RATIO
-            or abs(d["median_shift_z"]) >= DYNAMICS_SHIFT_Z
-            for d in observed.values()
-        )
-        return observed, passed
-
-    return _claim(
-        "dynamics_off_changes_e1_and_e4",
-        "paper §4.4: dynamics-off produces a pronounced change in e1 that propagates to e4 "
-        f"(read here as: DynamicsOff IQR >= {DYNAMICS_IQR_RATIO:g}x the largest other IQR, or "
-        f"its median >= {DYNAMICS_SHIFT_Z:g} z-units from Nominal's)",
-        f"per feature: iqr_ratio >= {DYNAMICS_IQR_RATIO:g} or "
-        f"|median_shift_z| >= {DYNAMICS_SHIFT_Z:g}",
-        REGIMES,
-        present,
-        evaluate,
-    )
-
-
-def _sensor_claim(stats: dict[str, Any], present: list[str]) -> Check:
-    def evaluate():
-        observed = {
-            name: {
-                "sd_ratio": stats[name]["SensorNoisy"]["sd"] / stats[name]["Nominal"]["sd"],
-                "mean_shift_in_nominal_sd": (
-                    stats[name]["SensorNoisy"]["mean"] - stats[name]["Nominal"]["mean"]
-                )
-                / stats[name]["Nominal"]["sd"],
-            }
-            for name in ("e2a", "e2b", "e3")
-        }
-        passed = all(
-            o["sd_ratio"] > 1 and abs(o["mean_shift_in_nominal_sd"]) < SENSOR_SHIFT_SD
-            for o in observed.values()
-        )
-        return observed, passed
-
-    return _claim(
-        "sensor_noisy_wider_not_shifted",
-        "paper §4.4: the sensor-noisy regime shows wider distributions rather than a large "
-        "mean shift, especially in the sensor features (read here as: in e2a, e2b and e3, "
-        f"SensorNoisy sd > Nominal sd and |mean shift| < {SENSOR_SHIFT_SD:g} Nominal sd)",
-        f"sd_ratio > 1 and |mean_shift_in_nominal_sd| < {SENSOR_SHIFT_SD:g}",
-        ("Nominal", "SensorNoisy"),
-        present,
-        evaluate,
-    )
-
+__all__ = ["fig08_feature_separability", "plot_feature_separability"]
 
 #: Panels are clipped to ±this many z-units; points beyond are counted and labelled.
 CLIP_Z = 6.0
@@ -237,8 +106,7 @@ def fig08_feature_separability(fault_residuals: pd.DataFrame) -> FigureArtifact:
 
     present = [r for r in REGIMES if r in stats[FEATURES[0]]]
     checks = [validity_finite("features_finite", "z-scored features", features)]
-    for claim in (_drift_claim, _dynamics_claim, _sensor_claim):
-        checks.append(claim(stats, present))
+    checks += feature_claims(stats)
     metrics = {
         "n_samples": len(features),
         "regimes_present": present,

@@ -150,7 +150,7 @@ def bracket_checks(table: pd.DataFrame) -> list[Check]:
         ),
         Check(
             id="bic_minimum_bracketed",
-            kind="claim",
+            kind="target",
             statement="project target: the sweep brackets the BIC minimum on both data sets "
             "(K extended until the BIC rose twice in a row, at most to bic.k_max)",
             expected="minimum below the last two K fitted",
@@ -199,7 +199,7 @@ def _stability_check(table: pd.DataFrame) -> Check:
     )
     return Check(
         id="best_loglik_stable_in_starts",
-        kind="claim",
+        kind="target",
         statement=f"project target: the best log-likelihood is stable in the EM starts (best of "
         f"the first half vs all of a K's random starts, {n_starts} doubled up to bic.max_restarts "
         f"while the second half still gains{splits}; every K the sweep fitted up to K* + 2, both "

@@ -11,12 +11,12 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
+from dtwin.claim_criteria import MCDA_CLAIMS, action_share, regime_spans
 from dtwin.figures._style import (
     PHYSICS_COLOR,
     REGIME_COLORS,
     new_figure,
     panel_title,
-    regime_spans,
     shade_regimes,
     unitless,
 )
@@ -134,12 +134,6 @@ def _caption(returns: int, lock_ins: Mapping[str, Any], dwell_s: float) -> str:
     )
 
 
-def _mostly(counts: pd.DataFrame, regime: str, action: str) -> tuple[float, bool]:
-    row = counts.loc[regime] if regime in counts.index else pd.Series(dtype=float)
-    share = float(row.get(action, 0) / row.sum()) if row.sum() else 0.0
-    return share, bool(row.sum() and row.idxmax() == action)
-
-
 def fig10_mcda_actions(
     timeline: pd.DataFrame,
     mcda: Mapping[str, Any],
@@ -180,9 +174,9 @@ def fig10_mcda_actions(
             passed=set(actions) <= set(ACTION_ORDER) and len(actions) == len(timeline),
         ),
     ]
-    for regime, action in (("DynamicsOff", "ReidentifyPlant"), ("Drift", "BiasCorrect")):
-        share, is_mode = _mostly(counts, regime, action)
-        r_share, _ = _mostly(r_table, regime, action)
+    for regime, action in MCDA_CLAIMS:
+        share, is_mode = action_share(counts, regime, action)
+        r_share, _ = action_share(r_table, regime, action)
         r_words = f"R with RMCDA {R_MCDA_VERSION}: {r_share:.1%}"
         checks.append(
             Check(

@@ -379,7 +379,7 @@ def _with_notes(
         "range_23_40": f"optimiser: {mode}; the paper's band is drawn in every facet",
         "one_mode_with_restarts": (
             f"optimiser: {mode}, with {n_restarts} EM starts from the {start or 'dirichlet'} "
-            "start: low-mode fits are local optima of lower likelihood (issue 12 item 4: with "
+            "start: low-mode fits are local optima of lower likelihood (with "
             "depmixS4's Dirichlet start 6 of 36 stayed there; sensitivity.hmm.start: kmeans++)"
         ),
     }
@@ -392,7 +392,7 @@ def _with_notes(
             or _slope_note(c, mode, n_restarts, start)
             or generic,
         )
-        if c.kind == "claim" and not c.passed and c.note is None
+        if c.kind in ("claim", "target") and not c.passed and c.note is None
         else c
         for c in checks
     ]
@@ -430,7 +430,7 @@ def _slope_note(check: Check, mode: str, n_restarts: int, start: str | None) -> 
     verdicts = ", ".join(f"{words[k]} {'yes' if passed[k] else 'no'}" for k in words if k in passed)
     history = (
         " It passed with depmixS4's Dirichlet start only while six m_B = 1.5 configurations sat "
-        "in a low optimum (~16 %; issue 12 item 4)"
+        "in a low optimum (~16 %)"
         if start == "kmeans++" and check.id == "alpha_trend_sensor_B_degraded"
         else ""
     )

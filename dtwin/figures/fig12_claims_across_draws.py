@@ -1,8 +1,8 @@
-"""Fig. 12 (this project, issue 12): the paper's single-draw claims across random draws.
+"""Fig. 12 (this project): the paper's single-draw claims across random draws.
 
 The paper judges each claim on one random draw (R: seed 11). The ``claims_draws`` jobs rerun
 that draw N times with derived seeds (:mod:`dtwin.stages.draws`; draw 0 is the main run) and
-judge every claim on each (:mod:`dtwin.figures._draw_claims`). This module gathers the draws:
+judge every claim on each (:mod:`dtwin.stages.draw_claims`). This module gathers the draws:
 for every claim the number of draws in which it holds with a Wilson interval
 (:func:`dtwin.claims.wilson_interval`), the distribution of the headline numbers beside R's
 draw, and — the one panel that explains the e1/e4 result — the plant correction's dRMSE of
@@ -10,7 +10,7 @@ e1 and e4 against the DynamicsOff window's mean of x. The ``bic_draws`` jobs swe
 over K on the first draws; their K* per data set judges Fig. 9's two claims on each draw
 (:mod:`dtwin.figures._draw_bic`) and its distribution is the third panel.
 
-Plain matplotlib, 7 in wide, 8–9 pt text.
+Plain matplotlib, drawn at the shared print size (:mod:`dtwin.figures._style`).
 """
 
 from __future__ import annotations
@@ -27,12 +27,12 @@ from matplotlib.ticker import MaxNLocator
 
 from dtwin._validation import DtwinValueError
 from dtwin.artifacts import Check, FigureArtifact
+from dtwin.claim_criteria import dynamics_off_window
 from dtwin.claims import wilson_interval
 from dtwin.figures._style import new_figure, panel_title, unitless
 
 __all__ = [
     "HEADLINE_NUMBERS",
-    "dynamics_off_window",
     "r_draw_values",
     "collect_draws",
     "claims_across_draws",
@@ -66,46 +66,6 @@ HEADLINE_NUMBERS: tuple[str, ...] = (
     "share_DynamicsOff_ReidentifyPlant",
     "share_Drift_BiasCorrect",
 )
-
-
-def dynamics_off_window(
-    physics_x: np.ndarray, e1: np.ndarray, regimes: np.ndarray
-) -> dict[str, float]:
-    """Return what a regime-mean correction can remove from e1 in the DynamicsOff window.
-
-    Parameters
-    ----------
-    physics_x : array, shape (T,)
-        Physics position x, m.
-    e1 : array, shape (T,)
-        Faulted plant residual (surrogate − physics), m.
-    regimes : array of str, shape (T,)
-        Scheduled regime per sample.
-
-    Returns
-    -------
-    dict
-        ``mean_x`` (m): the window's mean of x (DynamicsOff scales the surrogate x by 0.8, so
-        e1 ≈ −0.2·x there); ``mean_e1`` (m); ``e1_mean_share``: mean(e1)² / mean(e1²) in the
-        window, the share of e1's energy a constant offset carries. NaN without the window.
-
-    Examples
-    --------
-    >>> dynamics_off_window([1.0, 2.0], [0.1, 0.1], ["DynamicsOff", "DynamicsOff"])
-    {'mean_x': 1.5, 'mean_e1': 0.1, 'e1_mean_share': 1.0}
-    """
-    inside = np.asarray(regimes) == "DynamicsOff"
-    if not inside.any():
-        nan = float("nan")
-        return {"mean_x": nan, "mean_e1": nan, "e1_mean_share": nan}
-    window = np.asarray(e1, dtype=float)[inside]
-    energy = float(np.mean(window**2))
-    mean = float(window.mean())
-    return {
-        "mean_x": float(np.mean(np.asarray(physics_x, dtype=float)[inside])),
-        "mean_e1": mean,
-        "e1_mean_share": float(round(mean**2 / energy, 12)) if energy > 0 else float("nan"),
-    }
 
 
 def r_draw_values(

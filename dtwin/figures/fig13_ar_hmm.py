@@ -127,7 +127,7 @@ def _stability_check(ar_table: pd.DataFrame, k_star: int) -> Check:
     stable = bool(gain.max() < STABLE_LOGLIK)
     return Check(
         id="ar_best_loglik_stable_in_starts",
-        kind="claim",
+        kind="target",
         statement=f"project target: the AR-HMM's best log-likelihood is stable in the EM starts "
         f"(best of {n_starts // 2} vs best of {n_starts}, every K up to K* + 2)",
         expected=f"gain < {STABLE_LOGLIK:g} log-likelihood units",
@@ -167,7 +167,7 @@ def ar_hmm_checks(
     gaussian_k_star: int,
     gaussian_accuracy: float,
 ) -> list[Check]:
-    """Return the validity checks and the two questions of issue 12 item 6 as targets."""
+    """Return the validity checks and the two questions of the paper's future work as targets."""
     k_star, bracketed = int(ar_summary["k_star"]), bool(ar_summary["bracketed"])
     accuracy = float(ar_summary["at_n_states"]["accuracy"])
     n_states = int(ar_summary["n_states"])
@@ -185,7 +185,7 @@ def ar_hmm_checks(
         _stability_check(ar_table, k_star),
         Check(
             id="ar_bic_minimum_bracketed",
-            kind="claim",
+            kind="target",
             statement="project target: the AR-HMM's BIC sweep brackets its minimum (K extended "
             "until the BIC rose twice in a row, at most to ar_hmm.k_max)",
             expected="minimum below the last two K fitted",
@@ -195,7 +195,7 @@ def ar_hmm_checks(
         ),
         Check(
             id="ar_bic_chooses_the_injected_regimes",
-            kind="claim",
+            kind="target",
             statement=f"project question (paper §5 future work): with AR(1) emissions the BIC "
             f"chooses the {N_REGIMES} injected regimes (the Gaussian HMM's BIC: K = "
             f"{gaussian_k_star})",
@@ -207,7 +207,7 @@ def ar_hmm_checks(
         ),
         Check(
             id="ar_accuracy_above_gaussian",
-            kind="claim",
+            kind="target",
             statement=f"project question (paper §5 future work): at K = {n_states} the AR-HMM's "
             f"states match the injected regimes better than the Gaussian HMM's (Hungarian "
             f"accuracy; Gaussian {gaussian_accuracy:.3f})",

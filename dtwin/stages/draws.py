@@ -1,4 +1,4 @@
-"""Stage "draws" (issue 12): the single-draw part of the paper rerun for one random draw.
+"""Stage "draws": the single-draw part of the paper rerun for one random draw.
 
 The paper judges every claim on one random draw (R: seed 11). A *draw* here reruns that part
 with every random seed of the run derived from the draw number: simulate the asset (command
@@ -9,7 +9,7 @@ seeds themselves, so it *is* the main run; draw ``d > 0`` uses
 :func:`dtwin.sensitivity_sweep.replicate_seed` of each configured seed.
 
 The tables of one draw are returned in memory (:class:`DrawTables`); the claims are judged
-on them by :mod:`dtwin.figures._draw_claims`, with the criteria of the figures.
+on them by :mod:`dtwin.stages.draw_claims`, with the criteria the figures call.
 Config sections: ``simulation``, ``command``, ``twin``, ``arx``, ``faults``, ``hmm``,
 ``correction``, ``mcda``; :func:`run_draw_bic` also ``bic`` (Fig. 9's sweep, with the
 per-draw number of EM starts of ``draws.bic``).

@@ -1,10 +1,10 @@
 """The paper's single-draw claims judged on one random draw, with the figures' own criteria.
 
-Each claim of Figs. 2–10 is judged here on the tables of one draw
-(:class:`dtwin.stages.draws.DrawTables`, passed in as plain tables) with the criterion of the
-figure that states it: the same helpers (:func:`dtwin.figures._fig07_claims.fault_claims`,
-the Fig. 8 feature claims, the Fig. 6 spreads) or the same constants. Draw 0 is the main run,
-so its verdicts must equal the figures' (a validity check of Fig. 12 compares them).
+Each claim of Figs. 2–8 and 10 is judged here on the tables of one draw
+(:class:`dtwin.stages.draws.DrawTables`) with the criterion the figure that states it calls:
+:mod:`dtwin.claim_criteria` (Figs. 2–6, 10) and :mod:`dtwin.fault_claim_criteria` (Figs. 7, 8).
+No figure module is imported, so a label edit in a figure reruns no draw. Draw 0 is the main
+run, so its verdicts must equal the figures' (a validity check of Fig. 12 compares them).
 Claim keys are ``"<artifact>:<check id>"``, as in ``paper_figures/claims.json``.
 """
 
@@ -16,32 +16,26 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dtwin.fault_injection import REGIMES, regime_features
-from dtwin.figures._fig07_claims import fault_claims
-from dtwin.figures.fig02_arx_vs_physics import rmse_like_r
-from dtwin.figures.fig04_hmm_posteriors import PERSISTENCE_DWELL_S
-from dtwin.figures.fig05_correction_timeseries import PAPER_LOWERED, VISIBLE_PCT
-from dtwin.figures.fig06_correction_distributions import _spread, _tightened
-from dtwin.figures.fig08_feature_separability import (
-    FEATURES,
-    _drift_claim,
-    _dynamics_claim,
-    _sensor_claim,
-    feature_stats,
+from dtwin.claim_criteria import (
+    MCDA_CLAIMS,
+    action_share,
+    all_structured,
+    dynamics_off_window,
+    lowered_in_m1_m2b_m3_m4,
+    not_white,
+    regimes_are_persistent,
+    residual_spread,
+    rmse_like_r,
+    strongly_autocorrelated,
+    tightened,
 )
-from dtwin.figures.fig10_mcda_actions import _mostly
-from dtwin.figures.fig12_claims_across_draws import dynamics_off_window
+from dtwin.fault_claim_criteria import fault_claims, feature_claims, feature_stats
+from dtwin.fault_injection import regime_features
 from dtwin.hmm_basics import zscore
 from dtwin.residual_stats import acf_table, ljung_box_table
 from dtwin.wiring import RESIDUALS
 
-__all__ = ["MCDA_CLAIMS", "judge_draw"]
-
-#: Fig. 10's claims: (regime, action) pairs that must be the regime's most frequent action.
-MCDA_CLAIMS: tuple[tuple[str, str], ...] = (
-    ("DynamicsOff", "ReidentifyPlant"),
-    ("Drift", "BiasCorrect"),
-)
+__all__ = ["judge_draw"]
 
 
 def _twin_claims(
@@ -63,14 +57,14 @@ def _twin_claims(
     dt = float(residuals["t"].iloc[1] - residuals["t"].iloc[0])
     claims = {
         "fig02_arx_vs_physics:general_agreement": rmse_like_r(rmse, r_rmse),
-        "fig03_residual_acf:all_residuals_structured": all(p < alpha for p in max_p.values()),
-        "fig04_hmm_posteriors:regimes_are_persistent": bool(
-            np.all(self_prob >= 1 - dt / PERSISTENCE_DWELL_S)
-        ),
+        "fig03_residual_acf:all_residuals_structured": all_structured(max_p, alpha),
+        "fig04_hmm_posteriors:regimes_are_persistent": regimes_are_persistent(self_prob, dt),
     }
     for e in ("e1", "e4"):
-        claims[f"fig03_residual_acf:{e}_strongly_autocorrelated"] = bool(lag1[e].iloc[1] > strong)
-        claims[f"fig03_residual_acf:{e}_not_white"] = bool(max_p[e] < alpha)
+        claims[f"fig03_residual_acf:{e}_strongly_autocorrelated"] = strongly_autocorrelated(
+            lag1[e].iloc[1], strong
+        )
+        claims[f"fig03_residual_acf:{e}_not_white"] = not_white(max_p[e], alpha)
     numbers = {
         "rmse_ratio_e1": rmse["e1"] / r_rmse["e1"],
         "lag1_e1": float(lag1["e1"].iloc[1]),
@@ -89,9 +83,7 @@ def _fault_claims(
     checks = fault_claims(tables.fault_posteriors, scenario, r_scores, origin)
     regimes = tables.fault_residuals["regime"].to_numpy(dtype=str)
     features = zscore(regime_features(tables.fault_residuals)).to_frame()
-    stats = feature_stats(features, regimes)
-    present = [r for r in REGIMES if r in stats[FEATURES[0]]]
-    checks += [claim(stats, present) for claim in (_drift_claim, _dynamics_claim, _sensor_claim)]
+    checks += feature_claims(feature_stats(features, regimes))
     artifacts = ["fig07_fault_posteriors"] * 3 + ["fig08_feature_separability"] * 3
     claims = {f"{a}:{c.id}": bool(c.passed) for a, c in zip(artifacts, checks, strict=True)}
     numbers = {key: float(scenario[key]) for key in ("accuracy", "macro_f1", "kappa")}
@@ -103,15 +95,13 @@ def _correction_claims(tables: Any) -> tuple[dict[str, bool], dict[str, Any]]:
     """Figs. 5, 6: which residuals the correction lowers and tightens."""
     metrics = tables.correction_metrics
     smoothed = metrics[metrics["variant"] == "smoothed"].set_index("channel")["drmse_pct"]
-    spread = _spread(tables.correction_residuals)
+    spread = residual_spread(tables.correction_residuals)
     claims = {
-        "fig05_correction_timeseries:lowered_in_m1_m2b_m3_m4": all(
-            smoothed[e] > VISIBLE_PCT for e in PAPER_LOWERED
-        ),
+        "fig05_correction_timeseries:lowered_in_m1_m2b_m3_m4": lowered_in_m1_m2b_m3_m4(smoothed),
         "fig06_correction_distributions:tighter_in_every_module_but_m0": all(
-            _tightened(spread[e]) for e in RESIDUALS if e != "e0"
+            tightened(spread[e]) for e in RESIDUALS if e != "e0"
         ),
-        "fig06_correction_distributions:not_tighter_in_m0": not _tightened(spread["e0"]),
+        "fig06_correction_distributions:not_tighter_in_m0": not tightened(spread["e0"]),
     }
     window = dynamics_off_window(
         tables.physics["x"].to_numpy(),
@@ -128,7 +118,7 @@ def _mcda_claims(tables: Any) -> tuple[dict[str, bool], dict[str, Any]]:
     counts = pd.crosstab(timeline["regime"], timeline["action"])
     claims, shares = {}, {}
     for regime, action in MCDA_CLAIMS:
-        share, is_mode = _mostly(counts, regime, action)
+        share, is_mode = action_share(counts, regime, action)
         claims[f"fig10_mcda_actions:{regime}_mostly_{action}"] = bool(is_mode)
         shares[f"{regime}:{action}"] = share
     overall = timeline["action"].value_counts(normalize=True).sort_index()
@@ -141,7 +131,7 @@ def judge_draw(
     r_scores: Mapping[str, float],
     r_rmse: Mapping[str, float],
 ) -> dict[str, Any]:
-    """Judge every single-draw claim of Figs. 2–8 and 10 on one draw (Fig. 9's: ``_draw_bic``).
+    """Judge every single-draw claim of Figs. 2–8 and 10 on one draw (Fig. 9's: Fig. 12's rule).
 
     Parameters
     ----------
