@@ -23,7 +23,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from scipy.stats import norm
+from scipy.special import ndtri  # scipy.stats.norm.ppf's own kernel, without loading scipy.stats
 
 from dtwin._validation import DtwinValueError
 from dtwin.artifacts import REPLICATES_METRIC, Check
@@ -65,7 +65,7 @@ def wilson_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
         raise DtwinValueError(f"k must be an integer in [0, n={n}] (got {k!r})")
     if not 0 < level < 1:
         raise DtwinValueError(f"level must be in (0, 1) (got {level!r})")
-    z = float(norm.ppf(0.5 + level / 2))
+    z = float(ndtri(0.5 + level / 2))
     p = k / n
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)

@@ -36,7 +36,6 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg import expm
 
 from dtwin.wiring import MODULES, Module
 
@@ -268,6 +267,8 @@ def plant_matrices(
         augmented = np.zeros((3, 3))
         augmented[:2, :2] = [[0.0, 1.0], [-k / m, -c / m]]
         augmented[1, 2] = 1.0
+        from scipy.linalg import expm  # on first use: figures import this module for fuse/kpi
+
         exact = expm(augmented * dt)
         a, b_accel = exact[:2, :2], exact[:2, 2:]
     return PlantMatrices(a, b_accel / m, b_accel)

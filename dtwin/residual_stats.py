@@ -1,7 +1,9 @@
 """Is the twin's error structured? Residual ACF and Ljung–Box tests (paper §4.1, Fig. 3).
 
-Thin wrappers over statsmodels that add dtwin's meaning: tables with one column per residual
-channel and the white-noise band ``±1.96/√n`` the paper draws.
+Tables with one column per residual channel and the white-noise band ``±1.96/√n`` the paper
+draws. The sample ACF and the Ljung–Box statistic are statsmodels' (``acf(x, fft=False)``,
+``acorr_ljungbox``) written out in numpy with the same operations, so a figure job does not load
+statsmodels (~1 s per process); tests/test_residual_stats.py holds them equal to statsmodels'.
 """
 
 from __future__ import annotations
@@ -10,12 +12,11 @@ from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
-from statsmodels.stats.diagnostic import acorr_ljungbox
-from statsmodels.tsa.stattools import acf
+from scipy.special import chdtrc
 
 from dtwin._validation import DtwinValueError, require_finite_array, require_min_length
 
-__all__ = ["white_noise_band", "acf_table", "ljung_box_table"]
+__all__ = ["white_noise_band", "sample_acf", "ljung_box", "acf_table", "ljung_box_table"]
 
 
 def white_noise_band(n_samples: int) -> float:
@@ -33,6 +34,37 @@ def _channel(table: pd.DataFrame, name: str, nlags: int) -> np.ndarray:
     if np.ptp(values) == 0:
         raise DtwinValueError(f"{name} is constant; its autocorrelation is undefined")
     return values
+
+
+def sample_acf(values: np.ndarray, nlags: int) -> np.ndarray:
+    """Return the sample ACF of ``values`` at lags ``0 … nlags``, shape ``(nlags + 1,)``.
+
+    The autocovariance of the demeaned series divided by n (R's ``acf``, statsmodels'
+    ``acf(x, fft=False)``), over its value at lag 0.
+
+    Examples
+    --------
+    >>> sample_acf(np.array([1.0, 2.0, 3.0, 4.0]), 2).round(3).tolist()
+    [1.0, 0.25, -0.3]
+    """
+    demeaned = values - values.mean()
+    n = len(values)
+    autocovariance = np.correlate(demeaned, demeaned, "full")[n - 1 :] / (n * np.ones(n))
+    return autocovariance[: nlags + 1] / autocovariance[0]
+
+
+def ljung_box(values: np.ndarray, lags: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Return the Ljung–Box Q statistic and its p-value at each of ``lags``.
+
+    ``Q(h) = n (n + 2) Σ_{k=1..h} r_k² / (n − k)`` with ``r_k`` the sample ACF
+    (:func:`sample_acf`); the p-value is the upper tail of a χ² with ``h`` degrees of freedom.
+    """
+    lags = np.asarray(lags, dtype=int)
+    n, max_lag = len(values), int(lags.max())
+    r = sample_acf(values, max_lag)
+    q = n * (n + 2) * np.cumsum(r[1 : max_lag + 1] ** 2 / (n - np.arange(1, max_lag + 1)))
+    q = q[lags - 1]
+    return q, chdtrc(lags, q)
 
 
 def acf_table(table: pd.DataFrame, channels: Sequence[str], nlags: int) -> pd.DataFrame:
@@ -60,7 +92,7 @@ def acf_table(table: pd.DataFrame, channels: Sequence[str], nlags: int) -> pd.Da
     """
     result = pd.DataFrame({"lag": np.arange(nlags + 1)})
     for name in channels:
-        result[name] = acf(_channel(table, name, nlags), nlags=nlags, fft=False)
+        result[name] = sample_acf(_channel(table, name, nlags), nlags)
     return result
 
 
@@ -78,8 +110,8 @@ def ljung_box_table(
     rows = []
     for name in channels:
         values = _channel(table, name, max(lags))
-        result = acorr_ljungbox(values, lags=list(lags))
-        for lag, stat, pvalue in zip(lags, result["lb_stat"], result["lb_pvalue"], strict=True):
+        stats, pvalues = ljung_box(values, lags)
+        for lag, stat, pvalue in zip(lags, stats, pvalues, strict=True):
             rows.append(
                 {
                     "channel": name,

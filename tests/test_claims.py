@@ -253,3 +253,12 @@ def test_a_replicate_block_without_verdicts_is_rejected():
     payload = _sweep_payload(True, [], True)
     with pytest.raises(DtwinValueError, match="lists no replicate for all_positive"):
         summarise_claims([payload])
+
+
+def test_wilson_z_is_scipy_normal_quantile():
+    """wilson_interval takes z from scipy.special.ndtri: norm.ppf's value, bit for bit."""
+    from scipy.special import ndtri
+    from scipy.stats import norm
+
+    for level in (0.5, 0.8, 0.9, 0.95, 0.99, 0.999):
+        assert float(ndtri(0.5 + level / 2)) == float(norm.ppf(0.5 + level / 2))

@@ -25,12 +25,17 @@ PLOTTING = ("matplotlib",)
 
 #: script -> modules it must not load (representative figure, table, sweep and gap rules).
 BUDGETS = {
+    "bic_sweep": (*MODEL_FITTING, "dtwin.hmm", "scipy", *PLOTTING),  # joins two tables
+    "claims": (*MODEL_FITTING, "scipy.stats"),
     "fig01_pipeline": (*MODEL_FITTING, "scipy.stats"),
+    "fig03_residual_acf": (*MODEL_FITTING, "scipy.stats"),
+    "fig06_correction_distributions": (*MODEL_FITTING, "scipy.stats"),
     "fig07_fault_posteriors": (*MODEL_FITTING, "scipy.stats"),
-    "fig08_feature_separability": MODEL_FITTING,
+    "fig08_feature_separability": (*MODEL_FITTING, "scipy.stats", "scipy.linalg"),
     "fig09_bic": (*MODEL_FITTING, "scipy.stats"),
     "fig11_sensitivity": (*MODEL_FITTING, "scipy"),
     "mcda_actions": (*MODEL_FITTING, *PLOTTING, "scipy"),
+    "simulate": (*MODEL_FITTING, "scipy.stats", *PLOTTING),
     "sweep_chunk": ("statsmodels", *PLOTTING),
     "gap_cases": ("sklearn", "hmmlearn", "statsmodels", *PLOTTING),
 }

@@ -12,6 +12,7 @@ from dtwin._validation import DtwinValueError
 from dtwin.artifacts import to_jsonable
 from dtwin.fault_injection import FEATURES, REGIMES, regime_features
 from dtwin.hmm import zscore
+from dtwin.stages.bic_table import concat_bic_tables
 from dtwin.stages.correction import targeted_intervention
 from dtwin.stages.faults import (
     POSTERIOR_COLUMNS,
@@ -22,7 +23,6 @@ from dtwin.stages.regimes import (
     SEED_STREAMS,
     bic_dataset,
     bic_sweep,
-    concat_bic_tables,
     fit_nominal_regimes,
     hmm_seed,
     posterior_matrix,

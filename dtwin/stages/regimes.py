@@ -16,7 +16,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +43,6 @@ __all__ = [
     "given_bic_row",
     "bic_dataset",
     "bic_sweep",
-    "concat_bic_tables",
 ]
 
 logger = logging.getLogger(__name__)
@@ -219,11 +218,6 @@ def bic_dataset(
     if name == "nominal_residuals":
         return table[list(RESIDUALS)], summary
     return regime_features(table), summary["model"]
-
-
-def concat_bic_tables(tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
-    """Return the per-data-set BIC tables (each :func:`bic_sweep`'s) as one, in the given order."""
-    return pd.concat(list(tables), ignore_index=True)
 
 
 def bic_sweep(

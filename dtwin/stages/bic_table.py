@@ -1,0 +1,27 @@
+"""The BIC table of Fig. 9 (paper §5): the join of the per-data-set sweeps.
+
+Kept apart from :mod:`dtwin.stages.regimes` so the job that only joins the two sweeps' tables
+(rule ``bic_sweep``) imports pandas, not the EM engine.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import pandas as pd
+
+__all__ = ["concat_bic_tables"]
+
+
+def concat_bic_tables(tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
+    """Return the per-data-set BIC tables (each :func:`dtwin.stages.regimes.bic_sweep`'s) as one.
+
+    The rows keep the given order (the workflow passes the nominal residuals first).
+
+    Examples
+    --------
+    >>> a, b = pd.DataFrame({"K": [2]}), pd.DataFrame({"K": [3]})
+    >>> concat_bic_tables([a, b])["K"].tolist()
+    [2, 3]
+    """
+    return pd.concat(list(tables), ignore_index=True)
