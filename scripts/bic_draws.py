@@ -4,7 +4,8 @@ Input   (the library only: every draw is rerun from the config)
 Output  results/draws/bic/chunk<c>.json   {"draws": [{draw, seeds, bic: [rows of
                                           results/bic_sweep.csv's columns]}]}
 Params  draws (the chunk's draw numbers), sections (simulation, command, twin, arx, faults,
-        hmm, correction, mcda), bic (ks, k_max, stop_after_rises; n_restarts of draws.bic)
+        hmm: the draw up to its fault HMM, no correction or mcda), bic (ks, k_max,
+        stop_after_rises; n_restarts of draws.bic)
 """
 
 from dtwin._script import start_rule

@@ -11,7 +11,7 @@ from dtwin.claim_criteria import dynamics_off_window
 from dtwin.claims import wilson_interval
 from dtwin.figures._draw_bic import judge_draw_bic, k_star_distributions, k_star_table
 from dtwin.figures.fig12_claims_across_draws import BicDraws, claims_across_draws, collect_draws
-from dtwin.stages.draws import draw_seeds, run_draw, run_draw_bic
+from dtwin.stages.draws import REGIME_SECTIONS, draw_seeds, run_draw, run_draw_bic
 
 
 def _record(draw: int, holds: bool) -> dict:
@@ -191,10 +191,8 @@ def test_fig12_adds_fig09s_claims_across_draws_with_k_star():
 
 
 def test_a_draws_bic_sweep_uses_its_dedicated_fits_at_k4(config):
-    sections = {
-        key: config[key]
-        for key in ("simulation", "command", "twin", "arx", "faults", "hmm", "correction", "mcda")
-    }
+    """K* across draws reads the draw up to its fault HMM: no correction or mcda section."""
+    sections = {key: config[key] for key in REGIME_SECTIONS}
     sections["simulation"] = {**config["simulation"], "T": 6.0}
     sections["hmm"] = {**config["hmm"], "n_restarts": 2}
     bic = {"ks": [3, 4], "k_max": 5, "stop_after_rises": 2, "n_restarts": 2}

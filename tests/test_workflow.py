@@ -309,9 +309,18 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
         "fig05_correction_timeseries",
         "fig06_correction_distributions",
         "claims",
-        *DRAWS,
+        *DRAWS - {"bic_draws"},  # K* across draws reads no correction
     }
     edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.8))
+    # an MCDA weight reruns the decisions and the draws' claims, no BIC sweep (issue 24)
+    edit_config(workflow_copy, lambda c: c["mcda"]["weights"].update(Cost=0.2))
+    assert planned_rules(workflow_copy) == {
+        "mcda_actions",
+        "fig10_mcda_actions",
+        "claims",
+        *DRAWS - {"bic_draws"},
+    }
+    edit_config(workflow_copy, lambda c: c["mcda"]["weights"].update(Cost=0.15))
     edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=3))
     assert planned_rules(workflow_copy) == {
         "bic_sweep_dataset",

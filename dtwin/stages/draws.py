@@ -11,8 +11,10 @@ seeds themselves, so it *is* the main run; draw ``d > 0`` uses
 The tables of one draw are returned in memory (:class:`DrawTables`); the claims are judged
 on them by :mod:`dtwin.stages.draw_claims`, with the criteria the figures call.
 Config sections: ``simulation``, ``command``, ``twin``, ``arx``, ``faults``, ``hmm``,
-``correction``, ``mcda``; :func:`run_draw_bic` also ``bic`` (Fig. 9's sweep, with the
-per-draw number of EM starts of ``draws.bic``).
+``correction``, ``mcda`` (:data:`DRAW_SECTIONS`). :func:`run_draw_bic` reads only the first six
+(:data:`REGIME_SECTIONS`: K* needs no correction or decision) and ``bic`` (Fig. 9's sweep, with
+the per-draw number of EM starts of ``draws.bic``), so a correction or MCDA change reruns no
+BIC sweep.
 """
 
 from __future__ import annotations
@@ -33,7 +35,23 @@ from dtwin.stages.regimes import bic_sweep, fit_nominal_regimes
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
 from dtwin.wiring import RESIDUALS
 
-__all__ = ["DrawSeeds", "draw_seeds", "DrawTables", "run_draw", "draw_bic_table", "run_draw_bic"]
+__all__ = [
+    "REGIME_SECTIONS",
+    "DRAW_SECTIONS",
+    "DrawSeeds",
+    "draw_seeds",
+    "DrawRegimes",
+    "run_draw_regimes",
+    "DrawTables",
+    "run_draw",
+    "draw_bic_table",
+    "run_draw_bic",
+]
+
+#: Config sections of a draw up to its fault HMM (:func:`run_draw_regimes`, K* across draws).
+REGIME_SECTIONS = ("simulation", "command", "twin", "arx", "faults", "hmm")
+#: Config sections of a whole draw (:func:`run_draw`): the regimes, the correction, the MCDA.
+DRAW_SECTIONS = (*REGIME_SECTIONS, "correction", "mcda")
 
 
 @dataclass(frozen=True)
@@ -80,6 +98,38 @@ def draw_seeds(draw: int, simulation_seed: int, faults_seed: int, hmm_seed: int)
 
 
 @dataclass(frozen=True)
+class DrawRegimes:
+    """One draw up to its fault HMM: what K* across draws reads (:func:`run_draw_regimes`).
+
+    Attributes
+    ----------
+    seeds : DrawSeeds
+    physics, surrogate, residuals : DataFrame
+        ``results/physics.csv``, ``surrogate.csv``, ``residuals.csv`` of the draw.
+    theta : DataFrame
+        ``results/arx_theta.csv`` (``n_train``: the training window, samples).
+    nominal_model : dict
+        The nominal fit's summary (``results/regimes/nominal_model.json``).
+    fault_residuals, fault_surrogate, fault_states, fault_posteriors : DataFrame
+        ``results/faults/residuals.csv``, ``surrogate.csv``, ``states.csv``, ``posteriors.csv``.
+    fault_summary : dict
+        ``results/faults/summary.json`` (the configured drift origin only).
+    """
+
+    seeds: DrawSeeds
+    physics: pd.DataFrame
+    surrogate: pd.DataFrame
+    residuals: pd.DataFrame
+    theta: pd.DataFrame
+    nominal_model: dict[str, Any]
+    fault_residuals: pd.DataFrame
+    fault_surrogate: pd.DataFrame
+    fault_states: pd.DataFrame
+    fault_posteriors: pd.DataFrame
+    fault_summary: dict[str, Any]
+
+
+@dataclass(frozen=True)
 class DrawTables:
     """The tables of one draw (the same columns as the main run's ``results/`` files).
 
@@ -117,30 +167,33 @@ class DrawTables:
     mcda_timeline: pd.DataFrame
 
 
-def run_draw(draw: int, sections: Mapping[str, Mapping[str, Any]]) -> DrawTables:
-    """Rerun the single-draw part of the paper for draw ``draw``.
+def _require_sections(sections: Mapping[str, Any], needed: tuple[str, ...]) -> None:
+    missing = [name for name in needed if name not in sections]
+    if missing:
+        raise DtwinValueError(f"draws need the config section(s) {', '.join(missing)}")
+
+
+def run_draw_regimes(draw: int, sections: Mapping[str, Mapping[str, Any]]) -> DrawRegimes:
+    """Rerun draw ``draw`` of the paper up to its fault HMM (§3, §4.1, §4.2, §4.4).
 
     Parameters
     ----------
     draw : int
         Draw number; 0 reproduces the main run exactly.
     sections : mapping
-        The config sections ``simulation``, ``command``, ``twin``, ``arx``, ``faults``,
-        ``hmm``, ``correction``, ``mcda`` (each as in ``config/config.yaml``).
+        The config sections of :data:`REGIME_SECTIONS` (each as in ``config/config.yaml``);
+        others are ignored.
 
     Returns
     -------
-    DrawTables
+    DrawRegimes
 
     Raises
     ------
     DtwinValueError
         If a section is missing.
     """
-    needed = ("simulation", "command", "twin", "arx", "faults", "hmm", "correction", "mcda")
-    missing = [name for name in needed if name not in sections]
-    if missing:
-        raise DtwinValueError(f"draws need the config section(s) {', '.join(missing)}")
+    _require_sections(sections, REGIME_SECTIONS)
     s = sections
     seeds = draw_seeds(draw, s["simulation"]["seed"], s["faults"]["seed"], s["hmm"]["seed"])
     physics = simulate_asset({**s["simulation"], "seed": seeds.simulation}, s["command"], s["twin"])
@@ -151,13 +204,7 @@ def run_draw(draw: int, sections: Mapping[str, Mapping[str, Any]]) -> DrawTables
     faults = {**s["faults"], "seed": seeds.faults}
     twin_keys = {k: s["twin"][k] for k in ("dt", "fusion", "kpi")}
     scenario = run_fault_scenario(physics, surrogate, faults, hmm, twin_keys, both_origins=False)
-    corrected, metrics = targeted_intervention(
-        physics, scenario.surrogate, scenario.states, twin_keys, s["correction"]
-    )
-    mcda = select_mcda_actions(
-        scenario.residuals, scenario.posteriors, s["mcda"], s["twin"]["dt"]
-    ).timeline
-    return DrawTables(
+    return DrawRegimes(
         seeds=seeds,
         physics=physics,
         surrogate=surrogate,
@@ -166,16 +213,55 @@ def run_draw(draw: int, sections: Mapping[str, Mapping[str, Any]]) -> DrawTables
         nominal_model=nominal_model,
         fault_residuals=scenario.residuals,
         fault_surrogate=scenario.surrogate,
+        fault_states=scenario.states,
         fault_posteriors=scenario.posteriors,
         fault_summary=scenario.summary,
-        correction_residuals=corrected,
-        correction_metrics=metrics,
-        mcda_timeline=mcda,
+    )
+
+
+def run_draw(draw: int, sections: Mapping[str, Mapping[str, Any]]) -> DrawTables:
+    """Rerun the single-draw part of the paper for draw ``draw``.
+
+    Parameters
+    ----------
+    draw : int
+        Draw number; 0 reproduces the main run exactly.
+    sections : mapping
+        The config sections of :data:`DRAW_SECTIONS` (each as in ``config/config.yaml``).
+
+    Returns
+    -------
+    DrawTables
+
+    Raises
+    ------
+    DtwinValueError
+        If a section is missing.
+    """
+    _require_sections(sections, DRAW_SECTIONS)
+    regimes = run_draw_regimes(draw, sections)
+    twin_keys = {k: sections["twin"][k] for k in ("dt", "fusion", "kpi")}
+    corrected, metrics = targeted_intervention(
+        regimes.physics,
+        regimes.fault_surrogate,
+        regimes.fault_states,
+        twin_keys,
+        sections["correction"],
+    )
+    mcda = select_mcda_actions(
+        regimes.fault_residuals,
+        regimes.fault_posteriors,
+        sections["mcda"],
+        sections["twin"]["dt"],
+    ).timeline
+    kept = {k: v for k, v in vars(regimes).items() if k != "fault_states"}
+    return DrawTables(
+        **kept, correction_residuals=corrected, correction_metrics=metrics, mcda_timeline=mcda
     )
 
 
 def draw_bic_table(
-    tables: DrawTables, bic: Mapping[str, Any], hmm: Mapping[str, Any]
+    tables: DrawRegimes | DrawTables, bic: Mapping[str, Any], hmm: Mapping[str, Any]
 ) -> pd.DataFrame:
     """BIC over K on one draw's nominal residuals and fault features (§5, Eq. (26); Fig. 9).
 
@@ -189,8 +275,8 @@ def draw_bic_table(
 
     Parameters
     ----------
-    tables : DrawTables
-        :func:`run_draw`'s result.
+    tables : DrawRegimes or DrawTables
+        :func:`run_draw_regimes`'s (or :func:`run_draw`'s) result.
     bic : mapping
         ``ks``, ``k_max``, ``stop_after_rises``, ``n_restarts`` (as the ``bic`` section).
     hmm : mapping
@@ -223,7 +309,7 @@ def run_draw_bic(
     draw : int
         Draw number (0 = the configured seeds).
     sections : mapping
-        The sections of :func:`run_draw`.
+        The sections of :func:`run_draw_regimes` (:data:`REGIME_SECTIONS`).
     bic : mapping
         The sweep's settings (see :func:`draw_bic_table`).
 
@@ -233,7 +319,7 @@ def run_draw_bic(
         ``draw``, ``seeds`` (``simulation``, ``faults``, ``hmm``) and ``bic``: the rows of
         :func:`draw_bic_table` (one per data set and K).
     """
-    tables = run_draw(draw, sections)
+    tables = run_draw_regimes(draw, sections)
     table = draw_bic_table(tables, bic, sections["hmm"])
     seeds = tables.seeds
     return {

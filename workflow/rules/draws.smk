@@ -45,7 +45,7 @@ rule bic_draws:
         json="results/draws/bic/chunk{chunk}.json",
     params:
         draws=bic_draws_of_chunk,
-        sections=DRAW_SECTIONS,
+        sections=DRAW_REGIME_SECTIONS,
         bic=DRAW_BIC,
     log:
         "logs/bic_draws/chunk{chunk}.log",
