@@ -16,6 +16,8 @@ validity checks and the figure tests use this one implementation.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from itertools import combinations
 from typing import Any
@@ -36,6 +38,8 @@ from dtwin.figures._style import COLUMN_WIDTH, FULL_WIDTH, MIN_FONT_PT, UNITLESS
 
 __all__ = [
     "DrawnText",
+    "recording_texts",
+    "agg_canvas",
     "drawn_texts",
     "text_overlaps",
     "print_check",
@@ -52,8 +56,8 @@ MAX_HEIGHT = 9.0
 WIDTHS: tuple[tuple[float, float], ...] = ((7.0, 7.5), (COLUMN_WIDTH - 0.1, COLUMN_WIDTH + 0.1))
 #: Two texts overlap when their boxes share more than this share of the smaller box's area.
 OVERLAP_SHARE = 0.01
-#: Slack at the page edge before a text counts as off the page, pixels at the figure's dpi.
-EDGE_SLACK_PX = 1.0
+#: Slack at the page edge before a text counts as off the page, inches (1 pixel at 100 dpi).
+EDGE_SLACK_IN = 0.01
 
 assert WIDTHS[0][0] <= FULL_WIDTH <= WIDTHS[0][1]
 
@@ -67,12 +71,14 @@ class DrawnText:
     box: Bbox
 
 
-def drawn_texts(figure: Figure) -> list[DrawnText]:
-    """Render ``figure`` with Agg and return every text actually drawn, once per text artist."""
-    canvas = figure.canvas if isinstance(figure.canvas, FigureCanvasAgg) else None
-    canvas = canvas or FigureCanvasAgg(figure)
-    renderer = canvas.get_renderer()
+@contextmanager
+def recording_texts(renderer: Any) -> Iterator[list[DrawnText]]:
+    """Record, while the block runs, every text ``renderer`` draws (once per text artist).
+
+    Yields the list, filled as the figure is drawn; the renderer is restored afterwards.
+    """
     seen: dict[int, DrawnText] = {}
+    texts: list[DrawnText] = []
     original = renderer.draw_text
 
     def record(gc, x, y, s, prop, angle, ismath=False, mtext=None):
@@ -84,10 +90,25 @@ def drawn_texts(figure: Figure) -> list[DrawnText]:
 
     renderer.draw_text = record
     try:
-        figure.draw(renderer)
+        yield texts
     finally:
         del renderer.draw_text
-    return list(seen.values())
+        texts.extend(seen.values())
+
+
+def agg_canvas(figure: Figure) -> FigureCanvasAgg:
+    """Return the figure's Agg canvas (attached first if the figure has another)."""
+    if isinstance(figure.canvas, FigureCanvasAgg):
+        return figure.canvas
+    return FigureCanvasAgg(figure)
+
+
+def drawn_texts(figure: Figure) -> list[DrawnText]:
+    """Render ``figure`` with Agg and return every text actually drawn, once per text artist."""
+    renderer = agg_canvas(figure).get_renderer()
+    with recording_texts(renderer) as texts:
+        figure.draw(renderer)
+    return texts
 
 
 def _overlap(a: Bbox, b: Bbox) -> float:
@@ -108,8 +129,8 @@ def text_overlaps(texts: list[DrawnText]) -> list[tuple[str, str]]:
     ]
 
 
-def _off_page(texts: list[DrawnText], page: Bbox) -> list[str]:
-    slack = EDGE_SLACK_PX
+def _off_page(texts: list[DrawnText], page: Bbox, dpi: float) -> list[str]:
+    slack = EDGE_SLACK_IN * dpi
     return [
         t.text
         for t in texts
@@ -120,17 +141,19 @@ def _off_page(texts: list[DrawnText], page: Bbox) -> list[str]:
     ]
 
 
-def print_check(figure: Figure) -> Check:
+def print_check(figure: Figure, texts: list[DrawnText] | None = None) -> Check:
     """Return the validity check of the print rules for ``figure`` (see the module docstring).
 
-    ``observed`` holds the size (in), the smallest font (pt), and the texts that are too small,
-    overlap or fall off the page (at most five of each, shortened).
+    ``texts`` are the texts of a draw at the figure's current dpi (:func:`recording_texts`);
+    by default the figure is drawn here (:func:`drawn_texts`). ``observed`` holds the size
+    (in), the smallest font (pt), and the texts that are too small, overlap or fall off the
+    page (at most five of each, shortened).
     """
     width, height = (float(v) for v in figure.get_size_inches())
-    texts = drawn_texts(figure)
+    texts = drawn_texts(figure) if texts is None else texts
     small = sorted({t.text for t in texts if t.size_pt < MIN_FONT_PT - 1e-9})
     overlaps = text_overlaps(texts)
-    off_page = _off_page(texts, figure.bbox)
+    off_page = _off_page(texts, figure.bbox, figure.dpi)
     width_ok = any(low <= width <= high for low, high in WIDTHS)
     observed: dict[str, Any] = {
         "width_in": round(width, 3),
@@ -374,9 +397,9 @@ def axes_and_legends_check(figure: Figure) -> Check:
     )
 
 
-def reader_checks(figure: Figure) -> list[Check]:
+def reader_checks(figure: Figure, texts: list[DrawnText] | None = None) -> list[Check]:
     """Return every check of what a reader relies on (print size and text, axes and legends).
 
-    :func:`print_check`, then :func:`axes_and_legends_check`.
+    :func:`print_check` (on ``texts`` if given), then :func:`axes_and_legends_check`.
     """
-    return [print_check(figure), axes_and_legends_check(figure)]
+    return [print_check(figure, texts), axes_and_legends_check(figure)]

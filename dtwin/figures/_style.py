@@ -259,6 +259,17 @@ def panel_title(ax: Axes, letter: str, text: str = "", **kwargs: Any) -> None:
     ax.set_title(rf"$\mathbf{{{letter}}}$  {text}".rstrip(), loc="left", **kwargs)
 
 
+def _save_file(figure: Figure, path: str | os.PathLike, tight: bool, dpi: float | None) -> None:
+    """Save ``figure`` to ``path`` (format from the suffix), atomically and without timestamps."""
+    metadata = _METADATA.get(os.path.splitext(str(path))[1].lower(), {})
+    bbox = "tight" if tight else None
+
+    def write(tmp: str) -> None:
+        figure.savefig(tmp, metadata=metadata, dpi=dpi, bbox_inches=bbox)
+
+    atomic_write(path, write)
+
+
 def save_figure(
     figure: Figure,
     paths: Sequence[str | os.PathLike],
@@ -273,32 +284,60 @@ def save_figure(
     matplotlib's ``savefig.dpi`` (:data:`PNG_DPI` once :func:`apply_style` ran).
     """
     for path in paths:
-        suffix = os.path.splitext(str(path))[1].lower()
-        metadata = _METADATA.get(suffix, {})
-
-        def write(tmp: str, metadata: dict = metadata) -> None:
-            figure.savefig(tmp, metadata=metadata, dpi=dpi, bbox_inches="tight" if tight else None)
-
-        atomic_write(path, write)
+        _save_file(figure, path, tight, dpi)
     plt.close(figure)
+
+
+def _save_png_checked(figure: Figure, path: str | os.PathLike) -> list:
+    """Save the print-size PNG with one layout and one draw; return the reader checks of it.
+
+    ``savefig`` would lay the figure out in a draw of its own before the draw it writes; here
+    the layout engine runs once at :data:`PNG_DPI` (the same layout, so the same bytes), is
+    switched off for the one draw that writes the file, and the texts that draw puts on the
+    page are the reader checks' input, so the checks see exactly the saved PNG.
+    """
+    from dtwin.figures._print_check import agg_canvas, drawn_texts, reader_checks, recording_texts
+
+    engine, canvas, dpi = figure.get_layout_engine(), agg_canvas(figure), figure.dpi
+    try:
+        if engine is not None:
+            engine.execute(figure)
+        figure.dpi = PNG_DPI
+        if engine is not None:
+            engine.execute(figure)
+            figure.set_layout_engine("none")
+        with recording_texts(canvas.get_renderer()) as texts:
+            _save_file(figure, path, tight=False, dpi=PNG_DPI)
+        return reader_checks(figure, texts or drawn_texts(figure))
+    finally:
+        if engine is not None:
+            figure.set_layout_engine(engine)
+        figure.dpi = dpi
 
 
 def publish_artifact(
     artifact: FigureArtifact, paths: Sequence[str | os.PathLike], json_path: str | os.PathLike
 ):
-    """Check what a reader relies on, save the figure at print size to ``paths``, write its JSON.
+    """Save the figure at print size to ``paths``, check what a reader relies on, write its JSON.
 
-    The reader checks (:func:`dtwin.figures._print_check.reader_checks`: size, smallest font,
-    text overlaps, text inside the page; every numeric axis labelled with its unit; every
-    legend entry drawn) are appended to the artifact's checks, and the figure's caption and
-    paper number are written under ``"figure"``. Raises
-    :class:`dtwin.artifacts.ArtifactValidityError` (after writing the JSON) when a validity
-    check failed, so the rule fails and Snakemake removes its outputs.
+    The first PNG is laid out and drawn once (:func:`_save_png_checked`) and its drawn texts
+    feed the reader checks (:func:`dtwin.figures._print_check.reader_checks`: size, smallest
+    font, text overlaps, text inside the page; every numeric axis labelled with its unit; every
+    legend entry drawn), which are appended to the artifact's checks; other formats (the PDF)
+    are saved as :func:`save_figure` does. The figure's caption and paper number are written
+    under ``"figure"``. Raises :class:`dtwin.artifacts.ArtifactValidityError` (after writing
+    the JSON) when a validity check failed, so the rule fails and Snakemake removes its outputs.
     """
     from dtwin.figures._print_check import reader_checks
 
-    checks = reader_checks(artifact.figure)
-    save_figure(artifact.figure, paths, tight=False, dpi=PNG_DPI)
+    figure, checks = artifact.figure, None
+    for path in paths:
+        if checks is None and str(path).lower().endswith(".png"):
+            checks = _save_png_checked(figure, path)
+        else:
+            _save_file(figure, path, tight=False, dpi=PNG_DPI)
+    checks = reader_checks(figure) if checks is None else checks
+    plt.close(figure)
     return write_artifact(
         json_path,
         artifact.name,
