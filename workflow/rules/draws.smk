@@ -25,6 +25,7 @@ rule claims_draws:
         "logs/claims_draws/chunk{chunk}.log",
     benchmark:
         "benchmarks/rules/claims_draws/chunk{chunk}.tsv"
+    priority: PRIORITY_DRAWS
     threads: 1
     resources:
         mem_mb=500,
@@ -51,6 +52,7 @@ rule bic_draws:
         "logs/bic_draws/chunk{chunk}.log",
     benchmark:
         "benchmarks/rules/bic_draws/chunk{chunk}.tsv"
+    priority: PRIORITY_DRAWS
     threads: 1
     resources:
         mem_mb=500,

@@ -28,6 +28,7 @@ rule fault_regimes:
         "logs/fault_regimes.log",
     benchmark:
         "benchmarks/rules/fault_regimes.tsv"
+    priority: PRIORITY_CRITICAL_PATH
     threads: 1
     resources:
         mem_mb=500,

@@ -25,6 +25,7 @@ rule nominal_regimes:
         "logs/nominal_regimes.log",
     benchmark:
         "benchmarks/rules/nominal_regimes.tsv"
+    priority: PRIORITY_CRITICAL_PATH
     threads: 1
     resources:
         mem_mb=500,
@@ -99,6 +100,7 @@ rule bic_sweep_dataset:
         "logs/bic_sweep_dataset/{dataset}.log",
     benchmark:
         "benchmarks/rules/bic_sweep_dataset/{dataset}.tsv"
+    priority: PRIORITY_CRITICAL_PATH
     threads: 1
     resources:
         mem_mb=500,
@@ -121,6 +123,7 @@ rule bic_sweep:
         "logs/bic_sweep.log",
     benchmark:
         "benchmarks/rules/bic_sweep.tsv"
+    priority: PRIORITY_CRITICAL_PATH
     threads: 1
     resources:
         mem_mb=500,
@@ -154,6 +157,7 @@ rule fig09_bic:
         "logs/fig09_bic.log",
     benchmark:
         "benchmarks/rules/fig09_bic.tsv"
+    priority: PRIORITY_CRITICAL_PATH
     threads: 1
     resources:
         mem_mb=500,

@@ -16,6 +16,7 @@ rule simulate:
         "logs/simulate.log",
     benchmark:
         "benchmarks/rules/simulate.tsv"
+    priority: PRIORITY_CRITICAL_PATH
     threads: 1
     resources:
         mem_mb=500,
@@ -45,6 +46,7 @@ rule fit_surrogates:
         "logs/fit_surrogates.log",
     benchmark:
         "benchmarks/rules/fit_surrogates.tsv"
+    priority: PRIORITY_CRITICAL_PATH
     threads: 1
     resources:
         mem_mb=500,
@@ -72,6 +74,7 @@ rule residuals:
         "logs/residuals.log",
     benchmark:
         "benchmarks/rules/residuals.tsv"
+    priority: PRIORITY_CRITICAL_PATH
     threads: 1
     resources:
         mem_mb=500,
