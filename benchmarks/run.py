@@ -5,11 +5,16 @@ load average before and after it), medians where repeated. Sections (`python ben
 [section ...]` runs only those and keeps the others of benchmarks/results.json):
 
 - ``dag``: the paper DAG (every paper figure, without the gap benchmark and the draws) cold with
-  --cores 2 and --cores 1 on a copy in a temporary folder, then a no-op rerun; per-rule wall
-  time, CPU time and peak memory from the rules' `benchmark:` files of the cold --cores 2 run,
-  and per rule their sum (``by_rule``: jobs, wall s, CPU s);
+  --cores 2 and --cores 1 on a copy in a temporary folder, then the no-op (a rerun and a dry run
+  ``snakemake -n``, median of 3 each, wall and CPU seconds). CPU seconds come from the processes
+  themselves, not Snakemake's ``benchmark:`` sampler (which stops after ~15 s): every job is
+  measured by the kernel (benchmarks/cpu_probe/sitecustomize.py: ``os.wait4`` on the job's
+  process), Snakemake's own process by ``getrusage``, and the run's total is the
+  ``RUSAGE_CHILDREN`` of this process around it. Per job (``jobs``: CPU s, wall s, peak MB) and
+  per rule (``by_rule``: jobs, wall s, CPU s) for the cold --cores 2 run; ``vs_r`` is the R
+  scripts' time (:data:`R_REFERENCE_S`) over ours, for each core count;
 - ``figures``: `snakemake --cores 2 all` cold after set-up (every artifact incl. the gap
-  benchmark and the claims across draws);
+  benchmark and the claims across draws), measured the same way;
 - ``imports``: per script in scripts/, the CPU seconds of a fresh interpreter that runs only its
   imports (median of 3) and which heavy libraries they load;
 - ``hmm``: one HMM fit (K 4, D 10, 10 restarts) at T = 1e3 … 1e6 through dtwin and through plain
@@ -26,10 +31,10 @@ load average before and after it), medians where repeated. Sections (`python ben
 from __future__ import annotations
 
 import ast
-import csv
 import json
 import os
 import platform
+import resource
 import shutil
 import statistics
 import subprocess
@@ -68,47 +73,92 @@ PAPER_TARGETS = [
     f"paper_figures/{name}.json"
     for name in yaml.safe_load((REPO / "workflow" / "artifacts.yaml").read_text())["paper"]
 ]
+#: The authors' R scripts on all paper figures, cold, single-threaded, same machine kind, load
+#: 0.4-0.7: median of fresh runs, seconds (110-128 s; docs/performance.md, issue 24).
+R_REFERENCE_S = 112.7
+#: The folder whose sitecustomize.py measures every job's CPU time (see its docstring).
+CPU_PROBE = REPO / "benchmarks" / "cpu_probe"
+
+
+def children_cpu() -> float:
+    """User + system CPU seconds of every child process this process has reaped so far."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def measured_run(args: list[str], workdir: Path) -> dict:
+    """Run Snakemake in ``workdir`` with the CPU probe; wall, CPU and every job's numbers."""
+    with tempfile.TemporaryDirectory() as log:
+        env = {
+            **os.environ,
+            "PYTHONPATH": f"{CPU_PROBE}{os.pathsep}{workdir}",
+            "MPLBACKEND": "Agg",
+            "DTWIN_CPU_LOG": log,
+        }
+        cpu_before = children_cpu()
+        wall = run([PY, "-m", "snakemake", *args], workdir, env)
+        total = children_cpu() - cpu_before
+        jobs, snakemake_cpu = probe_records(Path(log))
+    return {
+        "wall_s": round(wall, 2),
+        "cpu_s": round(total, 2),
+        "snakemake_cpu_s": snakemake_cpu,
+        "jobs": jobs,
+    }
+
+
+def probe_records(folder: Path) -> tuple[dict, float]:
+    """Per job ``rule[/wildcards]``: CPU s, wall s, peak MB; and Snakemake's own CPU s."""
+    read = {path.stem: json.loads(path.read_text()) for path in folder.glob("*.json")}
+    jobs = {}
+    for key, identity in read.items():
+        if key.startswith("job-"):
+            usage = read[f"usage-{key[4:]}"]
+            name = "/".join([identity["rule"], *identity["wildcards"].values()])
+            jobs[name] = {k: usage[k] for k in ("cpu_s", "wall_s", "max_rss_mb")}
+    snakemake = [r for k, r in read.items() if k.startswith("process-")]
+    own = round(sum(r["cpu_s"] for r in snakemake), 2)
+    return dict(sorted(jobs.items())), own
+
+
+def noop(args: list[str], workdir: Path, repeats: int = 3) -> dict:
+    """Median wall and CPU seconds of ``snakemake <args>`` when nothing is to be done."""
+    env = {**os.environ, "PYTHONPATH": str(workdir), "MPLBACKEND": "Agg"}
+    walls, cpus = [], []
+    for _ in range(repeats):
+        before = children_cpu()
+        walls.append(run([PY, "-m", "snakemake", *args], workdir, env))
+        cpus.append(children_cpu() - before)
+    return {
+        "wall_s": round(statistics.median(walls), 2),
+        "cpu_s": round(statistics.median(cpus), 2),
+    }
 
 
 def dag_benchmarks() -> dict:
-    results = {}
-    env = {**os.environ, "PYTHONPATH": "", "MPLBACKEND": "Agg"}
+    results: dict = {"targets": PAPER_TARGETS, "r_reference_s": R_REFERENCE_S}
     for cores in (2, 1):
         with tempfile.TemporaryDirectory() as folder:
             workdir = Path(folder) / "repo"
             shutil.copytree(REPO, workdir, ignore=IGNORE)
-            env["PYTHONPATH"] = str(workdir)
-            targets = PAPER_TARGETS
-            cold = run([PY, "-m", "snakemake", "--cores", str(cores), *targets], workdir, env)
-            results[f"cold_cores{cores}_s"] = round(cold, 2)
+            cold = measured_run(["--cores", str(cores), *PAPER_TARGETS], workdir)
+            results[f"cold_cores{cores}_s"] = cold["wall_s"]
+            results[f"cold_cores{cores}_cpu_s"] = cold["cpu_s"]
+            results[f"vs_r_cores{cores}"] = round(R_REFERENCE_S / cold["wall_s"], 2)
             if cores == 2:
-                results["targets"] = targets
-                results["noop_rerun_s"] = round(
-                    run([PY, "-m", "snakemake", "--cores", "2", *targets], workdir, env), 2
-                )
-                results["rules"] = rule_benchmarks(workdir / "benchmarks" / "rules")
-                results["by_rule"] = by_rule(results["rules"])
+                results["snakemake_cpu_s"] = cold["snakemake_cpu_s"]
+                results["jobs"] = cold["jobs"]
+                results["by_rule"] = by_rule(cold["jobs"])
+                for name, extra in (("noop_rerun", []), ("noop_dry_run", ["-n"])):
+                    done = noop([*extra, "--cores", "2", *PAPER_TARGETS], workdir)
+                    results[f"{name}_s"], results[f"{name}_cpu_s"] = done["wall_s"], done["cpu_s"]
     return results
 
 
-def rule_benchmarks(folder: Path) -> dict:
-    rules = {}
-    for path in sorted(folder.rglob("*.tsv")):
-        with path.open() as handle:
-            row = next(csv.DictReader(handle, delimiter="\t"))
-        name = str(path.relative_to(folder).with_suffix(""))
-        rules[name] = {
-            "wall_s": float(row["s"]),
-            "cpu_s": float(row["cpu_time"]),
-            "max_rss_mb": float(row["max_rss"]),
-        }
-    return rules
-
-
-def by_rule(rules: dict) -> dict:
+def by_rule(jobs: dict) -> dict:
     """Jobs, summed wall seconds and summed CPU seconds per rule (chunks and cases together)."""
     totals: dict[str, dict] = {}
-    for name, row in rules.items():
+    for name, row in jobs.items():
         total = totals.setdefault(name.split("/")[0], {"jobs": 0, "wall_s": 0.0, "cpu_s": 0.0})
         total["jobs"] += 1
         total["wall_s"] = round(total["wall_s"] + row["wall_s"], 2)
@@ -118,18 +168,17 @@ def by_rule(rules: dict) -> dict:
 
 def figures_benchmark() -> dict:
     """`snakemake --cores 2` (rule all) cold on a fresh copy, then a no-op rerun."""
-    env = {**os.environ, "MPLBACKEND": "Agg"}
     with tempfile.TemporaryDirectory() as folder:
         workdir = Path(folder) / "repo"
         shutil.copytree(REPO, workdir, ignore=IGNORE)
-        env["PYTHONPATH"] = str(workdir)
-        cold = run([PY, "-m", "snakemake", "--cores", "2"], workdir, env)
-        noop = run([PY, "-m", "snakemake", "--cores", "2"], workdir, env)
-        rules = rule_benchmarks(workdir / "benchmarks" / "rules")
+        cold = measured_run(["--cores", "2"], workdir)
+        rerun = noop(["--cores", "2"], workdir, repeats=1)
     return {
-        "cold_cores2_s": round(cold, 2),
-        "noop_rerun_s": round(noop, 2),
-        "by_rule": by_rule(rules),
+        "cold_cores2_s": cold["wall_s"],
+        "cold_cores2_cpu_s": cold["cpu_s"],
+        "snakemake_cpu_s": cold["snakemake_cpu_s"],
+        "noop_rerun_s": rerun["wall_s"],
+        "by_rule": by_rule(cold["jobs"]),
     }
 
 
