@@ -326,8 +326,9 @@ def _own_effect_answers(effect: str, seeds) -> list[tuple[bool, bool]]:
             if not declared:
                 content.pop("discretisation")
             result = diagnose(recording, twin_from_mapping(content))
-            row.append(
-                (result.module, result.effect) == (case.key["module"], case.key["expected_effect"])
+            row.append(  # a friction with a breakaway force is right under either name
+                result.module == case.key["module"]
+                and result.effect in case.key["accepted_effects"]
             )
         rights.append(tuple(row))
     return rights

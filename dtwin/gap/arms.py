@@ -19,11 +19,11 @@ arm                   condition (expected answer)
 ``unseen``            (e) effect forms from families the catalogue does not use
                       (:data:`UNSEEN_FORMS`: Stribeck friction with a generalised exponent,
                       an asymmetric tanh saturation, a dead zone one side 0.2–0.6 of the other,
-                      a quintic spring, a delay with i.i.d. jitter; the answer is the nearest
-                      catalogue effect)
+                      a quintic spring, a delay with i.i.d. jitter, stick-slip friction; the
+                      answer is the nearest catalogue effect)
 ``near``              (f) near-catalogue effects outside the list (:data:`NEAR_CATALOGUE`:
-                      actuator backlash and rate limit, sensor hysteresis, plant stiction; the
-                      answer is ``unexplained``)
+                      actuator backlash and rate limit, sensor hysteresis, a cogging force
+                      periodic in the position; the answer is ``unexplained``)
 ``two``               (g) two effects in two modules (``<effect>+<effect>``; the answer is the
                       one with the larger signal-to-noise ratio)
 ====================  =============================================================================
@@ -49,6 +49,7 @@ __all__ = [
     "DEFAULT_ARM",
     "UNSEEN_FORMS",
     "NEAR_CATALOGUE",
+    "FRICTION_FAMILY",
     "TWO_EFFECT_PAIRS",
     "WRONG_NOISE_ERROR",
     "NOISY_X_FRACTION",
@@ -87,18 +88,23 @@ CONTINUOUS_SUBSTEPS = 20
 #: ``unseen`` effects: the modules they may sit in and the nearest catalogue effect per module
 #: (the expected answer).
 UNSEEN_FORMS: dict[str, dict[str, str]] = {
-    "stribeck_friction": {"M1": "coulomb_friction"},
+    "stribeck_friction": {"M1": "stribeck_friction"},
     "smooth_saturation": {"M0": "actuator_saturation"},
     "asymmetric_deadzone": {"M0": "actuator_deadzone"},
     "quintic_stiffness": {"M1": "cubic_stiffness"},
     "jittered_delay": {"M0": "actuator_delay", "M2a": "sensor_delay", "M2b": "sensor_delay"},
+    "stiction": {"M1": "stribeck_friction"},
 }
+#: Catalogue effects that are also right for a truth with a breakaway force (``Fs > Fc``):
+#: Coulomb friction is Stribeck friction without its bump, which a faint or fast motion
+#: cannot show (docs/gap.md §Candidate effects).
+FRICTION_FAMILY: tuple[str, ...] = ("coulomb_friction", "stribeck_friction")
 #: ``near`` effects (answer ``unexplained``) and the modules they may sit in.
 NEAR_CATALOGUE: dict[str, tuple[str, ...]] = {
     "backlash": ("M0",),
     "rate_limit": ("M0",),
     "hysteresis": ("M2a", "M2b"),
-    "stiction": ("M1",),
+    "cogging": ("M1",),
 }
 #: ``two`` arm: pairs of catalogue effects, always in different modules. Most pair modules
 #: whose signal-to-noise ratios are alike (actuator and plant, the two sensors), so that either
@@ -214,6 +220,16 @@ def _draw_hysteresis(module, level, rng, scale) -> dict[str, Any]:
     }
 
 
+def _draw_cogging(module, level, rng, scale) -> dict[str, Any]:
+    """Cogging: a force ``A·sin(2π·x/period + phase)`` periodic in the position (N)."""
+    return {
+        "form": "sinusoidal in x",
+        "A": _log_between(0.02, 0.25, level) * scale["u_max"],
+        "period": rng.uniform(0.2, 0.5) * scale["x_std"],
+        "phase": rng.uniform(0.0, 2 * math.pi),
+    }
+
+
 def _draw_stiction(module, level, rng, scale) -> dict[str, Any]:
     """Stiction: breakaway force ``Fs``, sliding friction ``Fc = ratio·Fs`` (N)."""
     fs = _log_between(0.02, 0.25, level) * scale["u_max"]
@@ -231,6 +247,7 @@ ARM_DRAWS: dict[str, Callable[..., dict[str, Any]]] = {
     "rate_limit": _draw_rate_limit,
     "hysteresis": _draw_hysteresis,
     "stiction": _draw_stiction,
+    "cogging": _draw_cogging,
 }
 
 
@@ -315,8 +332,8 @@ def hysteresis_offset(x: np.ndarray, spec: Mapping[str, Any]) -> np.ndarray:
 def plant_form_force(spec: Mapping[str, Any], k: float, min_smoothing: float = 0.0):
     """Return an arm's plant force hook ``F(x, v)`` (N), or None for other effects.
 
-    ``stribeck_friction`` (its sign smoothed over ``max(10⁻³·vs, min_smoothing)``) and
-    ``quintic_stiffness``.
+    ``stribeck_friction`` (its sign smoothed over ``max(10⁻³·vs, min_smoothing)``),
+    ``quintic_stiffness`` and ``cogging``.
     """
     effect = spec.get("effect")
     if effect == "stribeck_friction":
@@ -331,6 +348,9 @@ def plant_form_force(spec: Mapping[str, Any], k: float, min_smoothing: float = 0
     if effect == "quintic_stiffness":
         ratio, ref = spec["ratio"], spec["x_ref"]
         return lambda xp, vp: ratio * k * ref * (xp / ref) ** 5
+    if effect == "cogging":
+        amplitude, wavenumber, phase = spec["A"], 2 * math.pi / spec["period"], spec["phase"]
+        return lambda xp, vp: amplitude * math.sin(wavenumber * xp + phase)
     return None
 
 

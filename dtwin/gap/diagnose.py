@@ -998,9 +998,33 @@ def _choose(flagged: list[_ModuleWork], ranked: Mapping[str, list], settings: Ga
     if source is not None:
         if not ranked[source.name]:
             return source, None
-        best = ranked[source.name][0]
+        best = _plain_over_nesting(ranked[source.name])
         chosen = best if _clears_bar(best, settings) else None
     return source, chosen
+
+
+#: Share of the choosing excess (percentage points) a candidate must remove beyond a candidate
+#: it nests (``Effect.nests``) to be chosen over it (docs/gap.md §Which).
+NEST_MARGIN_PCT = 5.0
+
+
+def _plain_over_nesting(ranked: Sequence[CandidateReport]) -> CandidateReport:
+    """Return the best candidate, or the plain one it nests if that removes nearly as much.
+
+    Stribeck friction with its breakaway force equal to its sliding one is Coulomb friction:
+    with many effective samples the score prefers the wider form for any small mismatch of
+    shape (a sharper sign), not for a bump. The plain form is kept unless the wider one removes
+    :data:`NEST_MARGIN_PCT` more of the choosing excess; it then carries both weights.
+    """
+    best = ranked[0]
+    for name in effect_by_name(best.effect).nests:
+        plain = next((r for r in ranked if r.effect == name), None)
+        if (
+            plain is not None
+            and best.choosing_share_pct - plain.choosing_share_pct < NEST_MARGIN_PCT
+        ):
+            return replace(plain, weight=plain.weight + best.weight)
+    return best
 
 
 def _clears_bar(candidate, settings: GapSettings) -> bool:
@@ -1361,6 +1385,9 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
                 work.data, int(work.lin_base.get("delay_samples", 0)), n_train
             )
             work.reference_gap = normalised_rms(work.data.output, reference, split.score, work.norm)
+            # a gap a plain linear OE fit removes is calibration slack (docs/gap.md §Where)
+            reached = normalised_rms(work.data.output, reference, split.decide, work.norm)
+            work.gap_cal = min(work.gap_cal, reached) if np.isfinite(reached) else work.gap_cal
     notes.extend(_module_notes(works, calibrate))
     flagged = [w for w in works.values() if w.gap_cal > w.threshold]
     for work in flagged:

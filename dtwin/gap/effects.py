@@ -13,16 +13,18 @@ the module's twin:
     an extra input delay in seconds, fractional (linear interpolation): ``actuator_delay``,
     ``sensor_delay``.
 ``force``
-    an extra force ``F(x, v)`` subtracted in the plant's acceleration (paper §3.1 M1):
-    ``coulomb_friction``, ``cubic_stiffness``, ``quadratic_damping``.
+    an extra force ``F(x, v)`` subtracted in the plant's acceleration (paper §3.1 M1), its law
+    the effect's ``force_law``: ``coulomb_friction``, ``stribeck_friction``,
+    ``cubic_stiffness``, ``quadratic_damping``.
 ``output``
     a map on the sensor output (``lag`` is the sensor's noise-free first-order lag of x, ``bias``
     its offset): ``sensor_quantization``, ``sensor_scale_error``, ``sensor_bias_drift``.
 ``linear``
     ``parameter_mismatch``: no new term, the module's own linear parameters are re-fitted.
 
-The forms are the textbook ones on purpose; the real ones differ (a Stribeck bump, a smooth
-saturation, a drift that is not linear) and a candidate must still win when it is only close.
+The forms are the textbook ones on purpose; the real ones differ (a generalised Stribeck
+exponent, a smooth saturation, a drift that is not linear) and a candidate must still win when
+it is only close.
 """
 
 from __future__ import annotations
@@ -36,6 +38,10 @@ import numpy as np
 __all__ = [
     "Scales",
     "Effect",
+    "ForceOps",
+    "ARRAY_OPS",
+    "SCALAR_OPS",
+    "FRICTION_SMOOTHING",
     "EFFECTS",
     "EFFECT_NAMES",
     "NONE",
@@ -129,6 +135,13 @@ class Effect:
         linear parameters, a sensor gain): if it is the right answer the re-fitted twin is exact,
         so it must remove more of the excess gap than other candidates
         (``GapSettings.min_linear_share``).
+    nests : tuple of str
+        Catalogue effects this one contains as a special case (Stribeck friction with
+        ``Fs = Fc`` is Coulomb friction): the plain one is the answer unless this one removes
+        clearly more (``dtwin.gap.diagnose.NEST_MARGIN_PCT``).
+    force_law : callable or None
+        A ``force`` effect's law: ``force_law(theta, velocity_std, ops) -> F(x, v)``, built on
+        ``ops`` (:data:`ARRAY_OPS` for numpy arrays, :data:`SCALAR_OPS` for Python floats).
     """
 
     name: str
@@ -141,6 +154,8 @@ class Effect:
     starts: Callable[[Scales], list[list[float]]]
     typical: Callable[[Scales], list[float]]
     linear_form: bool = False
+    nests: tuple[str, ...] = ()
+    force_law: Callable[..., Callable[[float, float], float]] | None = None
 
     @property
     def n_params(self) -> int:
@@ -149,6 +164,66 @@ class Effect:
 
 
 # --- the forms --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ForceOps:
+    """The elementary functions a plant force law is built on (numpy ufuncs or ``math``)."""
+
+    tanh: Callable
+    abs: Callable
+    exp: Callable
+
+
+#: Force laws over numpy arrays, and over Python floats (the exact plant's scalar windows).
+ARRAY_OPS = ForceOps(np.tanh, np.abs, np.exp)
+SCALAR_OPS = ForceOps(math.tanh, abs, math.exp)
+
+#: Friction smoothing velocity as a fraction of std(v) (the tanh of the friction effects).
+FRICTION_SMOOTHING = 0.01
+
+
+def _smoothing(velocity_std: float) -> float:
+    return max(FRICTION_SMOOTHING * velocity_std, 1e-300)
+
+
+def _coulomb_law(theta, velocity_std: float, ops: ForceOps):
+    """``F = Fc·tanh(v/v_s)``."""
+    fc, smooth = float(theta[0]), _smoothing(velocity_std)
+    return lambda x, v: fc * ops.tanh(v / smooth)
+
+
+def _stribeck_law(theta, velocity_std: float, ops: ForceOps):
+    """``F = (Fc + max(Fs − Fc, 0)·exp(−(v/vs)²))·tanh(v/v_s)``: the breakaway force at rest.
+
+    A breakaway force below the sliding one is no Stribeck bump (it would mimic a viscous
+    term: a Coulomb and viscous friction read as Stribeck friction with ``Fs < Fc``).
+    """
+    fc, fs, vs = (float(value) for value in theta)
+    bump, vs, smooth = max(fs - fc, 0.0), max(abs(vs), 1e-300), _smoothing(velocity_std)
+
+    def stribeck(x, v):
+        ratio = v / vs
+        return (fc + bump * ops.exp(-ratio * ratio)) * ops.tanh(v / smooth)
+
+    return stribeck
+
+
+def _cubic_law(theta, velocity_std: float, ops: ForceOps):
+    """``F = k3·(x − x0)³``."""
+    k3, centre = float(theta[0]), float(theta[1])
+
+    def cubic(x, v):
+        offset = x - centre
+        return k3 * offset * offset * offset
+
+    return cubic
+
+
+def _quadratic_damping_law(theta, velocity_std: float, ops: ForceOps):
+    """``F = c2·v·|v|``."""
+    c2 = float(theta[0])
+    return lambda x, v: c2 * v * ops.abs(v)
 
 
 def soft_saturation(u: np.ndarray, limit: float, sharpness: float) -> np.ndarray:
@@ -465,6 +540,24 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [(0.0, 3.0 * s.input_max)],
         lambda s: [[0.05 * s.input_std]],
         lambda s: [0.1 * s.input_std],
+        force_law=_coulomb_law,
+    ),
+    Effect(
+        "stribeck_friction",
+        ("M1",),
+        ("Fc", "Fs", "vs"),
+        ("input units (force)", "input units (force)", "output units / s"),
+        "force",
+        "F = (Fc + max(Fs − Fc, 0)·exp(−(v/vs)²))·tanh(v / v_s),  v_s = 0.01·std(v)",
+        lambda s: [
+            (0.0, 3.0 * s.input_max),
+            (0.0, 3.0 * s.input_max),
+            (0.05 * s.velocity_std, 0.5 * s.velocity_std),
+        ],
+        lambda s: [[0.05 * s.input_std, 0.1 * s.input_std, f * s.velocity_std] for f in (0.1, 0.3)],
+        lambda s: [0.1 * s.input_std, 0.1 * s.input_std, 0.1 * s.velocity_std],
+        nests=("coulomb_friction",),
+        force_law=_stribeck_law,
     ),
     Effect(
         "cubic_stiffness",
@@ -479,6 +572,7 @@ EFFECTS: tuple[Effect, ...] = (
         ],
         lambda s: [[0.0, 0.0], [0.0, s.output_mean]],
         lambda s: [0.1 * s.stiffness / s.output_std**2, s.output_std],
+        force_law=_cubic_law,
     ),
     Effect(
         "quadratic_damping",
@@ -490,6 +584,7 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [(0.0, 50.0 * s.input_std / s.velocity_std**2)],
         lambda s: [[0.05 * s.input_std / s.velocity_std**2]],
         lambda s: [0.1 * s.input_std / s.velocity_std**2],
+        force_law=_quadratic_damping_law,
     ),
     Effect(
         "sensor_quantization",

@@ -42,6 +42,7 @@ from dtwin.gap.arms import (
     ARM_DRAWS,
     CONTINUOUS_SUBSTEPS,
     DEFAULT_ARM,
+    FRICTION_FAMILY,
     NEAR_CATALOGUE,
     NOISY_X_FRACTION,
     TWO_EFFECT_PAIRS,
@@ -62,6 +63,7 @@ from dtwin.modules import CONTRACTS, fuse, kpi, lag_coefficient, lag_response, p
 from dtwin.params import CommandParams
 
 __all__ = [
+    "accepted_effects",
     "IN_LIST_EFFECTS",
     "OUT_OF_LIST_EFFECTS",
     "ALL_CASE_EFFECTS",
@@ -673,8 +675,22 @@ def _place_effect(effect, module, params, asset, nominal, specs) -> None:
         specs[module] = {"effect": effect, **params}
 
 
+def accepted_effects(expected: str, params: Mapping[str, Any]) -> list[str]:
+    """Return the answers that are right for a case: ``expected``, or either friction name.
+
+    A friction with a breakaway force above its sliding one (``Fs > Fc``) is right as
+    ``coulomb_friction`` or ``stribeck_friction`` (:data:`~dtwin.gap.arms.FRICTION_FAMILY`):
+    Coulomb friction is Stribeck friction without its bump, which a faint effect or a fast
+    motion does not show.
+    """
+    breakaway = float(params.get("Fs", 0.0)) > float(params.get("Fc", 0.0))
+    if expected in FRICTION_FAMILY and breakaway:
+        return list(FRICTION_FAMILY)
+    return [expected]
+
+
 def _expected(arm, case_effect, effects, placed, snrs) -> dict[str, Any]:
-    """Return the answer key's ``arm, effect, module, expected_effect, expected_module, in_list``.
+    """Return the answer key: arm, effect, module, expected and accepted effects, in_list.
 
     ``unseen``: the nearest catalogue effect (``nearest_catalogue`` names the mapping);
     ``near`` and out-of-list effects: ``unexplained``; ``two``: the effect with the larger
@@ -688,6 +704,7 @@ def _expected(arm, case_effect, effects, placed, snrs) -> dict[str, Any]:
             "effect": case_effect,
             "module": module,
             "expected_effect": effect,
+            "accepted_effects": accepted_effects(effect, placed[larger][3]),
             "expected_module": module,
             "in_list": True,
         }
@@ -704,6 +721,7 @@ def _expected(arm, case_effect, effects, placed, snrs) -> dict[str, Any]:
         "effect": effect,
         "module": module,
         "expected_effect": expected,
+        "accepted_effects": accepted_effects(expected, placed[0][3] if placed else {}),
         "expected_module": module,
         "in_list": expected not in (NONE, UNEXPLAINED) or effect in IN_LIST_EFFECTS,
     }

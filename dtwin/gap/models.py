@@ -31,6 +31,8 @@ from scipy.signal import savgol_filter
 
 from dtwin.exact_plant import exact_plant_response, free_response_basis, hold_matrices
 from dtwin.gap.effects import (
+    ARRAY_OPS,
+    SCALAR_OPS,
     Effect,
     Scales,
     bias_drift,
@@ -63,9 +65,6 @@ __all__ = [
     "simulate_module",
     "first_order_lag",
 ]
-
-#: Friction smoothing velocity as a fraction of std(v) (the tanh in ``coulomb_friction``).
-FRICTION_SMOOTHING = 0.01
 
 
 @dataclass(frozen=True)
@@ -286,31 +285,13 @@ def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float, *
     """
     if effect is None or effect.stage != "force":
         return None
+    if effect.force_law is None:
+        raise ValueError(f"effect {effect.name} cannot act on the plant")
     if arrays:
-        force = _force_law(effect, theta, velocity_std, np.tanh, np.abs)
-        force.scalar = _force_law(effect, theta, velocity_std, math.tanh, abs)
+        force = effect.force_law(theta, velocity_std, ARRAY_OPS)
+        force.scalar = effect.force_law(theta, velocity_std, SCALAR_OPS)
         return force
-    return _force_law(effect, theta, velocity_std, math.tanh, abs)
-
-
-def _force_law(effect: Effect, theta: Sequence[float], velocity_std: float, tanh, absolute):
-    """Return ``F(x, v)`` of a plant effect, built on the given ``tanh`` and ``abs``."""
-    if effect.name == "coulomb_friction":
-        fc = float(theta[0])
-        vs = max(FRICTION_SMOOTHING * velocity_std, 1e-300)
-        return lambda x, v: fc * tanh(v / vs)
-    if effect.name == "cubic_stiffness":
-        k3, centre = float(theta[0]), float(theta[1])
-
-        def cubic(x, v):
-            offset = x - centre
-            return k3 * offset * offset * offset
-
-        return cubic
-    if effect.name == "quadratic_damping":
-        c2 = float(theta[0])
-        return lambda x, v: c2 * v * absolute(v)
-    raise ValueError(f"effect {effect.name} cannot act on the plant")
+    return effect.force_law(theta, velocity_std, SCALAR_OPS)
 
 
 def plant_windows(

@@ -244,6 +244,16 @@ def _ar1_floor(residual: np.ndarray, dt: float) -> NoiseFloor:
     return NoiseFloor(min(sigma_spec, sigma_diff), "data", phi ** np.arange(n_lags))
 
 
+#: Poles of the AR(1) measurement noise :func:`spectral_noise_floor` tries (0: white).
+NOISE_POLES = np.linspace(0.0, 0.98, 50)
+#: Fewest Welch frequencies in the band for a noise pole to be fitted (else white noise).
+MIN_POLE_FREQUENCIES = 8
+#: Highest start of the band (over the Nyquist frequency) at which a noise pole is fitted: a
+#: band from 0.6 of it read white noise of a rig at 4 samples per period as a pole of 0.7 and
+#: doubled its floor.
+MAX_POLE_BAND_START = 0.3
+
+
 def spectral_noise_floor(residual: np.ndarray, dt: float, bandwidth_hz: float) -> NoiseFloor:
     """Return the noise floor read from a residual's spectrum above the plant's bandwidth.
 
@@ -259,16 +269,27 @@ def spectral_noise_floor(residual: np.ndarray, dt: float, bandwidth_hz: float) -
     Returns
     -------
     NoiseFloor
-        White noise with the residual's median power spectral density over the band from
-        ``3·bandwidth_hz`` (at most 0.6 of the Nyquist frequency) to 0.95 of it, spread over the
-        whole band: ``σ² = median PSD · f_Nyquist`` (one-sided Welch PSD).
+        AR(1) noise ``e[k] = a·e[k−1] + w[k]`` whose one-sided spectrum
+        ``2·dt·σ_w²/(1 + a² − 2a·cos(2πf·dt))`` matches the residual's Welch spectrum over the
+        band from ``3·bandwidth_hz`` (at most 0.6 of the Nyquist frequency) to 0.95 of it
+        (least squares on the whitened log spectrum, deviations clipped at 3 MADs, over the
+        poles :data:`NOISE_POLES`; the level is the median of the whitened spectrum); its variance
+        ``σ_w²/(1 − a²)``, at most the residual's (``identified`` False: an effect's broadband
+        residual looks the same, so it never overrules a twin's level), and its
+        autocorrelation ``a^l``. White noise (``a = 0``) is the median spectral density spread
+        over the whole band, as before; a band of fewer than :data:`MIN_POLE_FREQUENCIES`
+        frequencies, or starting above :data:`MAX_POLE_BAND_START` of the Nyquist frequency,
+        keeps it.
 
     Notes
     -----
     docs/gap.md §Noise floors. Above its bandwidth a plant passes little of its input, so what
     the twin misses there is noise, whatever the sampling rate; structured effects of a plant
     (friction, a stiffness) act at the frequencies of the motion. The median ignores the few
-    harmonics an effect may leave in the band. No oversampling is assumed.
+    harmonics an effect may leave in the band. A rig's sensor noise is often coloured (an
+    anti-aliasing filter, a slow drift): read as white from the band above the plant, a noise
+    whose power sits at low frequencies was 2–6 times too small, and every clean recording of
+    the harder rig family read ``unexplained``.
     """
     from scipy.signal import welch
 
@@ -280,8 +301,35 @@ def spectral_noise_floor(residual: np.ndarray, dt: float, bandwidth_hz: float) -
     band = (freqs >= low) & (freqs <= 0.95 * nyquist)
     if np.count_nonzero(band) < 3:
         band = freqs >= 0.6 * nyquist
-    sigma = math.sqrt(max(float(np.median(density[band])), 0.0) * nyquist)
-    return NoiseFloor(sigma, "data", _white_acf())
+    # a narrow band (a plant near the Nyquist frequency) cannot tell a pole from a level
+    wide = low <= MAX_POLE_BAND_START * nyquist
+    pole = _noise_pole(freqs[band] * dt, density[band]) if wide else 0.0
+    shape = 1.0 + pole * pole - 2.0 * pole * np.cos(2 * math.pi * freqs[band] * dt)
+    innovation = max(float(np.median(density[band] * shape)), 0.0) * nyquist
+    # a pole near 1 extrapolates the band's level to a large variance: never above the residual's
+    sigma = min(math.sqrt(innovation / (1.0 - pole * pole)), float(np.std(values)))
+    if pole == 0.0:
+        return NoiseFloor(sigma, "data", _white_acf())
+    n_lags = max(2, min(400, int(10 / (1.0 - pole))))
+    # a coloured level is what an effect's broadband residual (a friction's sign changes) also
+    # looks like: it never overrules a twin's noise level (reconcile_noise_floor)
+    return NoiseFloor(sigma, "data", pole ** np.arange(n_lags), identified=False)
+
+
+def _noise_pole(cycles: np.ndarray, density: np.ndarray) -> float:
+    """Return the AR(1) pole whose spectrum shape fits ``density`` at ``cycles`` (f·dt) best."""
+    positive = density > 0
+    if np.count_nonzero(positive) < MIN_POLE_FREQUENCIES:
+        return 0.0
+    log_density = np.log(density[positive])
+    cosine = np.cos(2 * math.pi * cycles[positive])
+    shapes = np.log(1.0 + NOISE_POLES[:, None] ** 2 - 2.0 * NOISE_POLES[:, None] * cosine)
+    whitened = log_density[None, :] + shapes
+    # robust: deviations beyond 3 MADs (the few harmonics an effect leaves) count as 3 MADs
+    deviation = whitened - np.median(whitened, axis=1, keepdims=True)
+    limit = 3.0 * np.median(np.abs(deviation), axis=1, keepdims=True)
+    spread = np.mean(np.clip(deviation, -limit, limit) ** 2, axis=1)
+    return float(NOISE_POLES[int(np.argmin(spread))])
 
 
 def _plant_noise_moments(u, x, lin, dt):

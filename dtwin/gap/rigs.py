@@ -29,11 +29,21 @@ from collections.abc import Callable
 
 import numpy as np
 import pandas as pd
+from scipy.signal import lfilter
 
 from dtwin._validation import DtwinValueError
-from dtwin.gap.generator import GeneratedCase, generate_case
+from dtwin.gap.generator import GeneratedCase, accepted_effects, generate_case
 
-__all__ = ["RIG_EFFECTS", "RIG_PREFIX", "RIG_SAMPLES", "generate_rig_case", "generate_any_case"]
+__all__ = [
+    "RIG_EFFECTS",
+    "RIG_PREFIX",
+    "RIG_SAMPLES",
+    "HARD_RIG_EFFECTS",
+    "HARD_RIG_PREFIX",
+    "generate_rig_case",
+    "generate_hard_rig_case",
+    "generate_any_case",
+]
 
 #: The withheld effects of the rig family (all in the plant, M1).
 RIG_EFFECTS: tuple[str, ...] = ("none", "coulomb_friction", "cubic_stiffness", "quadratic_damping")
@@ -41,12 +51,19 @@ RIG_EFFECTS: tuple[str, ...] = ("none", "coulomb_friction", "cubic_stiffness", "
 RIG_PREFIX = "rig_"
 #: Samples per rig recording.
 RIG_SAMPLES = 6000
+#: The withheld effects of the harder rig family (docs/gap.md §Rig family).
+HARD_RIG_EFFECTS: tuple[str, ...] = (*RIG_EFFECTS, "stribeck_friction")
+#: Case-type prefix of the harder rig family (``hardrig_stribeck_friction``).
+HARD_RIG_PREFIX = "hardrig_"
+#: Fewest and most samples of a harder rig recording (a few periods of its resonance).
+HARD_RIG_SAMPLES = (3000, 20000)
 _SUBSTEPS = 10
 #: Strength range (relative to the linear force it competes with) at magnitude 0 and 1.
 _STRENGTH = {
     "coulomb_friction": (0.04, 0.3),  # Fc over std(u)
     "cubic_stiffness": (0.08, 0.6),  # k3·x_rms² over k
     "quadratic_damping": (0.2, 1.5),  # c2·v_rms over c
+    "stribeck_friction": (0.04, 0.3),  # Fc over std(u); the breakaway Fs is 1.5–3 Fc
 }
 
 
@@ -83,6 +100,42 @@ def _draw_rig(rng: np.random.Generator, effect: str, samples_per_period: float |
     }
 
 
+def _draw_hard_rig(rng: np.random.Generator, effect: str, samples_per_period: float | None) -> dict:
+    """Draw the harder family's rig: lightly damped, a few periods, held input, coloured noise."""
+    drawn = _log_uniform(rng, 3.0, 1000.0)
+    samples_per_period = drawn if samples_per_period is None else float(samples_per_period)
+    integrating = effect != "cubic_stiffness" and rng.uniform() < 0.4
+    closed = integrating or (samples_per_period >= 15 and rng.uniform() < 0.35)
+    if closed and samples_per_period < 15:
+        samples_per_period = max(_log_uniform(rng, 15.0, 1000.0), samples_per_period)
+    dt = 1.0 / _log_uniform(rng, 20.0, 20000.0)
+    omega = 2 * math.pi / (samples_per_period * dt)
+    zeta = _log_uniform(rng, 0.01, 0.3)
+    plant = {"m": 1.0, "c": 2 * zeta * omega, "k": 0.0 if integrating else omega**2}
+    if integrating:
+        plant["c"] = 1.0 / (_log_uniform(rng, 30.0, 3000.0) * dt)
+    low, high = HARD_RIG_SAMPLES
+    periods = _log_uniform(rng, 3.0, 30.0)
+    return {
+        "dt": dt,
+        "omega": omega,
+        "samples_per_period": samples_per_period,
+        "zeta": zeta,
+        "integrating": integrating,
+        "closed_loop": closed,
+        "plant": plant,
+        "u_scale": 10 ** rng.uniform(-3, 3),
+        "x_scale": 10 ** rng.uniform(-3, 3),
+        "hold": True,
+        "noise_pole": rng.uniform(0.5, 0.95),
+        "noise_level": (0.005, 0.03),
+        "n_samples": int(min(max(round(periods * samples_per_period), low), high)),
+        "periods": periods,
+        "breakaway": rng.uniform(1.5, 3.0),  # Stribeck: Fs over Fc
+        "stribeck_velocity": rng.uniform(0.05, 0.3),  # Stribeck: vs over std(v)
+    }
+
+
 def _multisine(rng: np.random.Generator, low: float, high: float, n_lines: int = 16):
     """Return a band-limited multisine, unit RMS: ``f(t)`` for scalar or array ``t`` (s)."""
     freqs = np.exp(rng.uniform(math.log(low), math.log(high), n_lines))
@@ -108,6 +161,15 @@ def _force_law(effect: str, strength: float, rig: dict, u_std: float, x_rms: flo
     if effect == "quadratic_damping":
         c2 = strength * plant["c"] / v_rms
         return (lambda x, v: c2 * v * abs(v)), {"c2": c2}
+    if effect == "stribeck_friction":
+        fc = strength * u_std
+        fs, vs = fc * rig["breakaway"], rig["stribeck_velocity"] * v_rms
+        smooth = 0.002 * v_rms
+
+        def stribeck(x, v):
+            return (fc + (fs - fc) * math.exp(-((v / vs) ** 2))) * math.tanh(v / smooth)
+
+        return stribeck, {"Fc": fc, "Fs": fs, "vs": vs}
     return None, {}
 
 
@@ -145,11 +207,15 @@ class _Drive:
         omega, dt = rig["omega"], rig["dt"]
         nyquist = 0.5 / dt
         self.closed = rig["closed_loop"]
+        self.held_input = False
         self.dt = dt
         self.held = np.zeros(n)
         band_high = min(3.0 * omega / (2 * math.pi), 0.4 * nyquist)
         if not self.closed:
             self.excite = _multisine(rng, 0.1 * omega / (2 * math.pi), band_high)
+            self.held_input = rig.get("hold", False)
+            if self.held_input:  # a DAC: the force held over each sample
+                self.held = self.excite(np.arange(n) * dt)
             return
         m, c = rig["plant"]["m"], rig["plant"]["c"]
         loop = omega * _log_uniform(rng, 0.5, 1.5)
@@ -169,15 +235,28 @@ class _Drive:
         self.held[j] = self.kp * (error + self.dither[j]) - self.kd * velocity
 
     def __call__(self, j: int, t: float) -> float:
-        if self.closed:
+        if self.closed or self.held_input:
             return self.held[j]
         return float(self.excite(t))
 
     def recorded(self, n: int) -> np.ndarray:
         """Return the force at the sample instants, shape ``(n,)``."""
-        if self.closed:
+        if self.closed or self.held_input:
             return self.held[:n].copy()
         return self.excite(np.arange(n) * self.dt)
+
+
+def _measurement_noise(rig: dict, rng: np.random.Generator, n: int) -> tuple[float, np.ndarray]:
+    """Return the position noise's level (over std(x)) and unit-variance shape ``(n,)``.
+
+    White, or AR(1) in the harder family: ``e[k] = a·e[k−1] + √(1 − a²)·w[k]``.
+    """
+    level = rng.uniform(*rig.get("noise_level", (0.005, 0.02)))
+    white = rng.standard_normal(n)
+    pole = rig.get("noise_pole")
+    if pole is None:
+        return level, white
+    return level, lfilter([math.sqrt(1.0 - pole**2)], [1.0, -pole], white)
 
 
 def _run(rig, rng_seed: int, effect: str, strength: float, n: int):
@@ -188,7 +267,8 @@ def _run(rig, rng_seed: int, effect: str, strength: float, n: int):
     x_rms = float(np.std(linear[:, 0])) or 1.0
     v_rms = float(np.std(linear[:, 1])) or 1.0
     u_std = float(np.std(pilot.recorded(n))) or 1.0
-    noise = x_rms * rng.uniform(0.005, 0.02) * rng.standard_normal(n)
+    level, shape = _measurement_noise(rig, rng, n)
+    noise = x_rms * level * shape
     force, params = _force_law(effect, strength, rig, u_std, x_rms, v_rms)
     drive = _Drive(rig, np.random.default_rng(rng_seed), n)
     states = _integrate(rig, drive, force, n, noise)
@@ -231,8 +311,46 @@ def generate_rig_case(
             f"rig effect must be one of {', '.join(RIG_EFFECTS)} (got {effect!r})"
         )
     rng = np.random.default_rng(seed)
-    n = int(n_samples or RIG_SAMPLES)
     rig = _draw_rig(rng, effect, samples_per_period)
+    return _generate(rig, rng, effect, seed, magnitude, int(n_samples or RIG_SAMPLES))
+
+
+def generate_hard_rig_case(
+    effect: str,
+    seed: int,
+    *,
+    magnitude: float | None = None,
+    n_samples: int | None = None,
+    samples_per_period: float | None = None,
+) -> GeneratedCase:
+    """Generate one recording of the harder rig family (docs/gap.md §Rig family).
+
+    Like :func:`generate_rig_case`, but: the force is held over each sample (a DAC) in open
+    loop too; damping ratio 0.01–0.3 and 3–30 periods of the resonance in the record
+    (3000–20,000 samples); AR(1) measurement noise (pole 0.5–0.95, 0.5–3 % of the position's
+    spread); units 10^U(−3, 3) on both channels; 40 % integrating plants (always in a PD
+    loop); and ``stribeck_friction``: ``(Fc + (Fs − Fc)·exp(−(v/vs)²))·sign(v)``, ``Fs`` 1.5–3
+    ``Fc``, ``vs`` 0.05–0.3 of std(v). Parameters as in :func:`generate_rig_case`
+    (``effect`` one of :data:`HARD_RIG_EFFECTS`; ``n_samples`` overrides the drawn length).
+
+    Returns
+    -------
+    GeneratedCase
+        As :func:`generate_rig_case`; the key's ``arm`` is ``"hard"``.
+    """
+    if effect not in HARD_RIG_EFFECTS:
+        raise DtwinValueError(
+            f"hard rig effect must be one of {', '.join(HARD_RIG_EFFECTS)} (got {effect!r})"
+        )
+    rng = np.random.default_rng(seed)
+    rig = _draw_hard_rig(rng, effect, samples_per_period)
+    case = _generate(rig, rng, effect, seed, magnitude, int(n_samples or rig["n_samples"]))
+    case.key.update(arm="hard", noise_pole=rig["noise_pole"], periods=rig["periods"])
+    return case
+
+
+def _generate(rig, rng, effect, seed, magnitude, n) -> GeneratedCase:
+    """Simulate a drawn rig with its effect and return the case in recording units."""
     magnitude = float(rng.uniform()) if magnitude is None else float(magnitude)
     low, high = _STRENGTH.get(effect, (0.0, 0.0))
     strength = low * (high / low) ** magnitude if high else 0.0
@@ -266,6 +384,8 @@ def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
         "k3": us / xs**3,
         "x0": xs,
         "c2": us / xs**2,
+        "Fs": us,
+        "vs": xs,
     }
     plant = {name: value * per_unit[name] for name, value in rig["plant"].items()}
     # m·ẍ + c·ẋ + k·x = u − u_offset in recording units: the force offset and, through the
@@ -277,6 +397,7 @@ def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
         "effect": effect,
         "module": "M1",
         "expected_effect": effect,
+        "accepted_effects": accepted_effects(effect, params),
         "in_list": effect != "none",
         "magnitude": magnitude,
         "seed": seed,
@@ -295,7 +416,7 @@ def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
 
 
 def generate_any_case(case_type: str, seed: int, **paper_options) -> GeneratedCase:
-    """Generate a benchmark case: ``rig_<effect>`` from the rig family, else the paper asset.
+    """Generate a benchmark case: a rig family's (``rig_``, ``hardrig_``), else the paper asset.
 
     A paper-asset case type may carry an arm (``no_noise__none``, dtwin/gap/arms.py).
     ``paper_options`` go to :func:`dtwin.gap.generator.generate_case` (``miscalibration``,
@@ -303,4 +424,6 @@ def generate_any_case(case_type: str, seed: int, **paper_options) -> GeneratedCa
     """
     if case_type.startswith(RIG_PREFIX):
         return generate_rig_case(case_type[len(RIG_PREFIX) :], seed)
+    if case_type.startswith(HARD_RIG_PREFIX):
+        return generate_hard_rig_case(case_type[len(HARD_RIG_PREFIX) :], seed)
     return generate_case(case_type, seed, **paper_options)
