@@ -139,12 +139,22 @@ def _generate(args: argparse.Namespace) -> int:
     import yaml
 
     from dtwin.artifacts import atomic_write_folder, write_csv, write_json
-    from dtwin.gap.rigs import RIG_PREFIX, generate_any_case, generate_rig_case
+    from dtwin.gap.rigs import (
+        HARD_RIG_PREFIX,
+        RIG_PREFIX,
+        generate_any_case,
+        generate_hard_rig_case,
+        generate_rig_case,
+    )
 
-    if args.effect.startswith(RIG_PREFIX):
-        effect = args.effect[len(RIG_PREFIX) :]
-        case = generate_rig_case(
-            effect, args.seed, magnitude=args.magnitude, n_samples=args.n_samples
+    rigs = {RIG_PREFIX: generate_rig_case, HARD_RIG_PREFIX: generate_hard_rig_case}
+    prefix = next((p for p in rigs if args.effect.startswith(p)), None)
+    if prefix is not None:
+        case = rigs[prefix](
+            args.effect[len(prefix) :],
+            args.seed,
+            magnitude=args.magnitude,
+            n_samples=args.n_samples,
         )
     else:
         case = generate_any_case(
@@ -178,7 +188,7 @@ def _fraction(text: str) -> float:
 def build_parser() -> argparse.ArgumentParser:
     """Return the ``dtwin`` argument parser (one subparser per subcommand)."""
     from dtwin.gap.generator import ALL_CASE_EFFECTS
-    from dtwin.gap.rigs import RIG_EFFECTS, RIG_PREFIX
+    from dtwin.gap.rigs import HARD_RIG_EFFECTS, HARD_RIG_PREFIX, RIG_EFFECTS, RIG_PREFIX
 
     parser = argparse.ArgumentParser(
         prog="dtwin", description="Find, explain and mitigate error in modular digital twins."
@@ -217,6 +227,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="generate a recording with a withheld effect (recording.csv, twin.yaml, key.json)",
     )
     rig_types = [RIG_PREFIX + effect for effect in RIG_EFFECTS]
+    rig_types += [HARD_RIG_PREFIX + effect for effect in HARD_RIG_EFFECTS]
     gen.add_argument("effect", choices=[*ALL_CASE_EFFECTS, *rig_types])
     gen.add_argument("--seed", type=int, required=True)
     gen.add_argument("--out", required=True)

@@ -140,3 +140,13 @@ def test_clean_harder_rigs_with_coloured_noise_read_none(seed):
     plant = result.modules["M1"]
     assert result.effect == "none"
     assert plant.scoring_gap_before <= 1.05 * plant.reference_gap
+
+
+def test_dtwin_generate_writes_a_harder_rig_case(tmp_path):
+    import json
+
+    from dtwin.cli import main
+
+    assert main(["generate", "hardrig_none", "--seed", "2", "--out", str(tmp_path / "c")]) == 0
+    key = json.loads((tmp_path / "c" / "key.json").read_text())
+    assert (key["arm"], key["effect"], key["seed"]) == ("hard", "none", 2)
