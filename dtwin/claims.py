@@ -17,59 +17,16 @@ sweep's optimiser expectations, ...) are ``target`` checks in their artifact's J
 from __future__ import annotations
 
 import json
-import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from scipy.special import ndtri  # scipy.stats.norm.ppf's own kernel, without loading scipy.stats
-
 from dtwin._validation import DtwinValueError
 from dtwin.artifacts import REPLICATES_METRIC, Check
+from dtwin.proportions import wilson_interval
 
-__all__ = ["wilson_interval", "ClaimsSummary", "check_row", "summarise_claims", "claims_markdown"]
-
-
-def wilson_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    """Return the Wilson score interval of a proportion ``k / n``.
-
-    Parameters
-    ----------
-    k : int
-        Successes, ``0 <= k <= n``.
-    n : int
-        Trials, ``n >= 1``.
-    level : float, default 0.95
-        Coverage of the interval, in (0, 1).
-
-    Returns
-    -------
-    (low, high) : tuple of float
-        ``(p̂ + z²/2n ∓ z·sqrt(p̂(1−p̂)/n + z²/4n²)) / (1 + z²/n)`` with ``z`` the
-        ``(1 + level)/2`` normal quantile (Wilson 1927); inside [0, 1] even at k = 0 or n.
-
-    Raises
-    ------
-    DtwinValueError
-        If ``n < 1``, ``k`` is outside ``[0, n]`` or ``level`` outside (0, 1).
-
-    Examples
-    --------
-    >>> [round(v, 4) for v in wilson_interval(8, 10)]
-    [0.4902, 0.9433]
-    """
-    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-        raise DtwinValueError(f"n must be an integer >= 1 (got {n!r})")
-    if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k <= n:
-        raise DtwinValueError(f"k must be an integer in [0, n={n}] (got {k!r})")
-    if not 0 < level < 1:
-        raise DtwinValueError(f"level must be in (0, 1) (got {level!r})")
-    z = float(ndtri(0.5 + level / 2))
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
+__all__ = ["ClaimsSummary", "check_row", "summarise_claims", "claims_markdown"]
 
 
 #: The artifact whose metrics give every paper claim's verdicts across random draws.

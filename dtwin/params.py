@@ -23,9 +23,9 @@ explicit Euler, the only one :func:`dtwin.physics.simulate_physics` runs) or an 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, get_args, get_type_hints
 
 from dtwin._validation import (
     DtwinTypeError,
@@ -36,7 +36,8 @@ from dtwin._validation import (
     require_number,
     require_positive,
 )
-from dtwin.modules import DISCRETISATIONS
+from dtwin.modules import CONTRACTS, DISCRETISATIONS
+from dtwin.wiring import MODULES
 
 __all__ = [
     "ActuatorParams",
@@ -47,6 +48,7 @@ __all__ = [
     "NoiseParams",
     "TwinParams",
     "CommandParams",
+    "ALGEBRAIC_SECTIONS",
     "twin_params_from_mapping",
     "command_params_from_mapping",
     "discretisation_from_mapping",
@@ -139,15 +141,29 @@ class CommandParams:
     step_std: float
 
 
-_SECTION_FIELDS: dict[str, tuple[type, tuple[str, ...]]] = {
-    "actuator": (ActuatorParams, ("tau",)),
-    "plant": (PlantParams, ("m", "c", "k")),
-    "sensor_A": (SensorParams, ("tau", "bias")),
-    "sensor_B": (SensorParams, ("tau", "bias")),
-    "fusion": (FusionParams, ("alpha",)),
-    "kpi": (KpiParams, ("w1", "w2")),
-    "noise": (NoiseParams, ("actuator", "plant", "sensor_A", "sensor_B")),
-}
+def _section_fields() -> dict[str, tuple[type, tuple[str, ...]]]:
+    """Each section of :class:`TwinParams`: its dataclass and its keys, in module order.
+
+    Derived from the module contract (:data:`dtwin.modules.CONTRACTS`: a module's section and
+    linear parameters, the noise channels) and the field types of :class:`TwinParams`, so the
+    modules are listed once (``tests/test_params.py`` checks each dataclass has those fields).
+    """
+    hints = get_type_hints(TwinParams)
+    keys = {contract.section: contract.params for contract in CONTRACTS.values()}
+    keys["noise"] = tuple(contract.noise for contract in CONTRACTS.values() if contract.noise)
+    return {
+        section: (next(t for t in get_args(hints[section]) if t is not type(None)), fields)
+        for section, fields in keys.items()
+    }
+
+
+_SECTION_FIELDS = _section_fields()
+
+#: The sections of the modules the twin recomputes from upstream signals (M3, M4: ``fusion``,
+#: ``kpi``): what fault injection and the bias correction read of ``twin`` besides ``dt``.
+ALGEBRAIC_SECTIONS: tuple[str, ...] = tuple(
+    module.section for module in MODULES if module.surrogate == "algebraic"
+)
 
 _POSITIVE = {"tau", "m"}
 _NONNEGATIVE = {"c", "k"}
@@ -179,18 +195,27 @@ def _build_section(section: str, raw: Any, prefix: str) -> Any:
 
 
 def twin_params_from_mapping(
-    mapping: Mapping[str, Any], *, require_all: bool = True, prefix: str = "twin"
+    mapping: Mapping[str, Any] | TwinParams,
+    *,
+    require_all: bool = True,
+    prefix: str = "twin",
+    required: Sequence[str] = (),
 ) -> TwinParams:
     """Return validated :class:`TwinParams` from a ``twin:``-shaped mapping.
 
     Parameters
     ----------
-    mapping : Mapping
-        The ``twin`` section (``dt`` plus the module sections of the module docstring).
+    mapping : Mapping or TwinParams
+        The ``twin`` section (``dt`` plus the module sections of the module docstring); a
+        :class:`TwinParams` is returned as it is (once ``required`` is checked), so a stage
+        parses its section once and passes the object on.
     require_all : bool, default True
         If False, missing module sections become ``None`` instead of an error.
     prefix : str, default "twin"
         Name used in error messages (``twin.fusion.alpha must be in [0, 1] (got 1.3)``).
+    required : sequence of str, default ()
+        Sections that must be present even when ``require_all`` is False (a stage's own,
+        e.g. ``("fusion", "kpi")``).
 
     Raises
     ------
@@ -203,6 +228,9 @@ def twin_params_from_mapping(
     >>> p.fusion.alpha, p.plant
     (0.6, None)
     """
+    if isinstance(mapping, TwinParams):
+        _require_sections(mapping, required, prefix)
+        return mapping
     mapping = require_mapping(prefix, mapping)
     if "dt" not in mapping:
         raise DtwinValueError(f"{prefix} is missing key: dt")
@@ -213,7 +241,7 @@ def twin_params_from_mapping(
     for section in _SECTION_FIELDS:
         if section in mapping and mapping[section] is not None:
             sections[section] = _build_section(section, mapping[section], prefix)
-        elif require_all:
+        elif require_all or section in required:
             raise DtwinValueError(f"{prefix} is missing key: {section}")
         else:
             sections[section] = None
@@ -222,6 +250,12 @@ def twin_params_from_mapping(
         **sections,
         discretisation=discretisation_from_mapping(mapping, prefix=prefix),
     )
+
+
+def _require_sections(twin: TwinParams, sections: Sequence[str], prefix: str) -> None:
+    for section in sections:
+        if getattr(twin, section) is None:
+            raise DtwinValueError(f"{prefix} is missing key: {section}")
 
 
 def discretisation_from_mapping(mapping: Mapping[str, Any], *, prefix: str = "twin") -> str | None:

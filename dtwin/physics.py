@@ -1,4 +1,4 @@
-"""The physical asset: five discrete modules and the simulator (paper §3.1; r_notes.md §1).
+"""The physical asset: six discrete modules and the simulator (paper §3.1; r_notes.md §1).
 
 The modules' laws are the contract of :mod:`dtwin.modules` (recursions, parameters, signals),
 run with the paper's explicit-Euler discretisation; this module adds the noise and the start at
@@ -22,12 +22,19 @@ import pandas as pd
 
 from dtwin._validation import DtwinValueError, require_finite_array, require_min_length
 from dtwin.command import time_axis
-from dtwin.modules import EULER, PlantTrajectory, fuse, kpi, lag_response, plant_response
+from dtwin.modules import (
+    EULER,
+    PlantTrajectory,
+    fuse,
+    kpi,
+    lag_coefficient,
+    lag_response,
+    plant_response,
+)
 from dtwin.params import TwinParams
 from dtwin.wiring import MODULES, SIGNALS
 
 __all__ = [
-    "lag_coefficient",
     "actuator_lpf",
     "plant_msd",
     "PlantTrajectory",
@@ -37,18 +44,6 @@ __all__ = [
     "backward_velocity",
     "simulate_physics",
 ]
-
-
-def lag_coefficient(tau: float, dt: float) -> float:
-    """Return the exact-discrete first-order lag coefficient ``a = exp(−dt/τ)``.
-
-    Notes
-    -----
-    Computed with ``numpy.exp``, as the paper simulator always has; the contract's
-    :func:`dtwin.modules.lag_coefficient` (``math.exp``, used by the gap diagnoser and
-    generator) can differ in the last bit, so this copy stays until outputs may move.
-    """
-    return float(np.exp(-dt / tau))
 
 
 def _noise_or_zeros(noise: np.ndarray | None, n_steps: int, name: str) -> np.ndarray:
@@ -225,7 +220,7 @@ def simulate_physics(twin: TwinParams, u_cmd: np.ndarray, rng: np.random.Generat
     """
     u_cmd = require_finite_array("u_cmd", u_cmd)
     require_min_length("u_cmd", u_cmd, 3)
-    missing = [module.name for module in MODULES if getattr(twin, module.params) is None]
+    missing = [module.name for module in MODULES if getattr(twin, module.section) is None]
     if missing or twin.noise is None:
         raise DtwinValueError("simulate_physics needs every twin section (twin.noise included)")
     if twin.discretisation not in (None, EULER):

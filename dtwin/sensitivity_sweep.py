@@ -45,7 +45,7 @@ import json
 import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -55,9 +55,9 @@ from dtwin._validation import (
     DtwinTypeError,
     DtwinValueError,
     require_in_range,
-    require_mapping,
     require_nonnegative,
 )
+from dtwin.params import TwinParams, twin_params_from_mapping
 
 __all__ = [
     "CORRECTION_METHODS",
@@ -201,27 +201,23 @@ def replicate_seed(base_seed: int, replicate: int) -> int:
     return int(sequence.generate_state(1, dtype=np.uint32)[0])
 
 
-def scale_twin(twin: Mapping[str, Any], alpha: float, m_A: float, m_B: float) -> dict[str, Any]:
-    """Return a copy of the ``twin`` mapping with fusion weight α and scaled sensor noise.
+def scale_twin(
+    twin: TwinParams | Mapping[str, Any], alpha: float, m_A: float, m_B: float
+) -> TwinParams:
+    """Return the twin with fusion weight α and scaled sensor noise.
 
     ``noise.sensor_A`` and ``noise.sensor_B`` (standard deviations) are multiplied by ``m_A``
-    and ``m_B``; every other entry is unchanged.
+    and ``m_B``; every other parameter is unchanged. A ``twin:`` mapping is parsed first
+    (:func:`dtwin.params.twin_params_from_mapping`, every section required).
     """
-    twin = require_mapping("twin", twin)
+    twin = twin_params_from_mapping(twin)
     alpha = require_in_range("alpha", alpha, 0.0, 1.0)
     m_A = require_nonnegative("m_A", m_A)
     m_B = require_nonnegative("m_B", m_B)
-    scaled = {
-        key: dict(value) if isinstance(value, Mapping) else value for key, value in twin.items()
-    }
-    scaled["fusion"] = {**scaled["fusion"], "alpha": alpha}
-    noise = scaled["noise"]
-    scaled["noise"] = {
-        **noise,
-        "sensor_A": noise["sensor_A"] * m_A,
-        "sensor_B": noise["sensor_B"] * m_B,
-    }
-    return scaled
+    noise = replace(
+        twin.noise, sensor_A=twin.noise.sensor_A * m_A, sensor_B=twin.noise.sensor_B * m_B
+    )
+    return replace(twin, fusion=replace(twin.fusion, alpha=alpha), noise=noise)
 
 
 @dataclass(frozen=True)

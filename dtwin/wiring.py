@@ -1,6 +1,8 @@
 """The wiring table of the six-module twin (paper §3, Fig. 1).
 
-One table says which signals each module reads and writes. The simulator, the surrogate
+One table says which signals each module reads and writes, and names its parameter section; it
+is the one table of the modules, which the module contract (:data:`dtwin.modules.CONTRACTS`)
+and the twin's parameters (:class:`dtwin.params.TwinParams`) extend. The simulator, the surrogate
 chain, the residual definitions and ``fig01_pipeline`` all read it, so the picture and the
 loops cannot drift from each other.
 
@@ -33,8 +35,9 @@ class Module:
         residual compares), the plant also writes the velocity ``v``.
     residual : str
         Name of its residual channel, surrogate − physics (paper Eq. (1)).
-    params : str
-        Name of its section in :class:`dtwin.params.TwinParams` (``"plant"``).
+    section : str
+        Name of its parameter section in :class:`dtwin.params.TwinParams` (``"plant"``); its
+        parameters and law are the module's contract (:data:`dtwin.modules.CONTRACTS`).
     surrogate : str
         ``"arx"`` when the twin replaces it with an ARX model, ``"algebraic"`` when the
         twin recomputes it from upstream surrogate signals.
@@ -45,13 +48,18 @@ class Module:
     inputs: tuple[str, ...]
     outputs: tuple[str, ...]
     residual: str
-    params: str
+    section: str
     surrogate: str
 
     @property
     def output(self) -> str:
         """The module's output proper (first of :attr:`outputs`)."""
         return self.outputs[0]
+
+    @property
+    def params(self) -> str:
+        """Former name of :attr:`section`, read by ``dtwin.gap.diagnose`` until it moves over."""
+        return self.section
 
 
 MODULES: tuple[Module, ...] = (

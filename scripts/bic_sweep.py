@@ -15,7 +15,7 @@ start_rule(snakemake)
 import pandas as pd
 
 from dtwin.artifacts import write_csv
-from dtwin.stages.bic_table import concat_bic_tables
+from dtwin.stages.bic_table import bic_sweep
 
 tables = [pd.read_csv(path) for path in snakemake.input.tables]
-write_csv(concat_bic_tables(tables), snakemake.output.table)
+write_csv(bic_sweep(tables), snakemake.output.table)

@@ -14,9 +14,10 @@ from dtwin._script import start_rule
 start_rule(snakemake)
 
 from dtwin.artifacts import write_csv
-from dtwin.stages.regimes import bic_dataset, bic_sweep
+from dtwin.stages.regimes import bic_sweep_dataset
 
-name, inputs = snakemake.wildcards.dataset, snakemake.input
-features, model = bic_dataset(name, inputs.features, inputs.model)
-table = bic_sweep({name: features}, snakemake.params.bic, snakemake.params.hmm, {name: model})
+inputs, params = snakemake.input, snakemake.params
+table = bic_sweep_dataset(
+    snakemake.wildcards.dataset, inputs.features, inputs.model, params.bic, params.hmm
+)
 write_csv(table, snakemake.output.table)

@@ -12,12 +12,13 @@ start_rule(snakemake)
 import pandas as pd
 
 from dtwin.artifacts import load_yaml
+from dtwin.config_sections import AcfSettings
 from dtwin.figures._style import publish_artifact
 from dtwin.figures.fig03_residual_acf import fig03_residual_acf
 
 artifact = fig03_residual_acf(
     pd.read_csv(snakemake.input.residuals),
-    snakemake.params.acf,
+    AcfSettings.from_mapping(snakemake.params.acf),
     load_yaml(snakemake.input.r_numbers),
 )
 publish_artifact(artifact, [snakemake.output.png, snakemake.output.pdf], snakemake.output.json)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from dtwin._validation import DtwinValueError
-from dtwin.claims import claims_markdown, summarise_claims, wilson_interval
+from dtwin.claims import claims_markdown, summarise_claims
 
 PAYLOADS = [
     {
@@ -79,16 +79,6 @@ def test_markdown_reports_a_failed_claim_with_its_reason_and_r_number():
 def test_malformed_payload_is_rejected():
     with pytest.raises(DtwinValueError, match="artifact"):
         summarise_claims([{"checks": []}])
-
-
-def test_wilson_interval_matches_a_hand_computation():
-    # 8 of 10, z = 1.959964: centre (0.8 + 0.19207) / 1.38415 = 0.71674, half-width
-    # 1.959964 * sqrt(0.016 + 0.0096036) / 1.38415 = 0.22658 (Wilson 1927)
-    low, high = wilson_interval(8, 10)
-    assert low == pytest.approx(0.49016, abs=1e-5) and high == pytest.approx(0.94332, abs=1e-5)
-    assert wilson_interval(0, 20)[0] == 0.0 and wilson_interval(20, 20)[1] == 1.0
-    with pytest.raises(DtwinValueError, match="k must be"):
-        wilson_interval(11, 10)
 
 
 def _claim(artifact, check_id, statement, passed, **extra):
@@ -253,12 +243,3 @@ def test_a_replicate_block_without_verdicts_is_rejected():
     payload = _sweep_payload(True, [], True)
     with pytest.raises(DtwinValueError, match="lists no replicate for all_positive"):
         summarise_claims([payload])
-
-
-def test_wilson_z_is_scipy_normal_quantile():
-    """wilson_interval takes z from scipy.special.ndtri: norm.ppf's value, bit for bit."""
-    from scipy.special import ndtri
-    from scipy.stats import norm
-
-    for level in (0.5, 0.8, 0.9, 0.95, 0.99, 0.999):
-        assert float(ndtri(0.5 + level / 2)) == float(norm.ppf(0.5 + level / 2))

@@ -8,9 +8,9 @@ import pytest
 
 from dtwin._validation import DtwinValueError
 from dtwin.claim_criteria import dynamics_off_window
-from dtwin.claims import wilson_interval
 from dtwin.figures._draw_bic import judge_draw_bic, k_star_distributions, k_star_table
 from dtwin.figures.fig12_claims_across_draws import BicDraws, claims_across_draws, collect_draws
+from dtwin.proportions import wilson_interval
 from dtwin.stages.draws import REGIME_SECTIONS, draw_seeds, run_draw, run_draw_bic
 
 

@@ -44,3 +44,18 @@ def test_partial_twin_allowed_when_asked(config):
     assert params.plant.k == 4.0 and params.sensor_A is None
     with pytest.raises(DtwinValueError, match="missing key: actuator"):
         twin_params_from_mapping({"dt": 0.01})
+
+
+def test_twin_sections_come_from_the_module_table():
+    """Each TwinParams section's dataclass has exactly the contract's keys, in its order."""
+    from dataclasses import fields
+
+    from dtwin.modules import CONTRACTS
+    from dtwin.params import _SECTION_FIELDS, TwinParams
+    from dtwin.wiring import MODULES
+
+    assert list(_SECTION_FIELDS) == [m.section for m in MODULES] + ["noise"]
+    for section, (cls, keys) in _SECTION_FIELDS.items():
+        assert tuple(f.name for f in fields(cls)) == keys, section
+    assert _SECTION_FIELDS["noise"][1] == tuple(c.section for c in CONTRACTS.values() if c.noise)
+    assert [f.name for f in fields(TwinParams)] == ["dt", *_SECTION_FIELDS, "discretisation"]

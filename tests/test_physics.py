@@ -9,11 +9,11 @@ import pandas as pd
 import pytest
 
 from dtwin.command import make_command, n_steps_for
+from dtwin.modules import lag_coefficient
 from dtwin.params import command_params_from_mapping
 from dtwin.physics import (
     actuator_lpf,
     backward_velocity,
-    lag_coefficient,
     plant_msd,
     sensor_first_order,
     simulate_physics,
@@ -152,3 +152,9 @@ def test_zoh_plant_step_response_is_exact_and_euler_is_the_papers():
     np.testing.assert_allclose(exact, step / k, atol=1e-12)
     euler = plant_response(u, m, c, k, dt, discretisation=EULER).x
     np.testing.assert_array_equal(euler, plant_msd(u, m, c, k, dt).x)
+
+
+def test_lag_coefficient_of_the_paper_time_constants_equals_numpy_exp():
+    """The one lag pole (math.exp) gives the paper simulator the bits of its former numpy.exp."""
+    for tau in (0.15, 0.08, 0.25):
+        assert lag_coefficient(tau, 0.02) == float(np.exp(-0.02 / tau))

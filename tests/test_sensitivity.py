@@ -10,6 +10,7 @@ import pytest
 
 from dtwin._validation import DtwinTypeError, DtwinValueError
 from dtwin.figures._fig11_claims import sweep_claim_numbers
+from dtwin.params import twin_params_from_mapping
 from dtwin.reference.loaders import load_r_physics, load_r_sweep
 from dtwin.sensitivity_sweep import (
     SWEEP_COLUMNS,
@@ -96,11 +97,13 @@ def test_replicate_seeds_are_deterministic_and_replicate_0_is_the_base_seed():
 def test_scale_twin_changes_only_fusion_and_sensor_noise(config):
     twin = config["twin"]
     scaled = scale_twin(twin, 0.2, 0.5, 1.5)
-    assert scaled["fusion"]["alpha"] == 0.2
-    assert scaled["noise"]["sensor_A"] == pytest.approx(0.5 * twin["noise"]["sensor_A"])
-    assert scaled["noise"]["sensor_B"] == pytest.approx(1.5 * twin["noise"]["sensor_B"])
-    assert scaled["plant"] == twin["plant"] and scaled["noise"]["plant"] == twin["noise"]["plant"]
-    assert twin["fusion"]["alpha"] == 0.6  # the input is not modified
+    assert scaled.fusion.alpha == 0.2
+    assert scaled.noise.sensor_A == 0.5 * twin["noise"]["sensor_A"]
+    assert scaled.noise.sensor_B == 1.5 * twin["noise"]["sensor_B"]
+    parsed = twin_params_from_mapping(twin)
+    assert scaled.plant == parsed.plant and scaled.noise.plant == parsed.noise.plant
+    assert scale_twin(parsed, 0.2, 0.5, 1.5) == scaled
+    assert twin["fusion"]["alpha"] == 0.6 and parsed.fusion.alpha == 0.6  # inputs unchanged
 
 
 # --- one configuration end to end -------------------------------------------------------------

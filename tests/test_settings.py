@@ -82,7 +82,7 @@ def test_bic_sweep_reads_the_hmm_section(config, recorded):
     """The rule passes only seed and the EM options (a change of K must not rerun it)."""
     hmm = {key: {**config["hmm"], **ODD}[key] for key in ("seed", "max_iter", "tol", "var_floor")}
     with pytest.raises(_FitReachedError):
-        dtwin.stages.regimes.bic_sweep(
+        dtwin.stages.regimes.sweep_bic(
             {"nominal_residuals": _random_frame(RESIDUALS)}, config["bic"], hmm
         )
     _assert_em_options(recorded[-1])

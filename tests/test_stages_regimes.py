@@ -12,7 +12,7 @@ from dtwin._validation import DtwinValueError
 from dtwin.artifacts import to_jsonable
 from dtwin.fault_injection import FEATURES, REGIMES, regime_features
 from dtwin.hmm import zscore
-from dtwin.stages.bic_table import concat_bic_tables
+from dtwin.stages.bic_table import bic_sweep
 from dtwin.stages.correction import targeted_intervention
 from dtwin.stages.faults import (
     POSTERIOR_COLUMNS,
@@ -22,10 +22,10 @@ from dtwin.stages.faults import (
 from dtwin.stages.regimes import (
     SEED_STREAMS,
     bic_dataset,
-    bic_sweep,
     fit_nominal_regimes,
     hmm_seed,
     posterior_matrix,
+    sweep_bic,
 )
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
 from dtwin.wiring import RESIDUALS
@@ -225,8 +225,8 @@ def test_bic_sweep_per_dataset_does_not_depend_on_the_other(scenario, twin_run, 
     nominal = residuals[list(RESIDUALS)].iloc[:300]
     faults = regime_features(scenario.residuals).iloc[:300]
     bic = {"ks": [2, 3], "n_restarts": 2}
-    both = bic_sweep({"nominal_residuals": nominal, "fault_features": faults}, bic, config["hmm"])
-    alone = bic_sweep({"nominal_residuals": nominal}, bic, config["hmm"])
+    both = sweep_bic({"nominal_residuals": nominal, "fault_features": faults}, bic, config["hmm"])
+    alone = sweep_bic({"nominal_residuals": nominal}, bic, config["hmm"])
     assert list(both.columns) == [
         "dataset",
         "n_features",
@@ -244,7 +244,7 @@ def test_bic_sweep_per_dataset_does_not_depend_on_the_other(scenario, twin_run, 
     assert list(both["n_features"]) == [6, 6, 10, 10]
     pd.testing.assert_frame_equal(both.iloc[:2], alone)
     with pytest.raises(DtwinValueError, match="datasets keys"):
-        bic_sweep({"other": nominal}, bic, config["hmm"])
+        sweep_bic({"other": nominal}, bic, config["hmm"])
 
 
 def test_each_data_sets_sweep_as_its_own_job_joins_to_the_whole(
@@ -266,9 +266,9 @@ def test_each_data_sets_sweep_as_its_own_job_joins_to_the_whole(
     assert nominal_model == {"n_states": 4} and fault_model == {"n_states": 4}
     bic = {"ks": [2, 3], "n_restarts": 2}
     datasets = {"nominal_residuals": nominal, "fault_features": faults}
-    whole = bic_sweep(datasets, bic, config["hmm"])
-    parts = [bic_sweep({name: data}, bic, config["hmm"]) for name, data in datasets.items()]
-    pd.testing.assert_frame_equal(concat_bic_tables(parts), whole)
+    whole = sweep_bic(datasets, bic, config["hmm"])
+    parts = [sweep_bic({name: data}, bic, config["hmm"]) for name, data in datasets.items()]
+    pd.testing.assert_frame_equal(bic_sweep(parts), whole)
     with pytest.raises(DtwinValueError, match="name must be one of"):
         bic_dataset("other", tmp_path / "residuals.csv", tmp_path / "nominal.json")
 
@@ -278,7 +278,7 @@ def test_bic_sweep_uses_the_dedicated_fit_at_its_k(twin_run, config):
     nominal = residuals[list(RESIDUALS)].iloc[:300]
     hmm = {**config["hmm"], "n_states": 3, "n_restarts": 2}
     _, model = fit_nominal_regimes(residuals.iloc[:300], hmm)
-    table = bic_sweep(
+    table = sweep_bic(
         {"nominal_residuals": nominal},
         {"ks": [2, 3], "n_restarts": 2},
         config["hmm"],

@@ -12,6 +12,7 @@ from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.claim_criteria import all_structured, not_white, strongly_autocorrelated
+from dtwin.config_sections import AcfSettings
 from dtwin.figures._style import (
     BAND_COLOR,
     PHYSICS_COLOR,
@@ -102,16 +103,16 @@ def plot_residual_acf(
 
 
 def fig03_residual_acf(
-    residuals: pd.DataFrame, acf: Mapping[str, Any], r_numbers: Mapping[str, Any]
+    residuals: pd.DataFrame, acf: AcfSettings, r_numbers: Mapping[str, Any]
 ) -> FigureArtifact:
-    """Paper Fig. 3 (A–D) with lag-1 ACF and Ljung–Box claims."""
-    nlags, alpha, strong = acf["nlags"], acf["significance"], acf["strong_lag1"]
-    white = np.random.default_rng(acf["white_noise_seed"]).standard_normal(acf["white_noise_n"])
+    """Paper Fig. 3 (A–D) with lag-1 ACF and Ljung–Box claims (``acf``: the ``acf`` section)."""
+    nlags, alpha, strong = acf.nlags, acf.significance, acf.strong_lag1
+    white = np.random.default_rng(acf.white_noise_seed).standard_normal(acf.white_noise_n)
     white_table = pd.DataFrame({"white": white})
     white_acf = acf_table(white_table, ["white"], nlags)
     residual_acf = acf_table(residuals, RESIDUALS, nlags)
-    ljung_box = ljung_box_table(residuals, RESIDUALS, acf["ljungbox_lags"])
-    white_lb = ljung_box_table(white_table, ["white"], acf["ljungbox_lags"])
+    ljung_box = ljung_box_table(residuals, RESIDUALS, list(acf.ljungbox_lags))
+    white_lb = ljung_box_table(white_table, ["white"], list(acf.ljungbox_lags))
     band = white_noise_band(len(residuals))
     figure = plot_residual_acf(white, white_acf, residuals, residual_acf, RESIDUALS, band)
     lag1 = {e: float(residual_acf[e].iloc[1]) for e in RESIDUALS}

@@ -4,7 +4,7 @@ The paper judges each claim on one random draw (R: seed 11). The ``claims_draws`
 that draw N times with derived seeds (:mod:`dtwin.stages.draws`; draw 0 is the main run) and
 judge every claim on each (:mod:`dtwin.stages.draw_claims`). This module gathers the draws:
 for every claim the number of draws in which it holds with a Wilson interval
-(:func:`dtwin.claims.wilson_interval`), the distribution of the headline numbers beside R's
+(:func:`dtwin.proportions.wilson_interval`), the distribution of the headline numbers beside R's
 draw, and — the one panel that explains the e1/e4 result — the plant correction's dRMSE of
 e1 and e4 against the DynamicsOff window's mean of x. The ``bic_draws`` jobs sweep the BIC
 over K on the first draws; their K* per data set judges Fig. 9's two claims on each draw
@@ -28,8 +28,8 @@ from matplotlib.ticker import MaxNLocator
 from dtwin._validation import DtwinValueError
 from dtwin.artifacts import Check, FigureArtifact
 from dtwin.claim_criteria import dynamics_off_window
-from dtwin.claims import wilson_interval
 from dtwin.figures._style import new_figure, panel_title, unitless
+from dtwin.proportions import wilson_interval
 
 __all__ = [
     "HEADLINE_NUMBERS",

@@ -10,18 +10,20 @@ from collections.abc import Sequence
 
 import pandas as pd
 
-__all__ = ["concat_bic_tables"]
+__all__ = ["bic_sweep"]
 
 
-def concat_bic_tables(tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
-    """Return the per-data-set BIC tables (each :func:`dtwin.stages.regimes.bic_sweep`'s) as one.
+def bic_sweep(tables: Sequence[pd.DataFrame]) -> pd.DataFrame:
+    """Rule ``bic_sweep``: the per-data-set BIC tables as one (``results/bic_sweep.csv``).
+
+    Each table is :func:`dtwin.stages.regimes.bic_sweep_dataset`'s.
 
     The rows keep the given order (the workflow passes the nominal residuals first).
 
     Examples
     --------
     >>> a, b = pd.DataFrame({"K": [2]}), pd.DataFrame({"K": [3]})
-    >>> concat_bic_tables([a, b])["K"].tolist()
+    >>> bic_sweep([a, b])["K"].tolist()
     [2, 3]
     """
     return pd.concat(list(tables), ignore_index=True)

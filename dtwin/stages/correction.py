@@ -23,6 +23,8 @@ import numpy as np
 import pandas as pd
 
 from dtwin.bias_correction import BiasCorrection, correct_bias
+from dtwin.config_sections import CorrectionSettings
+from dtwin.params import ALGEBRAIC_SECTIONS, TwinParams, twin_params_from_mapping
 from dtwin.state_tables import posterior_matrix
 from dtwin.wiring import RESIDUALS
 
@@ -40,22 +42,27 @@ def correct_twin(
     surrogate: pd.DataFrame,
     physics: pd.DataFrame,
     posteriors: np.ndarray,
-    twin: Mapping[str, Any],
-    correction: Mapping[str, Any],
+    twin: TwinParams | Mapping[str, Any],
+    correction: CorrectionSettings | Mapping[str, Any],
     state_means: np.ndarray | None = None,
 ) -> BiasCorrection:
-    """:func:`dtwin.bias_correction.correct_bias` with the ``twin`` and ``correction`` sections."""
+    """:func:`dtwin.bias_correction.correct_bias` with the ``twin`` and ``correction`` sections.
+
+    ``twin`` needs ``dt``, ``fusion`` and ``kpi``. Both sections are parsed here unless they
+    come parsed (:class:`~dtwin.params.TwinParams`,
+    :class:`~dtwin.config_sections.CorrectionSettings`).
+    """
+    twin = twin_params_from_mapping(twin, require_all=False, required=ALGEBRAIC_SECTIONS)
+    correction = CorrectionSettings.from_mapping(correction)
     return correct_bias(
         surrogate,
         physics,
         posteriors,
-        alpha=twin["fusion"]["alpha"],
-        w1=twin["kpi"]["w1"],
-        w2=twin["kpi"]["w2"],
-        dt=twin["dt"],
-        kappa=correction["kappa"],
-        ema_alpha=correction["ema_alpha"],
-        rate_max=correction["rate_max"],
+        alpha=twin.fusion.alpha,
+        w1=twin.kpi.w1,
+        w2=twin.kpi.w2,
+        dt=twin.dt,
+        **correction.options(),
         state_means=state_means,
     )
 
@@ -64,8 +71,8 @@ def targeted_intervention(
     physics: pd.DataFrame,
     faulted: pd.DataFrame,
     states: pd.DataFrame,
-    twin: Mapping[str, Any],
-    correction: Mapping[str, Any],
+    twin: TwinParams | Mapping[str, Any],
+    correction: CorrectionSettings | Mapping[str, Any],
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Correct the faulted twin with smoothed and with filtered posteriors (paper §4.3).
 
@@ -78,9 +85,9 @@ def targeted_intervention(
         ``y_A``, ``y_B``).
     states : DataFrame
         The fault fit's states table (``gamma_S*`` smoothed, ``filtered_S*`` filtered).
-    twin : mapping
+    twin : TwinParams or mapping
         ``dt``, ``fusion``, ``kpi`` of the ``twin`` section.
-    correction : mapping
+    correction : CorrectionSettings or mapping
         The ``correction`` section: ``kappa``, ``ema_alpha``, ``rate_max``.
 
     Returns
@@ -91,6 +98,8 @@ def targeted_intervention(
         ``metrics``: one row per variant and channel with the columns of
         :attr:`dtwin.bias_correction.BiasCorrection.metrics` (``variant`` first).
     """
+    twin = twin_params_from_mapping(twin, require_all=False, required=ALGEBRAIC_SECTIONS)
+    correction = CorrectionSettings.from_mapping(correction)
     smoothed = correct_twin(faulted, physics, posterior_matrix(states, "gamma"), twin, correction)
     filtered = correct_twin(
         faulted,

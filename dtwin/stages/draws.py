@@ -20,18 +20,20 @@ BIC sweep.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import pandas as pd
 
 from dtwin._validation import DtwinValueError
+from dtwin.config_sections import CorrectionSettings, SimulationSettings
 from dtwin.fault_injection import regime_features
+from dtwin.params import twin_params_from_mapping
 from dtwin.sensitivity_sweep import replicate_seed
 from dtwin.stages.correction import targeted_intervention
 from dtwin.stages.decisions import select_mcda_actions
 from dtwin.stages.faults import run_fault_scenario
-from dtwin.stages.regimes import bic_sweep, fit_nominal_regimes
+from dtwin.stages.regimes import fit_nominal_regimes, sweep_bic
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
 from dtwin.wiring import RESIDUALS
 
@@ -195,15 +197,16 @@ def run_draw_regimes(draw: int, sections: Mapping[str, Mapping[str, Any]]) -> Dr
     """
     _require_sections(sections, REGIME_SECTIONS)
     s = sections
-    seeds = draw_seeds(draw, s["simulation"]["seed"], s["faults"]["seed"], s["hmm"]["seed"])
-    physics = simulate_asset({**s["simulation"], "seed": seeds.simulation}, s["command"], s["twin"])
+    simulation = SimulationSettings.from_mapping(s["simulation"])
+    twin = twin_params_from_mapping(s["twin"])
+    seeds = draw_seeds(draw, simulation.seed, s["faults"]["seed"], s["hmm"]["seed"])
+    physics = simulate_asset(replace(simulation, seed=seeds.simulation), s["command"], twin)
     theta = fit_twin_surrogates(physics, s["arx"])
-    surrogate, residuals = roll_out_twin(physics, theta, s["twin"], s["arx"]["rollout_init"])
+    surrogate, residuals = roll_out_twin(physics, theta, twin, s["arx"]["rollout_init"])
     hmm = {**s["hmm"], "seed": seeds.hmm}
     _, nominal_model = fit_nominal_regimes(residuals, hmm)
     faults = {**s["faults"], "seed": seeds.faults}
-    twin_keys = {k: s["twin"][k] for k in ("dt", "fusion", "kpi")}
-    scenario = run_fault_scenario(physics, surrogate, faults, hmm, twin_keys, both_origins=False)
+    scenario = run_fault_scenario(physics, surrogate, faults, hmm, twin, both_origins=False)
     return DrawRegimes(
         seeds=seeds,
         physics=physics,
@@ -240,19 +243,16 @@ def run_draw(draw: int, sections: Mapping[str, Mapping[str, Any]]) -> DrawTables
     """
     _require_sections(sections, DRAW_SECTIONS)
     regimes = run_draw_regimes(draw, sections)
-    twin_keys = {k: sections["twin"][k] for k in ("dt", "fusion", "kpi")}
+    twin = twin_params_from_mapping(sections["twin"])
     corrected, metrics = targeted_intervention(
         regimes.physics,
         regimes.fault_surrogate,
         regimes.fault_states,
-        twin_keys,
-        sections["correction"],
+        twin,
+        CorrectionSettings.from_mapping(sections["correction"]),
     )
     mcda = select_mcda_actions(
-        regimes.fault_residuals,
-        regimes.fault_posteriors,
-        sections["mcda"],
-        sections["twin"]["dt"],
+        regimes.fault_residuals, regimes.fault_posteriors, sections["mcda"], twin.dt
     ).timeline
     kept = {k: v for k, v in vars(regimes).items() if k != "fault_states"}
     return DrawTables(
@@ -265,7 +265,7 @@ def draw_bic_table(
 ) -> pd.DataFrame:
     """BIC over K on one draw's nominal residuals and fault features (§5, Eq. (26); Fig. 9).
 
-    The sweep of :func:`dtwin.stages.regimes.bic_sweep` on the draw's own data and EM seed
+    The sweep of :func:`dtwin.stages.regimes.sweep_bic` on the draw's own data and EM seed
     (``hmm.seed`` of the draw, streams ``bic_<data set>``), with the draw's dedicated K-state
     fits (nominal, Fig. 4; fault features, Fig. 7) as its points at ``hmm.n_states``. Draw 0
     with ``bic.n_restarts`` of the ``bic`` section is the main run's Fig. 9 sweep (measured:
@@ -285,7 +285,7 @@ def draw_bic_table(
     Returns
     -------
     DataFrame
-        :func:`dtwin.stages.regimes.bic_sweep`'s table (``dataset``, ``K``, ``bic``,
+        :func:`dtwin.stages.regimes.sweep_bic`'s table (``dataset``, ``K``, ``bic``,
         ``log_likelihood``, ``log_likelihood_half``, ``n_starts``, ``source``, ...).
     """
     datasets = {
@@ -296,7 +296,7 @@ def draw_bic_table(
         "nominal_residuals": tables.nominal_model,
         "fault_features": tables.fault_summary["model"],
     }
-    return bic_sweep(datasets, bic, {**hmm, "seed": tables.seeds.hmm}, models)
+    return sweep_bic(datasets, bic, {**hmm, "seed": tables.seeds.hmm}, models)
 
 
 def run_draw_bic(

@@ -31,6 +31,7 @@ from dtwin.fault_injection import (
     regime_features,
 )
 from dtwin.hmm import HmmFit
+from dtwin.params import ALGEBRAIC_SECTIONS, TwinParams, twin_params_from_mapping
 from dtwin.regime_matching import (
     StateMapping,
     classification_scores,
@@ -69,7 +70,7 @@ def inject_scenario(
     physics: pd.DataFrame,
     surrogate: pd.DataFrame,
     faults: Mapping[str, Any],
-    twin: Mapping[str, Any],
+    twin: TwinParams | Mapping[str, Any],
     drift_origin: str | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Inject the scheduled faults into the surrogate streams; return them and the residuals.
@@ -84,13 +85,14 @@ def inject_scenario(
         (``y_fused``, ``v`` and ``z`` recomputed); ``residuals``: ``t``, ``regime``,
         ``e0 … e4`` (faulted surrogate − physics).
     """
+    twin = twin_params_from_mapping(twin, require_all=False, required=ALGEBRAIC_SECTIONS)
     faulted = inject_faults(
         surrogate,
         np.random.default_rng(require_seed("faults.seed", faults["seed"])),
-        alpha=twin["fusion"]["alpha"],
-        w1=twin["kpi"]["w1"],
-        w2=twin["kpi"]["w2"],
-        dt=twin["dt"],
+        alpha=twin.fusion.alpha,
+        w1=twin.kpi.w1,
+        w2=twin.kpi.w2,
+        dt=twin.dt,
         schedule=fault_schedule(faults["schedule"]),
         magnitudes=fault_magnitudes(faults, drift_origin),
     )
@@ -231,7 +233,7 @@ def run_fault_scenario(
     surrogate: pd.DataFrame,
     faults: Mapping[str, Any],
     hmm: Mapping[str, Any],
-    twin: Mapping[str, Any],
+    twin: TwinParams | Mapping[str, Any],
     *,
     both_origins: bool = True,
 ) -> FaultScenario:
@@ -245,8 +247,8 @@ def run_fault_scenario(
         The ``faults`` section: ``schedule``, ``magnitudes``, ``drift_origin``, ``seed``.
     hmm : mapping
         The ``hmm`` section; both origins use the same EM starts (seed stream ``fault_fit``).
-    twin : mapping
-        ``dt``, ``fusion`` and ``kpi`` of the ``twin`` section.
+    twin : TwinParams or mapping
+        ``dt`` and :data:`dtwin.params.ALGEBRAIC_SECTIONS` of the ``twin`` section.
     both_origins : bool, default True
         Score the other drift origin beside the configured one (False: the configured one
         only, half the cost; the tables are the same either way).
@@ -255,6 +257,7 @@ def run_fault_scenario(
     -------
     FaultScenario
     """
+    twin = twin_params_from_mapping(twin, require_all=False, required=ALGEBRAIC_SECTIONS)
     configured = faults["drift_origin"]
     origins = [configured, *(o for o in DRIFT_ORIGINS if o != configured and both_origins)]
     summary: dict[str, Any] = {"drift_origin": configured, "origins": {}}

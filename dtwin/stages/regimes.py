@@ -42,7 +42,8 @@ __all__ = [
     "BIC_DATASETS",
     "given_bic_row",
     "bic_dataset",
-    "bic_sweep",
+    "sweep_bic",
+    "bic_sweep_dataset",
 ]
 
 logger = logging.getLogger(__name__)
@@ -209,7 +210,7 @@ def bic_dataset(
     ``nominal_residuals``: columns e0 … e4 of ``results/residuals.csv`` and
     ``results/regimes/nominal_model.json``; ``fault_features``: the ten features
     (:func:`dtwin.fault_injection.regime_features`) of ``results/faults/residuals.csv`` and the
-    ``model`` of ``results/faults/summary.json``. The inputs of :func:`bic_sweep` for one data set.
+    ``model`` of ``results/faults/summary.json``. The inputs of :func:`sweep_bic` for one data set.
     """
     if name not in BIC_DATASETS:
         raise DtwinValueError(f"name must be one of {BIC_DATASETS} (got {name!r})")
@@ -220,7 +221,7 @@ def bic_dataset(
     return regime_features(table), summary["model"]
 
 
-def bic_sweep(
+def sweep_bic(
     datasets: Mapping[str, pd.DataFrame],
     bic: Mapping[str, Any],
     hmm: Mapping[str, Any],
@@ -282,3 +283,20 @@ def bic_sweep(
         table.insert(0, "dataset", name)
         tables.append(table)
     return pd.concat(tables, ignore_index=True)
+
+
+def bic_sweep_dataset(
+    name: str,
+    features_csv: str | os.PathLike,
+    model_json: str | os.PathLike,
+    bic: Mapping[str, Any],
+    hmm: Mapping[str, Any],
+) -> pd.DataFrame:
+    """Rule ``bic_sweep_dataset``: the BIC over K of one data set (:func:`sweep_bic`).
+
+    Reads the data set and its dedicated fit with :func:`bic_dataset`; returns its rows of
+    ``results/bic_sweep.csv`` (rule ``bic_sweep`` joins the data sets,
+    :func:`dtwin.stages.bic_table.bic_sweep`).
+    """
+    features, model = bic_dataset(name, features_csv, model_json)
+    return sweep_bic({name: features}, bic, hmm, {name: model})

@@ -10,7 +10,8 @@ surrogates, the HMM and both plant corrections. Config sections: ``simulation``,
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from dataclasses import replace
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -20,10 +21,12 @@ from dtwin._validation import (
     require_in_range,
     require_mapping,
     require_nonnegative,
+    require_seed,
 )
 from dtwin.bias_correction import correct_bias, correct_plant_bias_viterbi
+from dtwin.config_sections import CorrectionSettings, SimulationSettings
 from dtwin.hmm import fit_hmm, zscore
-from dtwin.params import twin_params_from_mapping
+from dtwin.params import TwinParams, twin_params_from_mapping
 from dtwin.physics import fuse, sensor_first_order
 from dtwin.sensitivity_sweep import (
     CORRECTION_METHODS,
@@ -41,7 +44,11 @@ __all__ = ["r_sweep_physics", "sweep_point", "sweep_point_on_r_signals"]
 
 
 def r_sweep_physics(
-    r_physics: pd.DataFrame, twin: Mapping[str, Any], alpha: float, m_A: float, m_B: float
+    r_physics: pd.DataFrame,
+    twin: TwinParams | Mapping[str, Any],
+    alpha: float,
+    m_A: float,
+    m_B: float,
 ) -> pd.DataFrame:
     """Return R's physics for one configuration of its sweep, rebuilt from R's seed-11 run.
 
@@ -51,7 +58,7 @@ def r_sweep_physics(
         R's nominal seed-11 physics (α 0.6, unit multipliers), columns ``t`` and
         ``u_cmd, u_act, x, v, y_A, y_B, y_fused, z``
         (:func:`dtwin.reference.loaders.load_r_physics`).
-    twin : mapping
+    twin : TwinParams or mapping
         The ``twin`` config section (sensor time constants and biases, ``dt``).
     alpha, m_A, m_B : float
         The configuration.
@@ -97,45 +104,44 @@ def _score(method: str, residuals: np.ndarray, e1_after: np.ndarray) -> Correcti
     )
 
 
+class _SweepSettings(NamedTuple):
+    """What one point reads of the ``sensitivity`` section: EM seed, HMM, both shapings."""
+
+    seed: int
+    hmm: HmmSettings
+    code: CorrectionSettings
+    paper: CorrectionSettings
+
+
 def _evaluate(
     physics: pd.DataFrame,
     point: SweepPoint,
     source: str,
     physics_seed: int | None,
     hmm_seed: int,
-    twin: Mapping[str, Any],
+    twin: TwinParams,
     arx: Mapping[str, Any],
-    hmm: HmmSettings,
-    correction: Mapping[str, Any],
+    sweep: _SweepSettings,
 ) -> SweepRun:
     """Refit the surrogates and the HMM on ``physics`` and score both corrections."""
     surrogate, residual_table = roll_out_twin(
         physics, fit_twin_surrogates(physics, arx), twin, arx["rollout_init"]
     )
     residuals = residual_table[list(RESIDUALS)].to_numpy()
+    hmm = sweep.hmm
     fit = fit_hmm(zscore(residuals).values, hmm.n_states, seed=hmm_seed, **hmm.fit_options())
-    code = correction["code"]
     plant = correct_plant_bias_viterbi(
-        surrogate["x"],
-        physics["x"],
-        fit.smoothed,
-        fit.viterbi,
-        kappa=code["kappa"],
-        ema_alpha=code["ema_alpha"],
-        rate_max=code["rate_max"],
+        surrogate["x"], physics["x"], fit.smoothed, fit.viterbi, **sweep.code.options()
     )
-    paper = correction["paper"]
     weighted = correct_bias(
         surrogate,
         physics,
         fit.smoothed,
-        alpha=twin["fusion"]["alpha"],
-        w1=twin["kpi"]["w1"],
-        w2=twin["kpi"]["w2"],
-        dt=twin["dt"],
-        kappa=paper["kappa"],
-        ema_alpha=paper["ema_alpha"],
-        rate_max=paper["rate_max"],
+        alpha=twin.fusion.alpha,
+        w1=twin.kpi.w1,
+        w2=twin.kpi.w2,
+        dt=twin.dt,
+        **sweep.paper.options(),
     )
     usable = ~fit.restarts["status"].isin(["failed", "degenerate"])
     return SweepRun(
@@ -155,22 +161,27 @@ def _evaluate(
     )
 
 
-def _require_sections(sensitivity: Mapping[str, Any]) -> tuple[HmmSettings, Mapping]:
+def _require_sections(sensitivity: Mapping[str, Any]) -> _SweepSettings:
     sensitivity = require_mapping("sensitivity", sensitivity)
     hmm = HmmSettings.from_mapping(sensitivity["hmm"], "sensitivity.hmm")
     correction = require_mapping("sensitivity.correction", sensitivity["correction"])
     missing = [m for m in CORRECTION_METHODS if m not in correction]
     if missing:
         raise DtwinValueError(f"sensitivity.correction is missing method(s) {', '.join(missing)}")
-    return hmm, correction
+    code, paper = (
+        CorrectionSettings.from_mapping(correction[m], f"sensitivity.correction.{m}")
+        for m in CORRECTION_METHODS
+    )
+    seed = require_seed("sensitivity.seed", sensitivity["seed"])
+    return _SweepSettings(seed, hmm, code, paper)
 
 
 def sweep_point(
     point: SweepPoint,
     *,
-    simulation: Mapping[str, Any],
+    simulation: SimulationSettings | Mapping[str, Any],
     command: Mapping[str, Any],
-    twin: Mapping[str, Any],
+    twin: TwinParams | Mapping[str, Any],
     arx: Mapping[str, Any],
     sensitivity: Mapping[str, Any],
 ) -> SweepRun:
@@ -199,19 +210,20 @@ def sweep_point(
     the training window, roll the chain out, z-score ``e0 … e4``, fit the HMM (best of
     ``n_restarts`` EM starts) and score both corrections of ``e1`` (Eq. (27)).
     """
-    hmm, correction = _require_sections(sensitivity)
-    physics_seed = replicate_seed(simulation["seed"], point.replicate)
-    hmm_seed = replicate_seed(sensitivity["seed"], point.replicate)
+    sweep = _require_sections(sensitivity)
+    simulation = SimulationSettings.from_mapping(simulation)
+    physics_seed = replicate_seed(simulation.seed, point.replicate)
+    hmm_seed = replicate_seed(sweep.seed, point.replicate)
     scaled = scale_twin(twin, point.alpha, point.m_A, point.m_B)
-    physics = simulate_asset({**simulation, "seed": physics_seed}, command, scaled)
-    return _evaluate(physics, point, "ours", physics_seed, hmm_seed, scaled, arx, hmm, correction)
+    physics = simulate_asset(replace(simulation, seed=physics_seed), command, scaled)
+    return _evaluate(physics, point, "ours", physics_seed, hmm_seed, scaled, arx, sweep)
 
 
 def sweep_point_on_r_signals(
     point: SweepPoint,
     r_physics: pd.DataFrame,
     *,
-    twin: Mapping[str, Any],
+    twin: TwinParams | Mapping[str, Any],
     arx: Mapping[str, Any],
     sensitivity: Mapping[str, Any],
 ) -> SweepRun:
@@ -222,8 +234,8 @@ def sweep_point_on_r_signals(
     replicates on R's signals differ in the EM starts alone. Returns ``source =
     "r_signals"``, ``physics_seed = None``.
     """
-    hmm, correction = _require_sections(sensitivity)
-    hmm_seed = replicate_seed(sensitivity["seed"], point.replicate)
+    sweep = _require_sections(sensitivity)
+    hmm_seed = replicate_seed(sweep.seed, point.replicate)
     scaled = scale_twin(twin, point.alpha, point.m_A, point.m_B)
     physics = r_sweep_physics(r_physics, scaled, point.alpha, point.m_A, point.m_B)
-    return _evaluate(physics, point, "r_signals", None, hmm_seed, scaled, arx, hmm, correction)
+    return _evaluate(physics, point, "r_signals", None, hmm_seed, scaled, arx, sweep)

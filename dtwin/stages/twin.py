@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dtwin._validation import require_seed
 from dtwin.arx import arx_orders_from_mapping
 from dtwin.command import make_command, n_steps_for
-from dtwin.params import command_params_from_mapping, twin_params_from_mapping
+from dtwin.config_sections import SimulationSettings
+from dtwin.params import TwinParams, command_params_from_mapping, twin_params_from_mapping
 from dtwin.physics import simulate_physics
 from dtwin.surrogate import (
     compute_residuals,
@@ -34,15 +34,19 @@ __all__ = [
 
 
 def simulate_asset(
-    simulation: Mapping[str, Any], command: Mapping[str, Any], twin: Mapping[str, Any]
+    simulation: SimulationSettings | Mapping[str, Any],
+    command: Mapping[str, Any],
+    twin: TwinParams | Mapping[str, Any],
 ) -> pd.DataFrame:
     """Simulate the physical asset with one generator seeded from ``simulation.seed``.
 
     Returns the physics table of :func:`dtwin.physics.simulate_physics` (``t`` and signals).
+    ``simulation`` and ``twin`` are parsed here unless they come parsed.
     """
+    simulation = SimulationSettings.from_mapping(simulation)
     twin_params = twin_params_from_mapping(twin)
-    n_steps = n_steps_for(simulation["T"], twin_params.dt)
-    rng = np.random.default_rng(require_seed("simulation.seed", simulation["seed"]))
+    n_steps = n_steps_for(simulation.T, twin_params.dt)
+    rng = np.random.default_rng(simulation.seed)
     u_cmd = make_command(n_steps, twin_params.dt, command_params_from_mapping(command), rng)
     return simulate_physics(twin_params, u_cmd, rng)
 
@@ -54,7 +58,10 @@ def fit_twin_surrogates(physics: pd.DataFrame, arx: Mapping[str, Any]) -> pd.Dat
 
 
 def roll_out_twin(
-    physics: pd.DataFrame, theta: pd.DataFrame, twin: Mapping[str, Any], rollout_init: str
+    physics: pd.DataFrame,
+    theta: pd.DataFrame,
+    twin: TwinParams | Mapping[str, Any],
+    rollout_init: str,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Roll the surrogate chain out; return ``(surrogate, residuals)`` tables."""
     surrogate = run_surrogate_chain(

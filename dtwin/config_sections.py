@@ -1,0 +1,207 @@
+"""Typed, frozen settings of the config sections ``simulation``, ``acf`` and ``correction``.
+
+A stage (or the figure a script draws) turns its config section into one of these objects at
+its entry; everything after reads the object's attributes, never the raw mapping. ``from_mapping``
+returns an object of its own class as it is, so a stage entry called with settings already
+parsed does not parse them again. Every
+section is parsed the same way, by a ``from_mapping(raw, section)`` classmethod (as
+:class:`dtwin.stages.settings.HmmSettings`): a missing or unknown key, a wrong type or a value
+out of range is a :class:`~dtwin._validation.DtwinValueError` or
+:class:`~dtwin._validation.DtwinTypeError` naming the key
+(``correction.ema_alpha must be in [0, 1] (got 1.3)``). The bounds are those of
+``workflow/schemas/config.schema.yaml``; the keys' meanings are in ``docs/config.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+from dtwin._validation import (
+    DtwinValueError,
+    require_in_range,
+    require_mapping,
+    require_nonnegative,
+    require_number,
+    require_positive,
+    require_seed,
+)
+
+__all__ = ["SimulationSettings", "AcfSettings", "CorrectionSettings", "section_keys"]
+
+
+def section_keys(cls: type, raw: Any, section: str) -> Mapping[str, Any]:
+    """Return ``raw`` once it is a mapping holding exactly the fields of dataclass ``cls``.
+
+    Raises
+    ------
+    DtwinTypeError
+        If ``raw`` is not a mapping.
+    DtwinValueError
+        If a field is missing or a key is not a field (both named with ``section``).
+    """
+    raw = require_mapping(section, raw)
+    names = [field.name for field in fields(cls)]
+    missing = [name for name in names if name not in raw]
+    if missing:
+        raise DtwinValueError(f"{section} is missing key(s): {', '.join(missing)}")
+    unknown = sorted(str(key) for key in raw if key not in names)
+    if unknown:
+        raise DtwinValueError(f"{section} has unknown key(s): {', '.join(unknown)}")
+    return raw
+
+
+def _integer(name: str, value: Any, minimum: int) -> int:
+    """Return ``value`` as an int ``>= minimum`` (an integral float such as ``30.0`` counts)."""
+    number = require_number(name, value)
+    if number < minimum or not number.is_integer():
+        raise DtwinValueError(f"{name} must be an integer >= {minimum} (got {value!r})")
+    return int(number)
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """The ``simulation`` section: length and seed of the paper's run (§3.1).
+
+    Attributes
+    ----------
+    T : float
+        Length of the run, s (``n_steps = round(T / twin.dt)``).
+    seed : int
+        Seed of the one generator of the command and the asset's noise.
+    """
+
+    T: float
+    seed: int
+
+    @classmethod
+    def from_mapping(cls, raw: Any, section: str = "simulation") -> SimulationSettings:
+        """Return the validated settings of config section ``section``.
+
+        Examples
+        --------
+        >>> SimulationSettings.from_mapping({"T": 20.0, "seed": 11})
+        SimulationSettings(T=20.0, seed=11)
+        >>> SimulationSettings.from_mapping({"T": 0, "seed": 11})
+        Traceback (most recent call last):
+        ...
+        dtwin._validation.DtwinValueError: simulation.T must be > 0 (got 0.0)
+        """
+        if isinstance(raw, cls):
+            return raw
+        raw = section_keys(cls, raw, section)
+        return cls(
+            T=require_positive(f"{section}.T", raw["T"]),
+            seed=require_seed(f"{section}.seed", raw["seed"]),
+        )
+
+
+@dataclass(frozen=True)
+class AcfSettings:
+    """The ``acf`` section: the residual autocorrelation of Fig. 3 (paper §4.1).
+
+    Attributes
+    ----------
+    nlags : int
+        Lags of every ACF, samples (>= 1).
+    white_noise_n : int
+        Length of panel A's white-noise demo series, samples (>= 10).
+    white_noise_seed : int
+        Seed of that series.
+    ljungbox_lags : tuple of int
+        Lags of the Ljung–Box tests, samples (each >= 1).
+    significance : float
+        Ljung–Box p below this reads "not white", in (0, 1).
+    strong_lag1 : float
+        Lag-1 ACF above this reads "strongly autocorrelated", in [−1, 1].
+    """
+
+    nlags: int
+    white_noise_n: int
+    white_noise_seed: int
+    ljungbox_lags: tuple[int, ...]
+    significance: float
+    strong_lag1: float
+
+    @classmethod
+    def from_mapping(cls, raw: Any, section: str = "acf") -> AcfSettings:
+        """Return the validated settings of config section ``section``.
+
+        Examples
+        --------
+        >>> raw = {"nlags": 30, "white_noise_n": 1000, "white_noise_seed": 42,
+        ...        "ljungbox_lags": [10, 20], "significance": 0.01, "strong_lag1": 0.9}
+        >>> AcfSettings.from_mapping(raw).ljungbox_lags
+        (10, 20)
+        """
+        if isinstance(raw, cls):
+            return raw
+        raw = section_keys(cls, raw, section)
+        lags = raw["ljungbox_lags"]
+        if isinstance(lags, (str, bytes)) or not isinstance(lags, (list, tuple)) or not lags:
+            raise DtwinValueError(
+                f"{section}.ljungbox_lags must be a non-empty list (got {lags!r})"
+            )
+        significance = require_number(f"{section}.significance", raw["significance"])
+        if not 0 < significance < 1:
+            raise DtwinValueError(f"{section}.significance must be in (0, 1) (got {significance})")
+        return cls(
+            nlags=_integer(f"{section}.nlags", raw["nlags"], 1),
+            white_noise_n=_integer(f"{section}.white_noise_n", raw["white_noise_n"], 10),
+            white_noise_seed=require_seed(f"{section}.white_noise_seed", raw["white_noise_seed"]),
+            ljungbox_lags=tuple(_integer(f"{section}.ljungbox_lags", lag, 1) for lag in lags),
+            significance=significance,
+            strong_lag1=require_in_range(f"{section}.strong_lag1", raw["strong_lag1"], -1, 1),
+        )
+
+
+@dataclass(frozen=True)
+class CorrectionSettings:
+    """The bias correction's shaping (paper §4.3).
+
+    Section ``correction`` and the two shapings of ``sensitivity.correction`` (``code``,
+    ``paper``).
+
+    Attributes
+    ----------
+    kappa : float
+        Gain on the estimated bias.
+    ema_alpha : float
+        Weight of the newest sample in the exponential moving average, in (0, 1].
+    rate_max : float
+        Largest step of the correction per sample, signal units (>= 0).
+    """
+
+    kappa: float
+    ema_alpha: float
+    rate_max: float
+
+    @classmethod
+    def from_mapping(cls, raw: Any, section: str = "correction") -> CorrectionSettings:
+        """Return the validated settings of config section ``section``.
+
+        Examples
+        --------
+        >>> CorrectionSettings.from_mapping({"kappa": 0.8, "ema_alpha": 0.15, "rate_max": 0.05})
+        CorrectionSettings(kappa=0.8, ema_alpha=0.15, rate_max=0.05)
+        >>> CorrectionSettings.from_mapping({"kappa": 0.8, "ema_alpha": 0, "rate_max": 0.05})
+        Traceback (most recent call last):
+        ...
+        dtwin._validation.DtwinValueError: correction.ema_alpha must be in (0, 1] (got 0.0)
+        """
+        if isinstance(raw, cls):
+            return raw
+        raw = section_keys(cls, raw, section)
+        ema_alpha = require_number(f"{section}.ema_alpha", raw["ema_alpha"])
+        if not 0 < ema_alpha <= 1:
+            raise DtwinValueError(f"{section}.ema_alpha must be in (0, 1] (got {ema_alpha})")
+        return cls(
+            kappa=require_number(f"{section}.kappa", raw["kappa"]),
+            ema_alpha=ema_alpha,
+            rate_max=require_nonnegative(f"{section}.rate_max", raw["rate_max"]),
+        )
+
+    def options(self) -> dict[str, float]:
+        """Return the keyword arguments ``kappa``, ``ema_alpha``, ``rate_max`` of a correction."""
+        return {"kappa": self.kappa, "ema_alpha": self.ema_alpha, "rate_max": self.rate_max}

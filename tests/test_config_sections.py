@@ -1,0 +1,82 @@
+"""Typed config sections (dtwin.config_sections, the twin's sections a stage needs): errors name
+the key, the shipped config parses, a parsed object passes through a stage entry unchanged."""
+
+from __future__ import annotations
+
+import pytest
+
+from dtwin._validation import DtwinTypeError, DtwinValueError
+from dtwin.config_sections import AcfSettings, CorrectionSettings, SimulationSettings
+from dtwin.params import ALGEBRAIC_SECTIONS, twin_params_from_mapping
+
+SECTIONS = {"simulation": SimulationSettings, "acf": AcfSettings, "correction": CorrectionSettings}
+
+
+@pytest.mark.parametrize("section", sorted(SECTIONS))
+def test_the_shipped_config_parses_and_a_parsed_section_passes_through(config, section):
+    settings = SECTIONS[section].from_mapping(config[section])
+    assert SECTIONS[section].from_mapping(settings) is settings
+    for key, value in config[section].items():
+        parsed = getattr(settings, key)
+        assert (list(parsed) if isinstance(parsed, tuple) else parsed) == value
+
+
+def test_the_sweep_shapings_parse_as_correction_settings(config):
+    for method, raw in config["sensitivity"]["correction"].items():
+        if method != "method":
+            CorrectionSettings.from_mapping(raw, f"sensitivity.correction.{method}")
+
+
+@pytest.mark.parametrize(
+    ("section", "key", "value", "error", "message"),
+    [
+        ("simulation", "T", -1.0, DtwinValueError, "simulation.T must be > 0"),
+        ("simulation", "seed", 1.5, DtwinValueError, "simulation.seed must be an integer >= 0"),
+        ("acf", "nlags", 0, DtwinValueError, "acf.nlags must be an integer >= 1"),
+        ("acf", "white_noise_n", 5, DtwinValueError, "acf.white_noise_n must be an integer >= 10"),
+        ("acf", "ljungbox_lags", [], DtwinValueError, "acf.ljungbox_lags must be a non-empty"),
+        ("acf", "ljungbox_lags", [10, 0], DtwinValueError, "acf.ljungbox_lags must be an integer"),
+        ("acf", "significance", 1.0, DtwinValueError, r"acf.significance must be in \(0, 1\)"),
+        ("acf", "strong_lag1", 1.5, DtwinValueError, r"acf.strong_lag1 must be in \[-1, 1\]"),
+        ("correction", "kappa", "x", DtwinTypeError, "correction.kappa must be a number"),
+        (
+            "correction",
+            "ema_alpha",
+            1.3,
+            DtwinValueError,
+            r"correction.ema_alpha must be in \(0, 1\]",
+        ),
+        ("correction", "rate_max", -0.1, DtwinValueError, "correction.rate_max must be >= 0"),
+    ],
+)
+def test_a_bad_value_names_its_key(config, section, key, value, error, message):
+    with pytest.raises(error, match=message):
+        SECTIONS[section].from_mapping({**config[section], key: value})
+
+
+@pytest.mark.parametrize("section", sorted(SECTIONS))
+def test_missing_and_unknown_keys_are_named(config, section):
+    raw = dict(config[section])
+    first = next(iter(raw))
+    with pytest.raises(DtwinValueError, match=f"{section} is missing key\\(s\\): {first}"):
+        SECTIONS[section].from_mapping({k: v for k, v in raw.items() if k != first})
+    with pytest.raises(DtwinValueError, match=f"{section} has unknown key\\(s\\): typo"):
+        SECTIONS[section].from_mapping({**raw, "typo": 1})
+    with pytest.raises(DtwinTypeError, match=f"{section} must be a mapping"):
+        SECTIONS[section].from_mapping([1, 2])
+
+
+def test_a_stage_names_the_twin_section_it_needs(config):
+    """The correction and fault injection read dt, fusion and kpi of twin, parsed once."""
+    assert ALGEBRAIC_SECTIONS == ("fusion", "kpi")
+    part = {k: config["twin"][k] for k in ("dt", *ALGEBRAIC_SECTIONS)}
+    twin = twin_params_from_mapping(part, require_all=False, required=ALGEBRAIC_SECTIONS)
+    assert twin_params_from_mapping(twin, required=ALGEBRAIC_SECTIONS) is twin
+    with pytest.raises(DtwinValueError, match="twin is missing key: kpi"):
+        twin_params_from_mapping(
+            {"dt": 0.02, "fusion": {"alpha": 0.6}}, require_all=False, required=ALGEBRAIC_SECTIONS
+        )
+    with pytest.raises(DtwinValueError, match=r"twin.fusion.alpha must be in \[0, 1\] \(got 1.3\)"):
+        twin_params_from_mapping(
+            {**part, "fusion": {"alpha": 1.3}}, require_all=False, required=ALGEBRAIC_SECTIONS
+        )
