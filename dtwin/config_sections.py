@@ -1,4 +1,4 @@
-"""Typed, frozen settings of the config sections ``simulation``, ``acf`` and ``correction``.
+"""Typed, frozen settings of the config sections ``simulation``, ``acf``, ``correction``, ``bic``.
 
 A stage (or the figure a script draws) turns its config section into one of these objects at
 its entry; everything after reads the object's attributes, never the raw mapping. ``from_mapping``
@@ -15,7 +15,7 @@ out of range is a :class:`~dtwin._validation.DtwinValueError` or
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass, fields
 from typing import Any
 
 from dtwin._validation import (
@@ -28,11 +28,19 @@ from dtwin._validation import (
     require_seed,
 )
 
-__all__ = ["SimulationSettings", "AcfSettings", "CorrectionSettings", "section_keys"]
+__all__ = [
+    "SimulationSettings",
+    "AcfSettings",
+    "CorrectionSettings",
+    "BicSettings",
+    "section_keys",
+]
 
 
 def section_keys(cls: type, raw: Any, section: str) -> Mapping[str, Any]:
-    """Return ``raw`` once it is a mapping holding exactly the fields of dataclass ``cls``.
+    """Return ``raw`` once it is a mapping holding the fields of dataclass ``cls`` and no other.
+
+    Fields with a default may be left out.
 
     Raises
     ------
@@ -43,7 +51,8 @@ def section_keys(cls: type, raw: Any, section: str) -> Mapping[str, Any]:
     """
     raw = require_mapping(section, raw)
     names = [field.name for field in fields(cls)]
-    missing = [name for name in names if name not in raw]
+    required = [f.name for f in fields(cls) if f.default is MISSING]
+    missing = [name for name in required if name not in raw]
     if missing:
         raise DtwinValueError(f"{section} is missing key(s): {', '.join(missing)}")
     unknown = sorted(str(key) for key in raw if key not in names)
@@ -205,3 +214,69 @@ class CorrectionSettings:
     def options(self) -> dict[str, float]:
         """Return the keyword arguments ``kappa``, ``ema_alpha``, ``rate_max`` of a correction."""
         return {"kappa": self.kappa, "ema_alpha": self.ema_alpha, "rate_max": self.rate_max}
+
+
+def _optional_integer(name: str, value: Any, minimum: int) -> int | None:
+    return None if value is None else _integer(name, value, minimum)
+
+
+@dataclass(frozen=True)
+class BicSettings:
+    """The ``bic`` section: the sweep of the BIC over K (paper §5, Fig. 9).
+
+    Attributes
+    ----------
+    ks : tuple of int
+        The K always fitted (each >= 1).
+    n_restarts : int
+        EM starts per K (>= 1); the best of the first half is reported beside the best of all.
+    k_max : int or None, default None
+        Extend K past ``max(ks)`` until the BIC rose ``stop_after_rises`` times in a row, at
+        most to ``k_max`` (None: no extension).
+    stop_after_rises : int, default 2
+        Rises in a row that bracket the minimum (>= 1).
+    split_starts : bool, default False
+        Also grow the best K − 1 fit by splitting each of its states.
+    max_restarts : int or None, default None
+        Starts of a K are doubled while its second half still gains, up to this (None: never).
+    """
+
+    ks: tuple[int, ...]
+    n_restarts: int
+    k_max: int | None = None
+    stop_after_rises: int = 2
+    split_starts: bool = False
+    max_restarts: int | None = None
+
+    @classmethod
+    def from_mapping(cls, raw: Any, section: str = "bic") -> BicSettings:
+        """Return the validated settings of config section ``section``.
+
+        Examples
+        --------
+        >>> BicSettings.from_mapping({"ks": [2, 3], "n_restarts": 4})
+        BicSettings(ks=(2, 3), n_restarts=4, k_max=None, stop_after_rises=2, split_starts=False, max_restarts=None)
+        >>> BicSettings.from_mapping({"ks": [2, 0], "n_restarts": 4})
+        Traceback (most recent call last):
+        ...
+        dtwin._validation.DtwinValueError: bic.ks must be an integer >= 1 (got 0)
+        """  # noqa: E501
+        if isinstance(raw, cls):
+            return raw
+        raw = section_keys(cls, raw, section)
+        ks = raw["ks"]
+        if isinstance(ks, (str, bytes)) or not isinstance(ks, (list, tuple)) or not ks:
+            raise DtwinValueError(f"{section}.ks must be a non-empty list (got {ks!r})")
+        split = raw.get("split_starts", False)
+        if not isinstance(split, bool):
+            raise DtwinValueError(f"{section}.split_starts must be true or false (got {split!r})")
+        return cls(
+            ks=tuple(_integer(f"{section}.ks", k, 1) for k in ks),
+            n_restarts=_integer(f"{section}.n_restarts", raw["n_restarts"], 1),
+            k_max=_optional_integer(f"{section}.k_max", raw.get("k_max"), 1),
+            stop_after_rises=_integer(
+                f"{section}.stop_after_rises", raw.get("stop_after_rises", 2), 1
+            ),
+            split_starts=split,
+            max_restarts=_optional_integer(f"{section}.max_restarts", raw.get("max_restarts"), 1),
+        )

@@ -80,3 +80,19 @@ def test_a_stage_names_the_twin_section_it_needs(config):
         twin_params_from_mapping(
             {**part, "fusion": {"alpha": 1.3}}, require_all=False, required=ALGEBRAIC_SECTIONS
         )
+
+
+def test_the_bic_section_parses_with_the_library_defaults(config):
+    from dtwin.config_sections import BicSettings
+
+    settings = BicSettings.from_mapping(config["bic"])
+    assert settings.ks == tuple(config["bic"]["ks"]) and settings.k_max == config["bic"]["k_max"]
+    assert BicSettings.from_mapping(settings) is settings
+    short = BicSettings.from_mapping({"ks": [2, 3], "n_restarts": 2})
+    assert (short.k_max, short.stop_after_rises, short.split_starts) == (None, 2, False)
+    with pytest.raises(DtwinValueError, match=r"bic\.split_starts must be true or false"):
+        BicSettings.from_mapping({**config["bic"], "split_starts": "yes"})
+    with pytest.raises(DtwinValueError, match="bic is missing key\\(s\\): n_restarts"):
+        BicSettings.from_mapping({"ks": [2]})
+    with pytest.raises(DtwinValueError, match=r"draws\.bic\.k_max must be an integer >= 1"):
+        BicSettings.from_mapping({**config["bic"], "k_max": 0}, "draws.bic")

@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from dtwin._validation import DtwinValueError
+from dtwin.config_sections import BicSettings
 from dtwin.fault_injection import regime_features
 from dtwin.hmm import HmmFit, ZScored, bic_by_k, bic_row, fit_hmm, zscore
 from dtwin.stages.settings import EmSettings, HmmSettings
@@ -223,7 +224,7 @@ def bic_dataset(
 
 def sweep_bic(
     datasets: Mapping[str, pd.DataFrame],
-    bic: Mapping[str, Any],
+    bic: BicSettings | Mapping[str, Any],
     hmm: Mapping[str, Any],
     models: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> pd.DataFrame:
@@ -233,12 +234,13 @@ def sweep_bic(
     ----------
     datasets : mapping of str to DataFrame
         Raw features per data set, keys from :data:`BIC_DATASETS` (each is z-scored here).
-    bic : mapping
-        The ``bic`` section: ``ks`` (always fitted), ``n_restarts`` (starts per K; the best
-        of the first half is reported beside the best of all), optional ``k_max`` and
-        ``stop_after_rises`` (extend K past ``max(ks)`` until the BIC rose that many times in
-        a row, at most to ``k_max``) and ``split_starts`` (also grow the best K − 1 fit by
-        splitting each of its states, :func:`dtwin.hmm.split_fits`).
+    bic : BicSettings or mapping
+        The ``bic`` section (:class:`dtwin.config_sections.BicSettings`): ``ks`` (always
+        fitted), ``n_restarts`` (starts per K; the best of the first half is reported beside
+        the best of all), optional ``k_max`` and ``stop_after_rises`` (extend K past
+        ``max(ks)`` until the BIC rose that many times in a row, at most to ``k_max``),
+        ``split_starts`` (also grow the best K − 1 fit by splitting each of its states,
+        :func:`dtwin.hmm.split_fits`) and ``max_restarts``; parsed here unless it comes parsed.
     hmm : mapping
         The ``hmm`` section (``seed`` and the EM options).
     models : mapping of str to dict, optional
@@ -252,6 +254,7 @@ def sweep_bic(
         (``K``, ``log_likelihood``, ``n_params``, ``bic``, ``converged``, ``n_usable``,
         ``log_likelihood_half``, ``n_starts``, ``source``); one row per data set and K.
     """
+    bic = BicSettings.from_mapping(bic)
     em_options = EmSettings.from_mapping(hmm).options()
     tables = []
     for name, features in datasets.items():
@@ -261,13 +264,13 @@ def sweep_bic(
         start = time.perf_counter()
         table = bic_by_k(
             zscore(features).values,
-            list(bic["ks"]),
-            n_restarts=bic["n_restarts"],
+            list(bic.ks),
+            n_restarts=bic.n_restarts,
             seed=hmm_seed(hmm, f"bic_{name}"),
-            k_max=bic.get("k_max"),
-            stop_after_rises=bic.get("stop_after_rises", 2),
-            split_starts=bool(bic.get("split_starts", False)),
-            max_restarts=bic.get("max_restarts"),
+            k_max=bic.k_max,
+            stop_after_rises=bic.stop_after_rises,
+            split_starts=bic.split_starts,
+            max_restarts=bic.max_restarts,
             given=None if model is None else {model["n_states"]: given_bic_row(model)},
             **em_options,
         )
@@ -276,7 +279,7 @@ def sweep_bic(
             name,
             features.shape[1],
             table["K"].tolist(),
-            bic["n_restarts"],
+            bic.n_restarts,
             time.perf_counter() - start,
         )
         table.insert(0, "n_features", features.shape[1])
@@ -289,7 +292,7 @@ def bic_sweep_dataset(
     name: str,
     features_csv: str | os.PathLike,
     model_json: str | os.PathLike,
-    bic: Mapping[str, Any],
+    bic: BicSettings | Mapping[str, Any],
     hmm: Mapping[str, Any],
 ) -> pd.DataFrame:
     """Rule ``bic_sweep_dataset``: the BIC over K of one data set (:func:`sweep_bic`).
