@@ -348,3 +348,65 @@ def test_own_asset_with_each_effect_for_20_seeds_reads_as_well_silent_as_declare
     declared = sum(d for d, _ in rights)
     silent = sum(s for _, s in rights)
     assert silent >= 0.9 * len(rights) and silent >= declared - 3, (declared, silent)
+
+
+# --- 95 % intervals of the answer's parameters (issue 25 item 6) ------------------------------
+
+
+def test_rig_friction_interval_holds_the_true_level_and_is_in_the_json():
+    result = diagnose(recording_from_frame(_rig(0.3)), twin_from_mapping({"dt": 0.002}))
+    low, high = result.param_intervals["Fc"]
+    assert low < result.params["Fc"] < high
+    assert low <= 0.3 <= high and high - low < 0.2 * 0.3
+    payload = diagnosis_to_dict(result)
+    jsonschema.validate(payload, SCHEMA)
+    assert payload["param_intervals"]["Fc"] == [low, high]
+
+
+def _sensor_case(rng: np.random.Generator, n: int = 1500, gain: float = 1.08):
+    """Sensor A with a scale error and AR(1) noise (lag-1 correlation 0.6): data, truth."""
+    from dtwin.gap.effects import Scales
+    from dtwin.gap.models import ModuleData, first_order_lag
+
+    dt = 0.02
+    t = np.arange(n) * dt
+    x = np.sin(2 * np.pi * 0.3 * t) + 0.5 * np.sign(np.sin(2 * np.pi * 0.07 * t))
+    noise = np.zeros(n)
+    for i in range(1, n):
+        noise[i] = 0.6 * noise[i - 1] + 0.8 * 0.03 * rng.standard_normal()
+    y = gain * first_order_lag(x, 0.08, dt, x[0]) + 0.01 + noise
+    scales = Scales(
+        input_max=float(np.max(np.abs(x))),
+        input_std=float(np.std(x)),
+        output_std=float(np.std(y)),
+        velocity_std=0.0,
+        duration=float(t[-1]),
+        dt=dt,
+        noise_std=0.03,
+        stiffness=1.0,
+        mass=1.0,
+        output_mean=float(np.mean(y)),
+    )
+    return ModuleData("M2a", {"x": x}, y, dt, t, scales=scales), gain
+
+
+def test_intervals_cover_the_true_gain_about_95_percent_under_coloured_noise():
+    """40 noise draws: the sandwich interval with batch means holds the truth in 34-40 of them
+    (binomial 95 % range at p = 0.95 is 35-40); the naive s²(JᵀJ)⁻¹ interval would not."""
+    from dtwin.gap.effects import effect_by_name
+    from dtwin.gap.fit import fit_candidate
+    from dtwin.gap.intervals import parameter_intervals
+
+    effect = effect_by_name("sensor_scale_error")
+    rng = np.random.default_rng(25)
+    inside, widths = 0, []
+    for _ in range(40):
+        data, gain = _sensor_case(rng)
+        fit = fit_candidate(data, effect, {"tau": 0.08, "bias": 0.0}, n_train=750)
+        intervals = parameter_intervals(data, effect, fit.lin, fit.theta, 750)
+        assert set(intervals) == {"tau", "bias", "gain"}
+        low, high = intervals["gain"]
+        inside += low <= gain <= high
+        widths.append(high - low)
+    assert 34 <= inside <= 40
+    assert np.median(widths) < 0.05  # informative: ±2.5 % of the gain at most

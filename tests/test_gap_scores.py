@@ -227,3 +227,38 @@ def test_a_second_effect_is_scored_on_two_effect_cases_and_counted_as_false_else
     named = metrics["arms"]["two"]["intervals"]["second_effect_named"]
     false = metrics["arms"]["default"]["intervals"]["false_second_effect"]
     assert (named["k"], named["n"]) == (1, 3) and (false["k"], false["n"]) == (1, 2)
+
+
+def test_interval_coverage_counts_right_answers_whose_interval_holds_the_truth():
+    """Issue 25 item 6: coverage per effect, Wilson interval, missing intervals counted."""
+    key = {
+        "effect": "coulomb_friction",
+        "expected_effect": "coulomb_friction",
+        "module": "M1",
+        "in_list": True,
+        "magnitude": 0.5,
+        "n_samples": 1000,
+        "params": {"Fc": 0.2},
+    }
+    base = {"module": "M1", "effect": "coulomb_friction", "recording": {"dt": 0.02}}
+    diagnoses = [
+        {**base, "params": {"Fc": 0.21}, "param_intervals": {"Fc": [0.18, 0.24]}},  # holds
+        {**base, "params": {"Fc": 0.25}, "param_intervals": {"Fc": [0.22, 0.28]}},  # misses
+        {**base, "params": {"Fc": 0.19}, "param_intervals": {}},  # no interval
+        {**base, "module": "M0", "effect": "actuator_deadzone", "params": {"D": 1.0}},  # wrong
+    ]
+    table = score_cases((f"c{i}", key, d) for i, d in enumerate(diagnoses))
+    metrics = benchmark_metrics(table)
+    coverage = metrics["interval_coverage"]
+    assert (coverage["k"], coverage["n"]) == (1, 2)
+    assert coverage["low"] < 0.5 < coverage["high"]
+    assert metrics["interval_coverage_by_effect"]["coulomb_friction"]["k"] == 1
+    assert metrics["interval_missing"] == 1
+
+
+def test_report_gives_each_parameter_with_its_interval():
+    _case, result = _diagnosed("coulomb_friction", None, 1, 0.8)
+    low, high = result.param_intervals["Fc"]
+    assert low < result.params["Fc"] < high
+    assert f"Fc = {result.params['Fc']:.4g} [{low:.4g}, {high:.4g}]" in render_markdown(result)
+    assert diagnosis_to_dict(result)["param_intervals"]["Fc"] == [low, high]

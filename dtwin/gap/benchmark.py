@@ -190,7 +190,7 @@ def _parameter_columns(key, diagnosis, effect_ok: bool) -> dict[str, Any]:
     size; relative to the value for a saturation level); NaN when not comparable.
     """
     out = {"param_name": None, "param_true": math.nan, "param_fitted": math.nan}
-    out["param_error"] = math.nan
+    out.update(param_error=math.nan, param_low=math.nan, param_high=math.nan)
     dt = float((diagnosis.get("recording") or {}).get("dt") or key.get("dt") or math.nan)
     truth = true_parameter(key, dt) if effect_ok and key["expected_effect"] != NONE else None
     if truth is None:
@@ -201,6 +201,9 @@ def _parameter_columns(key, diagnosis, effect_ok: bool) -> dict[str, Any]:
     out.update(param_name=name, param_true=value)
     if fitted is not None and size > 0:
         out.update(param_fitted=fitted, param_error=abs(fitted - value) / size)
+    bounds = (diagnosis.get("param_intervals") or {}).get(name)
+    if fitted is not None and bounds is not None and None not in bounds:
+        out.update(param_low=float(bounds[0]), param_high=float(bounds[1]))
     return out
 
 
@@ -350,6 +353,29 @@ def _parameter_errors(right: pd.DataFrame) -> dict[str, Any]:
         "median_parameter_error": float(errors.param_error.median()) if len(errors) else None,
         "n_parameter_errors": int(len(errors)),
         "parameter_error_by_effect": per_effect,
+        **_interval_coverage(right),
+    }
+
+
+def _interval_coverage(right: pd.DataFrame) -> dict[str, Any]:
+    """Return how often the answer's 95 % interval holds the true parameter, overall and per effect.
+
+    Over right diagnoses with a true catalogue parameter (§Scores) and an interval for it:
+    ``interval_coverage`` ``{k, n, rate, low, high}`` (Wilson 95 %), ``interval_coverage_by_effect``
+    the same per effect, and ``interval_missing``, right diagnoses with a true parameter but no
+    interval (a parameter the data did not determine).
+    """
+    if "param_low" not in right:
+        return {"interval_coverage": None, "interval_coverage_by_effect": {}}
+    scored = right.dropna(subset=["param_error"])
+    has = scored.dropna(subset=["param_low", "param_high"])
+    inside = (has.param_low <= has.param_true) & (has.param_true <= has.param_high)
+    return {
+        "interval_coverage": _rate(inside),
+        "interval_coverage_by_effect": {
+            effect: _rate(group) for effect, group in inside.groupby(has.effect)
+        },
+        "interval_missing": int(len(scored) - len(has)),
     }
 
 

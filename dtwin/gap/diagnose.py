@@ -54,6 +54,7 @@ from dtwin.gap.effects import (
     quantizer_log_density,
 )
 from dtwin.gap.fit import CandidateFit, calibrate_linear, fit_candidate, linear_typical
+from dtwin.gap.intervals import parameter_intervals
 from dtwin.gap.localise import (
     ModuleModel,
     module_inputs,
@@ -249,7 +250,8 @@ class Diagnosis:
     module for the figure. ``free_run_rms_before`` and ``free_run_rms_after`` are RMS errors
     in the recording's units of the source module (M1 when there is none) simulated over the
     scoring part from its first sample, with the linear twin and with the chosen effect
-    (:func:`_free_run_rms`; None for an integrating or unstable plant).
+    (:func:`_free_run_rms`; None for an integrating or unstable plant). ``param_intervals``
+    gives a 95 % interval of every fitted parameter of the answer (:func:`_answer_intervals`).
     """
 
     module: str | None
@@ -279,6 +281,7 @@ class Diagnosis:
     twin_discretisation: str | None = None
     free_run_rms_before: float | None = None
     free_run_rms_after: float | None = None
+    param_intervals: dict[str, tuple[float, float]] = field(default_factory=dict)
     series: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -1254,6 +1257,28 @@ def _free_run_rms(works: Mapping[str, _ModuleWork], source, chosen, split: _Spli
     return none | {key: _rms(data.output, sim, split.score) for key, sim in runs.items()}
 
 
+def _answer_intervals(source, chosen, split: _Split) -> dict[str, tuple[float, float]]:
+    """Return the 95 % interval of each of the answer's parameters (docs/gap.md §Intervals).
+
+    Those of ``params``, and for ``parameter_mismatch`` every re-fitted linear parameter
+    (:func:`dtwin.gap.intervals.parameter_intervals`); empty without a chosen effect.
+    """
+    if chosen is None:
+        return {}
+    fitted = next(f for f in source.candidates if f.effect.name == chosen.effect)
+    intervals = parameter_intervals(
+        source.data,
+        fitted.effect,
+        fitted.fit.lin,
+        fitted.fit.theta,
+        split.n_train,
+        other_part=(split.n_train, split.n_choose),
+    )
+    if chosen.effect == PARAMETER_MISMATCH:
+        return intervals
+    return {name: value for name, value in intervals.items() if name in chosen.params}
+
+
 def _strictly_stable(lin: Mapping[str, float]) -> bool:
     """Return whether the plant ``m·ẍ + c·ẋ + k·x = u`` is strictly stable (m, c, k > 0)."""
     return all(float(lin.get(key, 0.0)) > 0 for key in ("m", "c", "k"))
@@ -1420,5 +1445,6 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
         also_needed=_other_gaps(flagged, source, ranked, settings),
         twin_discretisation=discretisation,
         **_free_run_rms(works, source, chosen, split),
+        param_intervals=_answer_intervals(source, chosen, split),
         series=_scoring_series(recording, source, ranked, split.score),
     )

@@ -75,6 +75,11 @@ DEFINITIONS: dict[str, str] = {
     "score": "n_eff·deviance + n_params·ln(n_eff) on the choosing part (deviance ln MSE; a "
     "quantizer's its own density's), relative to the best candidate",
     "confidence": "BIC weight of the chosen candidate among the module's candidates",
+    "param_intervals": "95 % interval [low, high] of each fitted parameter of the answer "
+    "(shown after its value in the first line of report.md): the least-squares fit's sandwich "
+    "covariance with the training residuals cut in 20 blocks taken as independent, and a t "
+    "quantile with 19 degrees of freedom; it describes the fit's statistical uncertainty, not "
+    "the error of a catalogue form that only approximates the real effect",
     "free_run_rms_before, free_run_rms_after": "RMS of recorded − simulated output of the "
     "source module (M1 when the answer is none) over the scoring part, in the recording's units, "
     "the twin run freely from the recorded state at the scoring part's first sample: with the "
@@ -111,6 +116,7 @@ def diagnosis_to_dict(diagnosis: Diagnosis) -> dict[str, Any]:
         "module": d.module,
         "effect": d.effect,
         "params": d.params,
+        "param_intervals": {name: list(bounds) for name, bounds in d.param_intervals.items()},
         "confidence": d.confidence,
         **{key: getattr(d, key) for key in ("gap_before", "gap_refit", "gap_after")},
         "shrink_pct": d.shrink_pct,
@@ -183,10 +189,16 @@ def _headline(d: Diagnosis) -> str:
     return _answer_headline(d) + _also_needed_line(d)
 
 
+def _param_text(name: str, value: float, bounds: tuple[float, float] | None) -> str:
+    """Return ``name = value [low, high]`` (the 95 % interval when there is one)."""
+    interval = f" [{bounds[0]:.4g}, {bounds[1]:.4g}]" if bounds is not None else ""
+    return f"{name} = {value:.4g}{interval}"
+
+
 def _answer_headline(d: Diagnosis) -> str:
     if d.effect == "unexplained":
         return _unexplained_headline(d)
-    params = ", ".join(f"{k} = {v:.4g}" for k, v in d.params.items())
+    params = ", ".join(_param_text(k, v, d.param_intervals.get(k)) for k, v in d.params.items())
     kpi = (
         f"; end-to-end {d.kpi_signal} gap −{d.kpi_shrink_pct:.0f} %"
         if d.kpi_shrink_pct is not None

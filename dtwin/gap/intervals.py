@@ -1,0 +1,202 @@
+"""95 % intervals of a fitted candidate's parameters (docs/gap.md §Intervals).
+
+A candidate is fitted by least squares on its simulation error over the training part
+(:func:`dtwin.gap.fit.fit_candidate`). Its residuals are neither independent nor of one
+variance (a model error is slow; coloured noise; windows restarted from noisy states), so the
+textbook covariance ``s²·(JᵀJ)⁻¹`` is too narrow. :func:`parameter_intervals` uses the
+**sandwich** covariance with **batch means**: the training residuals are cut into
+``n_blocks`` contiguous blocks, each block's score ``g_b = J_bᵀ·r_b`` is taken as one
+independent observation, and
+
+``cov = (JᵀJ)⁻¹ · (B/(B − p)) · Σ_b g_b g_bᵀ · (JᵀJ)⁻¹``,
+
+``B`` blocks, ``p`` fitted parameters; the interval is ``θ ± t_{B−1}(0.975)·√cov_ii``
+(White 1980; the batch-means variance of Conley 1999 / Ibragimov–Müller 2010 with a t
+quantile). The Jacobian ``J`` of the residuals is taken by central differences at the fitted
+parameters, over every free parameter of the fit (the linear ones too), so that an effect's
+interval carries its trade-off with the re-fitted linear twin.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+
+import numpy as np
+from scipy.stats import t as student_t
+
+from dtwin.gap.effects import PARAMETER_MISMATCH, Effect
+from dtwin.gap.fit import fit_candidate, linear_typical, training_view
+from dtwin.gap.models import LINEAR_PARAMS, ModuleData, simulate_module
+from dtwin.modules import EULER
+
+__all__ = ["N_BLOCKS", "LEVEL", "fitted_names", "parameter_intervals"]
+
+#: Contiguous blocks of the training residuals (independent observations of the score).
+N_BLOCKS = 20
+#: Coverage of the intervals.
+LEVEL = 0.95
+#: Central-difference step, relative to each parameter's typical size.
+_STEP = 1e-4
+
+
+def fitted_names(
+    name: str, lin: Mapping[str, float], effect: Effect | None
+) -> tuple[list[str], list[str]]:
+    """Return the fit's free parameters: ``(linear ones, the effect's)``.
+
+    The linear ones are those :func:`dtwin.gap.fit.fit_candidate` frees by default
+    (:data:`~dtwin.gap.models.LINEAR_PARAMS` of the module, and ``u_offset`` when present).
+    """
+    linear = [k for k in (*LINEAR_PARAMS[name], "u_offset") if k in lin]
+    own = list(effect.params) if effect is not None and effect.name != PARAMETER_MISMATCH else []
+    return linear, own
+
+
+def _typical(data: ModuleData, lin, effect: Effect | None, names: Sequence[str]) -> np.ndarray:
+    """Return each parameter's typical size (the step's scale), never 0."""
+    scale_free = data.discretisation != EULER
+    typical = dict(linear_typical(data.name, lin, data.scales, scale_free=scale_free))
+    if effect is not None and effect.name != PARAMETER_MISMATCH:
+        typical.update(
+            zip(effect.params, (abs(v) for v in effect.typical(data.scales)), strict=True)
+        )
+    values = np.array([abs(float(typical.get(k, 0.0))) for k in names], dtype=float)
+    return np.where(values > 0, values, 1.0)
+
+
+def _residual_fn(data: ModuleData, effect, lin, linear: Sequence[str], n_train: int):
+    """Return ``residual(θ)``: recorded − simulated over the training part, ``(n_train,)``.
+
+    ``θ`` is the free linear parameters (``linear``) followed by the effect's; unscored
+    samples (a window's warm-up) are NaN.
+    """
+    view, segments = training_view(data, n_train)
+    target = view.output[:n_train]
+    n_lin = len(linear)
+    fixed = dict(lin)
+
+    def residual(vector: np.ndarray) -> np.ndarray:
+        trial = dict(fixed)
+        trial.update(zip(linear, vector[:n_lin], strict=True))
+        simulated = simulate_module(
+            view, trial, effect, vector[n_lin:], stop=n_train, segments=segments
+        )
+        return target - simulated
+
+    return residual
+
+
+def _jacobian(residual, theta: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Return the central-difference Jacobian ``∂r/∂θ``, shape ``(n_samples, p)``."""
+    columns = []
+    for index, step in enumerate(steps):
+        up, down = theta.copy(), theta.copy()
+        up[index] += step
+        down[index] -= step
+        columns.append((residual(up) - residual(down)) / (2.0 * step))
+    return np.column_stack(columns)
+
+
+def parameter_intervals(
+    data: ModuleData,
+    effect: Effect | None,
+    lin: Mapping[str, float],
+    theta: Sequence[float],
+    n_train: int,
+    *,
+    n_blocks: int = N_BLOCKS,
+    level: float = LEVEL,
+    other_part: tuple[int, int] | None = None,
+) -> dict[str, tuple[float, float]]:
+    """Return the ``level`` interval of every free parameter of a fitted candidate.
+
+    Parameters
+    ----------
+    data : ModuleData
+        The module's data, as the candidate was fitted on it.
+    effect : Effect or None
+        The candidate (None or ``parameter_mismatch``: the linear twin alone).
+    lin : mapping
+        The fitted linear parameters (``CandidateFit.lin``).
+    theta : sequence of float
+        The fitted effect parameters (``CandidateFit.theta``).
+    n_train : int
+        Training samples (from the start).
+    n_blocks : int, default :data:`N_BLOCKS`
+        Blocks of the batch-means covariance.
+    level : float, default 0.95
+    other_part : (int, int), optional
+        Samples ``[start, stop)`` after the training part on which the candidate is fitted
+        again: half the squared difference of the two fits is added to each variance (the
+        spread a statistical interval misses when the catalogue form only approximates the
+        effect or the excitation differs between parts).
+
+    Returns
+    -------
+    dict of str to (float, float)
+        ``name → (low, high)`` for every name of :func:`fitted_names`; empty when the
+        Jacobian is singular or not finite (a parameter the data do not determine).
+
+    Notes
+    -----
+    The sandwich covariance with batch means of the module docstring; units are the
+    parameters' own.
+    """
+    linear, own = fitted_names(data.name, lin, effect)
+    names = [*linear, *own]
+    beta = np.array([float(lin[k]) for k in linear] + [float(v) for v in theta][: len(own)])
+    residual = _residual_fn(data, effect, lin, linear, n_train)
+    typical = _typical(data, lin, effect, names)
+    with np.errstate(all="ignore"):
+        r0 = residual(beta)
+        # in units of each parameter's typical size: k3 = 1e13 beside m = 1e-3 stays solvable
+        jac = _jacobian(residual, beta, _STEP * typical) * typical
+    used = np.isfinite(r0) & np.all(np.isfinite(jac), axis=1)
+    r0, jac = r0[used], jac[used]
+    p = len(beta)
+    n_blocks = min(n_blocks, len(r0) // max(2 * p, 1))
+    if n_blocks <= p + 1:
+        return {}
+    hessian = jac.T @ jac
+    if not np.all(np.isfinite(hessian)) or np.linalg.cond(hessian) > 1e14:
+        return {}
+    bread = np.linalg.inv(hessian)
+    blocks = zip(np.array_split(jac, n_blocks), np.array_split(r0, n_blocks), strict=True)
+    scores = np.array([j.T @ r for j, r in blocks])
+    meat = scores.T @ scores * n_blocks / (n_blocks - p)
+    variance = np.maximum(np.diag(bread @ meat @ bread), 0.0) * typical**2
+    if other_part is not None:
+        variance = variance + 0.5 * (beta - _refit(data, effect, lin, other_part, linear)) ** 2
+    spread = np.sqrt(variance)
+    half = student_t.ppf(0.5 + level / 2.0, n_blocks - 1) * spread
+    return {
+        name: (float(value - h), float(value + h))
+        for name, value, h in zip(names, beta, half, strict=True)
+        if math.isfinite(h)
+    }
+
+
+def _part(data: ModuleData, start: int, stop: int) -> ModuleData:
+    """Return ``data`` cut to samples ``[start, stop)`` (times kept, restarts shifted)."""
+
+    def cut(values):
+        return None if values is None else values[start:stop]
+
+    return replace(
+        data,
+        inputs={name: values[start:stop] for name, values in data.inputs.items()},
+        output=data.output[start:stop],
+        t=data.t[start:stop],
+        velocity=cut(data.velocity),
+        position=cut(data.position),
+        restarts=tuple(r - start for r in data.restarts if start < r < stop),
+    )
+
+
+def _refit(data, effect, lin, part: tuple[int, int], linear: Sequence[str]) -> np.ndarray:
+    """Return the free parameters of the candidate fitted again on samples ``part`` alone."""
+    start, stop = part
+    fit = fit_candidate(_part(data, start, stop), effect, lin, n_train=stop - start, free=linear)
+    return np.array([float(fit.lin[k]) for k in linear] + [float(v) for v in fit.theta])
