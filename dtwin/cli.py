@@ -24,6 +24,8 @@ import dataclasses
 import logging
 import os
 import sys
+import threading
+import time
 import warnings
 from collections import Counter
 from collections.abc import Sequence
@@ -238,16 +240,66 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Seconds after which a run shows its current step on stderr (docs/gap.md §Speed), and how
+#: often it looks.
+PROGRESS_AFTER, PROGRESS_EVERY = 3.0, 0.5
+
+
+class _ProgressLine(logging.Handler):
+    """Show the library's current step on stderr once a command has run ``PROGRESS_AFTER`` s.
+
+    The steps are the INFO records of ``dtwin.gap.diagnose.progress``; a daemon thread checks
+    every half second and prints ``dtwin <command>: <elapsed> s: <step>`` when the step has
+    changed, so a short run prints nothing and a long one a line per step (any step shorter
+    than the half second may go unseen).
+    """
+
+    def __init__(self, command: str) -> None:
+        super().__init__(logging.INFO)
+        self.command, self.step, self.shown = command, "reading the input", None
+        self.start = time.monotonic()
+        self.done = threading.Event()
+        self.source = logging.getLogger("dtwin.gap.diagnose.progress")
+
+    def __enter__(self) -> _ProgressLine:
+        self.source.setLevel(logging.INFO)
+        self.source.addHandler(self)
+        self.source.propagate = logger.isEnabledFor(logging.INFO)  # --verbose logs them too
+        threading.Thread(target=self._beat, daemon=True).start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.done.set()
+        self.source.removeHandler(self)
+        self.source.propagate = True
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.step = record.getMessage()
+
+    def _beat(self) -> None:
+        while not self.done.wait(PROGRESS_EVERY):
+            elapsed = time.monotonic() - self.start
+            if elapsed >= PROGRESS_AFTER and self.step != self.shown:
+                self.shown = self.step
+                print(f"dtwin {self.command}: {elapsed:.0f} s: {self.step}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``dtwin`` command line and return its exit status."""
-    from dtwin._validation import DtwinTypeError, DtwinValueError
-
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
+    with _ProgressLine(args.command):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run the parsed command; bad input becomes one line on stderr and exit status 2."""
+    from dtwin._validation import DtwinTypeError, DtwinValueError
+
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

@@ -185,10 +185,18 @@ def _force_windows(drive, x0, v0, a, force_step: HoldMatrices, force: Force, inv
     state whatever holds the input, always enters with the first-order hold (trapezoidal), by
     one predictor-corrector pass: a force held over the sample (explicit) feeds energy into a
     lightly damped plant and can diverge. A force with a ``scalar`` attribute (the same law
-    on Python floats) uses it when the windows are stepped one by one (:data:`SCALAR_WINDOWS`).
+    on Python floats) uses it when the windows are stepped one by one (:data:`SCALAR_WINDOWS`);
+    one with a ``law`` attribute (:class:`dtwin._force_kernels.ForceLaw`) is stepped by the
+    compiled loop of :mod:`dtwin._force_kernels`, the same arithmetic ~50× faster.
     """
     (a11, a12), (a21, a22) = a.tolist()
     (q1, q2), (r1, r2) = force_step.taps.tolist()
+    law = getattr(force, "law", None)
+    if law is not None:  # a known law: the compiled loop (dtwin._force_kernels)
+        from dtwin._force_kernels import force_windows
+
+        steps = (a11, a12, a21, a22, q1, q2, r1, r2)
+        return force_windows(drive, x0, v0, steps, law, inv_m)
     if drive.shape[0] <= SCALAR_WINDOWS:  # few windows: one after another on plain floats
         steps = (a11, a12, a21, a22, q1, q2, r1, r2)
         scalar = getattr(force, "scalar", force)

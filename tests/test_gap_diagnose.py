@@ -196,6 +196,22 @@ def test_cli_writes_a_valid_report(tmp_path, capsys):
     assert main([*argv, "--out", str(out)]) == 0  # re-running replaces its own folder
 
 
+def test_a_long_run_shows_its_steps_on_stderr(tmp_path, capsys, monkeypatch):
+    """Issue 25 item 8: a progress line per step once a run has taken PROGRESS_AFTER s."""
+    import dtwin.cli
+
+    case = generate_case("coulomb_friction", 1, magnitude=0.8, n_samples=1500)
+    case.recording.to_csv(tmp_path / "rec.csv", index=False)
+    (tmp_path / "twin.yaml").write_text(yaml.safe_dump(case.twin))
+    argv = ["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "twin.yaml")]
+    monkeypatch.setattr(dtwin.cli, "PROGRESS_AFTER", 0.0)
+    monkeypatch.setattr(dtwin.cli, "PROGRESS_EVERY", 0.001)
+    assert main([*argv, "--out", str(tmp_path / "slow")]) == 0
+    err = capsys.readouterr().err
+    assert "dtwin diagnose: 0 s: M1: fitting the candidate effects" in err
+    assert "Traceback" not in err
+
+
 def test_python_m_dtwin_runs(tmp_path):
     done = subprocess.run(
         [

@@ -128,6 +128,74 @@ def test_one_window_float_loop_equals_the_lockstep_array_loop_bit_for_bit(k3):
     assert np.isinf(together).any() == (k3 < 0)
 
 
+def _law_force(name: str, params: tuple[float, ...]):
+    """A force of a known law: the Python callable, and the same with its ``law`` attached."""
+    import math
+
+    from dtwin._force_kernels import ForceLaw
+
+    laws = {
+        "tanh_friction": lambda x, v: params[0] * np.tanh(v / params[1]),
+        "cubic_spring": lambda x, v: (
+            params[0] * (x - params[1]) * (x - params[1]) * (x - params[1])
+        ),
+        "quadratic_damping": lambda x, v: params[0] * v * np.abs(v),
+        "stribeck_friction": lambda x, v: (
+            (params[0] + params[1] * np.exp(-(v / params[2]) * (v / params[2])))
+            * np.tanh(v / params[3])
+        ),
+    }
+    scalars = {
+        "tanh_friction": lambda x, v: params[0] * math.tanh(v / params[1]),
+        "cubic_spring": lambda x, v: (
+            params[0] * (x - params[1]) * (x - params[1]) * (x - params[1])
+        ),
+        "quadratic_damping": lambda x, v: params[0] * v * abs(v),
+        "stribeck_friction": lambda x, v: (
+            (params[0] + params[1] * math.exp(-(v / params[2]) * (v / params[2])))
+            * math.tanh(v / params[3])
+        ),
+    }
+    plain = laws[name]
+    plain.scalar = scalars[name]
+
+    def compiled(x, v):
+        return plain(x, v)
+
+    compiled.law = ForceLaw(name, params)
+    return plain, compiled
+
+
+@pytest.mark.parametrize("windows_count", [3, 12])  # one by one, and in lockstep
+@pytest.mark.parametrize(
+    ("name", "params"),
+    [
+        ("tanh_friction", (0.4, 0.01)),
+        ("cubic_spring", (3e4, 0.02)),
+        ("cubic_spring", (-3e6, 0.0)),  # diverges
+        ("quadratic_damping", (0.7,)),
+        ("stribeck_friction", (0.3, 0.2, 0.05, 0.01)),
+    ],
+)
+def test_compiled_force_loop_equals_the_python_loop(name, params, windows_count):
+    """Issue 25 item 8: the numba loop of a known law gives the Python loop's positions."""
+    rng = np.random.default_rng(8)
+    length = 300
+    n = windows_count * length
+    u = np.sign(np.sin(np.arange(n) * 0.05)) + 0.1 * rng.normal(size=n)
+    start = dict(x_start=rng.normal(size=n) * 0.1, v_start=rng.normal(size=n))
+    windows = [(a, a + length) for a in range(0, n, length)]
+    plain, compiled = _law_force(name, params)
+    for hold in (ZOH, FOH, BANDLIMITED):
+        kwargs = dict(windows=windows, hold=hold, **start)
+        expected = exact_plant_response(u, 1.3, 0.3, 40.0, 0.01, force=plain, **kwargs)
+        got = exact_plant_response(u, 1.3, 0.3, 40.0, 0.01, force=compiled, **kwargs)
+        np.testing.assert_array_equal(np.isinf(got), np.isinf(expected))
+        finite = np.isfinite(expected)
+        np.testing.assert_allclose(got[finite], expected[finite], rtol=1e-12, atol=1e-14)
+    assert np.isinf(got).any() == (params[0] < -1e5)
+
+
 def test_first_order_hold_uses_the_same_sample_input():
     """Only the first-order hold lets u[k] act on x[k] (a band-limited input's same-sample term)."""
     u = np.zeros(5)

@@ -101,6 +101,9 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
+#: The diagnoser's steps, at INFO (``dtwin diagnose`` shows the current one on stderr once a
+#: run has taken a few seconds: docs/gap.md §Speed).
+progress = logging.getLogger(f"{__name__}.progress")
 
 #: Largest relative disagreement between the recording's dt and ``twin.dt``.
 DT_TOLERANCE = 0.01
@@ -498,8 +501,12 @@ def _exact_plant_floor(data: ModuleData, simulated, lin: dict, n_train: int) -> 
     return replace(floor, rms=floor.rms * math.sqrt(gain))
 
 
-def _exact_plant_window(data, nominal, n_train, n_held) -> tuple[int, dict | None]:
-    """Return the exact plant's window and its twin calibrated over it (None: nominal twin).
+def _exact_plant_window(data, nominal, n_train, n_held) -> tuple[int, dict | None, int | None]:
+    """Return the exact plant's window, its twin calibrated last and over which window.
+
+    ``(horizon, fitted, fitted_horizon)``; ``fitted`` None for a nominal twin. When the search
+    settles on the window it fitted over (``fitted_horizon == horizon``), that fit is the first
+    hold's calibration (:func:`_prepare_exact_plant` does not repeat it).
 
     Calibration starts over the longest window (a quarter of the held-out part) and moves to
     the window of the fitted dynamics until it changes by at most ``WINDOW_SETTLED`` (at most
@@ -508,17 +515,17 @@ def _exact_plant_window(data, nominal, n_train, n_held) -> tuple[int, dict | Non
     then hides the mass (a rig's mass fitted 0.15 instead of 54, window 20 instead of ~330).
     """
     if nominal is not None:
-        return plant_horizon(nominal, data.dt, n_held), None
+        return plant_horizon(nominal, data.dt, n_held), None, None
     horizon = max(n_held // 4, MIN_HORIZON)
-    fitted = None
+    fitted = fitted_horizon = None
     for _ in range(WINDOW_ROUNDS):
-        fitted = calibrate_linear(replace(data, horizon=horizon), n_train)
+        fitted, fitted_horizon = calibrate_linear(replace(data, horizon=horizon), n_train), horizon
         following = plant_horizon(fitted, data.dt, n_held)
         settled = abs(following - horizon) <= WINDOW_SETTLED * horizon
         horizon = following
         if settled:
             break
-    return horizon, fitted
+    return horizon, fitted, fitted_horizon
 
 
 def _prepare_exact_plant(data, nominal, n_train, n_held, holds) -> tuple[ModuleData, dict]:
@@ -526,15 +533,19 @@ def _prepare_exact_plant(data, nominal, n_train, n_held, holds) -> tuple[ModuleD
 
     The window comes from the first hold (:func:`_exact_plant_window`); each hold is fitted over
     it (a nominal twin: evaluated), the later ones starting from the first hold's delay, and the
-    one with the smaller training simulation error is kept (docs/gap.md §Modules).
+    one with the smaller training simulation error is kept (docs/gap.md §Modules). The first
+    hold's fit of the window search is kept when it was over the same window (the same fit
+    again cost a third of a 130,000-sample rig's calibration, docs/gap.md §Speed).
     """
     first = replace(data, discretisation=holds[0])
-    horizon, start = _exact_plant_window(first, nominal, n_train, n_held)
+    horizon, start, fitted_horizon = _exact_plant_window(first, nominal, n_train, n_held)
     best = None
     for hold in holds:
         trial = replace(data, discretisation=hold, horizon=horizon)
         if nominal is not None:
             lin = dict(nominal)
+        elif hold == holds[0] and fitted_horizon == horizon:
+            lin = start
         else:
             near = None if start is None else int(start["delay_samples"])
             lin = calibrate_linear(trial, n_train, delay_near=near)
@@ -1400,10 +1411,10 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
     if recording.ignored:
         notes.append(f"ignored columns that are not module signals: {', '.join(recording.ignored)}")
 
-    works = {
-        name: _analyse_module(name, recording, twin, t, split, calibrate, settings, layout)
-        for name in names
-    }
+    works = {}
+    for name in names:
+        progress.info("%s: linear twin and noise floor (%d samples)", name, n)
+        works[name] = _analyse_module(name, recording, twin, t, split, calibrate, settings, layout)
     for work in works.values():
         if work.name == "M1" and work.calibrated and work.data.discretisation != EULER:
             reference = output_error_reference(
@@ -1416,10 +1427,12 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
     notes.extend(_module_notes(works, calibrate))
     flagged = [w for w in works.values() if w.gap_cal > w.threshold]
     for work in flagged:
+        progress.info("%s: fitting the candidate effects", work.name)
         _fit_candidates(work, split)
     ranked = {w.name: _score_candidates(w, split, settings) for w in flagged}
     source, chosen = _choose(flagged, ranked, settings)
 
+    progress.info("scoring: chain, free run and intervals of the answer")
     chains = _chain_before_after(recording, twin, works, t, source, chosen)
     kpi_signal, kpi_shrink = _kpi_shrink(recording, *chains, source, chosen, split.score, notes)
     modules = _module_reports(recording, works, flagged, source, chosen, chains, split)

@@ -32,6 +32,7 @@ from scipy.signal import savgol_filter
 from dtwin.exact_plant import exact_plant_response, free_response_basis, hold_matrices
 from dtwin.gap.effects import (
     ARRAY_OPS,
+    FRICTION_SMOOTHING,
     SCALAR_OPS,
     Effect,
     Scales,
@@ -281,7 +282,9 @@ def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float, *
     """Return the candidate's plant force ``F(x, v)``, or None.
 
     With ``arrays`` it takes numpy arrays (ufuncs) and carries the same law on Python floats as
-    its ``scalar`` attribute (:data:`dtwin.exact_plant.SCALAR_WINDOWS`).
+    its ``scalar`` attribute (:data:`dtwin.exact_plant.SCALAR_WINDOWS`) and, for a law the
+    compiled loop knows, its name and parameters as its ``law`` attribute
+    (:mod:`dtwin._force_kernels`).
     """
     if effect is None or effect.stage != "force":
         return None
@@ -290,8 +293,30 @@ def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float, *
     if arrays:
         force = effect.force_law(theta, velocity_std, ARRAY_OPS)
         force.scalar = effect.force_law(theta, velocity_std, SCALAR_OPS)
+        force.law = _known_law(effect, theta, velocity_std)
         return force
     return effect.force_law(theta, velocity_std, SCALAR_OPS)
+
+
+def _known_law(effect: Effect, theta: Sequence[float], velocity_std: float):
+    """Return the :class:`~dtwin._force_kernels.ForceLaw` of the effect's ``force_law``, or None.
+
+    The same law with the same parameters (:mod:`dtwin.gap.effects`), for the compiled loop.
+    """
+    from dtwin._force_kernels import ForceLaw
+
+    smooth = max(FRICTION_SMOOTHING * velocity_std, 1e-300)
+    values = [float(value) for value in theta]
+    if effect.name == "coulomb_friction":
+        return ForceLaw("tanh_friction", (values[0], smooth))
+    if effect.name == "stribeck_friction":
+        fc, fs, vs = values
+        return ForceLaw("stribeck_friction", (fc, max(fs - fc, 0.0), max(abs(vs), 1e-300), smooth))
+    if effect.name == "cubic_stiffness":
+        return ForceLaw("cubic_spring", (values[0], values[1]))
+    if effect.name == "quadratic_damping":
+        return ForceLaw("quadratic_damping", (values[0],))
+    return None
 
 
 def plant_windows(
