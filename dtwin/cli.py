@@ -292,8 +292,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
+    if not progress_wanted():
+        return _run(args)
     with _ProgressLine(args.command):
         return _run(args)
+
+
+def progress_wanted() -> bool:
+    """Return whether to show progress lines: stderr is a terminal (a person is waiting).
+
+    Redirected stderr (a log, a pipeline, a test) stays empty on success and holds one line on
+    an error, as scripts reading it expect.
+    """
+    return sys.stderr.isatty()
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -197,13 +197,16 @@ def test_cli_writes_a_valid_report(tmp_path, capsys):
 
 
 def test_a_long_run_shows_its_steps_on_stderr(tmp_path, capsys, monkeypatch):
-    """Issue 25 item 8: a progress line per step once a run has taken PROGRESS_AFTER s."""
+    """Issue 25 item 8: on a terminal, a line per step once a run has taken PROGRESS_AFTER s."""
     import dtwin.cli
 
     case = generate_case("coulomb_friction", 1, magnitude=0.8, n_samples=1500)
     case.recording.to_csv(tmp_path / "rec.csv", index=False)
     (tmp_path / "twin.yaml").write_text(yaml.safe_dump(case.twin))
     argv = ["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "twin.yaml")]
+    assert main([*argv, "--out", str(tmp_path / "quiet")]) == 0
+    assert capsys.readouterr().err == ""  # stderr not a terminal: no progress lines
+    monkeypatch.setattr(dtwin.cli, "progress_wanted", lambda: True)
     monkeypatch.setattr(dtwin.cli, "PROGRESS_AFTER", 0.0)
     monkeypatch.setattr(dtwin.cli, "PROGRESS_EVERY", 0.001)
     assert main([*argv, "--out", str(tmp_path / "slow")]) == 0

@@ -262,3 +262,31 @@ def test_report_gives_each_parameter_with_its_interval():
     assert low < result.params["Fc"] < high
     assert f"Fc = {result.params['Fc']:.4g} [{low:.4g}, {high:.4g}]" in render_markdown(result)
     assert diagnosis_to_dict(result)["param_intervals"]["Fc"] == [low, high]
+
+
+def test_step_map_is_the_isotonic_fit_and_pools_equal_weights():
+    """Issue 25 item 5: the share right per step, rising with the weight; ties pooled."""
+    from dtwin.gap.confidence import calibrated_confidence, fit_steps
+
+    rng = np.random.default_rng(5)
+    weights = np.concatenate([rng.uniform(0.4, 0.7, 200), np.ones(800)])
+    rights = rng.uniform(size=1000) < np.where(weights < 0.99, 0.5, 0.95)
+    steps = fit_steps(weights, rights)
+    assert [p for _, p, _ in steps] == sorted(p for _, p, _ in steps)
+    top = steps[-1]
+    assert top[2] == 800 and top[1] == pytest.approx(rights[200:].mean())
+    assert steps[0][1] == pytest.approx(0.5, abs=0.1)
+    mapped = [calibrated_confidence(w, [(a, p) for a, p, _ in steps]) for w in (0.45, 1.0)]
+    assert mapped == pytest.approx([steps[0][1], top[1]])
+
+
+def test_confidence_is_the_mapped_weight_and_rises_with_it():
+    from dtwin.gap.confidence import STEPS, calibrated_confidence
+
+    values = [calibrated_confidence(w) for w in (0.2, 0.5, 0.9, 0.999, 1.0)]
+    assert all(0 < v < 1 for v in values)
+    assert values == sorted(values) and values[-1] == STEPS[-1][1]
+    _case, result = _diagnosed("coulomb_friction", None, 1, 0.8)
+    assert result.confidence == pytest.approx(calibrated_confidence(result.bic_weight))
+    payload = diagnosis_to_dict(result)
+    assert payload["bic_weight"] == result.bic_weight

@@ -42,6 +42,7 @@ from threadpoolctl import threadpool_limits
 
 from dtwin._validation import DtwinTypeError, DtwinValueError, require_in_range
 from dtwin.exact_plant import EXACT_HOLDS
+from dtwin.gap.confidence import calibrated_confidence
 from dtwin.gap.effects import (
     NONE,
     PARAMETER_MISMATCH,
@@ -255,6 +256,8 @@ class Diagnosis:
     scoring part from its first sample, with the linear twin and with the chosen effect
     (:func:`_free_run_rms`; None for an integrating or unstable plant). ``param_intervals``
     gives a 95 % interval of every fitted parameter of the answer (:func:`_answer_intervals`).
+    ``confidence`` is the probability that the answer is right, the winner's ``bic_weight``
+    mapped by :func:`dtwin.gap.confidence.calibrated_confidence`.
     """
 
     module: str | None
@@ -285,6 +288,7 @@ class Diagnosis:
     free_run_rms_before: float | None = None
     free_run_rms_after: float | None = None
     param_intervals: dict[str, tuple[float, float]] = field(default_factory=dict)
+    bic_weight: float | None = None
     series: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
@@ -1312,6 +1316,7 @@ def _verdict(source, chosen) -> dict[str, Any]:
         ("gap_before", "gap_refit", "gap_after", "raw_shrink_pct", "own_shrink_pct"), None
     )
     verdict.update(excess_shrink_pct=None, excess_clipped=None, params={}, confidence=None)
+    verdict.update(bic_weight=None)
     if source is None:
         return {**verdict, "module": None, "effect": NONE}
     if chosen is None:
@@ -1320,7 +1325,8 @@ def _verdict(source, chosen) -> dict[str, Any]:
         "module": source.name,
         "effect": chosen.effect,
         "params": chosen.params,
-        "confidence": chosen.weight,
+        "confidence": calibrated_confidence(chosen.weight),
+        "bic_weight": chosen.weight,
         "gap_before": source.gap_scored,
         "gap_refit": _linear_refit_gap(source),
         "gap_after": chosen.scoring_gap_after,
