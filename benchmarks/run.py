@@ -11,7 +11,9 @@ load average before and after it), medians where repeated. Sections (`python ben
   measured by the kernel (benchmarks/cpu_probe/sitecustomize.py: ``os.wait4`` on the job's
   process), Snakemake's own process by ``getrusage``, and the run's total is the
   ``RUSAGE_CHILDREN`` of this process around it. Per job (``jobs``: CPU s, wall s, peak MB) and
-  per rule (``by_rule``: jobs, wall s, CPU s) for the cold --cores 2 run; ``vs_r`` is the R
+  per rule (``by_rule``: jobs, wall s, CPU s) for the cold --cores 2 run, with each job's
+  start and end (s after the run started) and the jobs' summed wall time over the run's
+  (``jobs_wall_over_run_wall``: 2 when both cores are always busy); ``vs_r`` is the R
   scripts' time (:data:`R_REFERENCE_S`) over ours, for each core count;
 - ``figures``: `snakemake --cores 2 all` cold after set-up (every artifact incl. the gap
   benchmark and the claims across draws), measured the same way;
@@ -95,27 +97,34 @@ def measured_run(args: list[str], workdir: Path) -> dict:
             "MPLBACKEND": "Agg",
             "DTWIN_CPU_LOG": log,
         }
-        cpu_before = children_cpu()
+        cpu_before, started = children_cpu(), time.time()
         wall = run([PY, "-m", "snakemake", *args], workdir, env)
         total = children_cpu() - cpu_before
-        jobs, snakemake_cpu = probe_records(Path(log))
+        jobs, snakemake_cpu = probe_records(Path(log), started)
+    busy = sum(job["wall_s"] for job in jobs.values())
     return {
         "wall_s": round(wall, 2),
         "cpu_s": round(total, 2),
         "snakemake_cpu_s": snakemake_cpu,
+        "jobs_wall_over_run_wall": round(busy / wall, 2),
         "jobs": jobs,
     }
 
 
-def probe_records(folder: Path) -> tuple[dict, float]:
-    """Per job ``rule[/wildcards]``: CPU s, wall s, peak MB; and Snakemake's own CPU s."""
+def probe_records(folder: Path, started: float) -> tuple[dict, float]:
+    """Per job ``rule[/wildcards]``: CPU s, wall s, peak MB, start and end s after ``started``
+    (an epoch time); and Snakemake's own CPU s."""
     read = {path.stem: json.loads(path.read_text()) for path in folder.glob("*.json")}
     jobs = {}
     for key, identity in read.items():
         if key.startswith("job-"):
             usage = read[f"usage-{key[4:]}"]
             name = "/".join([identity["rule"], *identity["wildcards"].values()])
-            jobs[name] = {k: usage[k] for k in ("cpu_s", "wall_s", "max_rss_mb")}
+            end = usage["end_epoch_s"] - started
+            jobs[name] = {k: usage[k] for k in ("cpu_s", "wall_s", "max_rss_mb")} | {
+                "start_s": round(end - usage["wall_s"], 2),
+                "end_s": round(end, 2),
+            }
     snakemake = [r for k, r in read.items() if k.startswith("process-")]
     own = round(sum(r["cpu_s"] for r in snakemake), 2)
     return dict(sorted(jobs.items())), own
@@ -147,6 +156,7 @@ def dag_benchmarks() -> dict:
             results[f"vs_r_cores{cores}"] = round(R_REFERENCE_S / cold["wall_s"], 2)
             if cores == 2:
                 results["snakemake_cpu_s"] = cold["snakemake_cpu_s"]
+                results["jobs_wall_over_run_wall"] = cold["jobs_wall_over_run_wall"]
                 results["jobs"] = cold["jobs"]
                 results["by_rule"] = by_rule(cold["jobs"])
                 for name, extra in (("noop_rerun", []), ("noop_dry_run", ["-n"])):

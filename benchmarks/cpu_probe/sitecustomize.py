@@ -4,8 +4,8 @@ benchmarks/run.py puts this folder first on ``PYTHONPATH`` and sets ``DTWIN_CPU_
 folder. A Python process started under it that runs a Snakemake ``script:`` job (its script
 lives in ``.snakemake/scripts/``) forks at start-up: the child runs the job, and the parent
 waits for it with :func:`os.wait4` and writes the child's user + system CPU seconds, peak
-memory and wall seconds (interpreter start-up and shut-down included, like every child it
-reaped), then exits with the child's status. The child writes its rule and wildcards (read
+memory, wall seconds (interpreter start-up and shut-down included, like every child it reaped)
+and end time, then exits with the child's status. The child writes its rule and wildcards (read
 from the ``snakemake`` object) at exit. Any other Python process (Snakemake itself) writes its
 own CPU and that of the children it reaped at exit. Unlike Snakemake's ``benchmark:`` files (a
 sampler that stops after ~15 s and takes no sample at exit) this is the kernel's own account.
@@ -61,6 +61,7 @@ def _measure_job() -> None:
         "cpu_s": _cpu(usage),
         "max_rss_mb": round(usage.ru_maxrss / 1024, 1),
         "wall_s": round(time.perf_counter() - _START, 3),
+        "end_epoch_s": time.time(),
     }
     _write(f"usage-{pid}.json", record)
     code = os.waitstatus_to_exitcode(status)
