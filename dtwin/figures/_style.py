@@ -289,12 +289,14 @@ def save_figure(
 
 
 def _save_png_checked(figure: Figure, path: str | os.PathLike) -> list:
-    """Save the print-size PNG with one layout and one draw; return the reader checks of it.
+    """Save the print-size PNG with one draw; return the reader checks of that draw.
 
-    ``savefig`` would lay the figure out in a draw of its own before the draw it writes; here
-    the layout engine runs once at :data:`PNG_DPI` (the same layout, so the same bytes), is
-    switched off for the one draw that writes the file, and the texts that draw puts on the
-    page are the reader checks' input, so the checks see exactly the saved PNG.
+    ``savefig`` would lay the figure out in a draw of its own before the draw it writes, and the
+    reader checks drew it once more at the figure's dpi. Here the layout engine runs at the
+    figure's dpi and then at :data:`PNG_DPI` without drawing (constrained layout starts from the
+    current positions and moves with the dpi, so this reaches the positions of that sequence:
+    the same bytes), is switched off for the one draw that writes the file, and the texts that
+    draw puts on the page are the reader checks' input, so the checks see the saved PNG.
     """
     from dtwin.figures._print_check import agg_canvas, drawn_texts, reader_checks, recording_texts
 
