@@ -17,18 +17,18 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["STEPS", "WEIGHT_CLIP", "calibrated_confidence", "fit_steps"]
+__all__ = ["STEPS", "WEIGHT_CLIP", "MIN_STEP_ANSWERS", "calibrated_confidence", "fit_steps"]
 
 #: Weights are clipped to ``[WEIGHT_CLIP, 1 − WEIGHT_CLIP]`` (a weight of exactly 1 in floating
 #: point carries no more evidence than 1 − 1e-9: all such answers are one group).
 WEIGHT_CLIP = 1e-9
 #: ``(lowest weight, probability)`` of each step, by rising weight: fitted by :func:`fit_steps`
-#: on the named answers of the benchmark's cases 00–04 (335 answers; the steps held 8, 60 and
-#: 267 of them), docs/gap.md §Confidence.
+#: on the named answers of the benchmark's cases 00–04 (348 answers; the steps held 10, 80 and
+#: 258 of them), docs/gap.md §Confidence.
 STEPS: tuple[tuple[float, float], ...] = (
-    (0.0, 0.5),
-    (0.781721, 0.883333),
-    (1.0 - WEIGHT_CLIP, 0.981273),
+    (0.0, 0.6),
+    (0.776877, 0.95),
+    (1.0 - WEIGHT_CLIP, 0.980620),
 )
 
 
@@ -60,13 +60,20 @@ def calibrated_confidence(weight: float, steps: Sequence[tuple[float, float]] = 
     return float(probability)
 
 
+#: Fewest answers of a step: a smaller one joins its neighbour above (the top one, below). A
+#: step of one wrong answer read 0.0 for every weight under it.
+MIN_STEP_ANSWERS = 10
+
+
 def fit_steps(
-    weights: Sequence[float], rights: Sequence[bool]
+    weights: Sequence[float], rights: Sequence[bool], min_answers: int = MIN_STEP_ANSWERS
 ) -> tuple[tuple[float, float, int], ...]:
     """Return the isotonic step map of ``rights`` on ``weights``: ``(lowest, probability, n)``.
 
     Pool adjacent violators over the distinct (clipped) weights, each weight's answers pooled
-    first; every step is the share right among its ``n`` answers, rising with the weight.
+    first; then a step of fewer than ``min_answers`` answers joins its neighbour above (the top
+    step its neighbour below), which keeps the map rising. Every step is the share right among
+    its ``n`` answers.
 
     Parameters
     ----------
@@ -81,7 +88,7 @@ def fit_steps(
 
     Examples
     --------
-    >>> fit_steps([0.6, 0.7, 0.9, 1.0], [True, False, True, True])
+    >>> fit_steps([0.6, 0.7, 0.9, 1.0], [True, False, True, True], min_answers=1)
     ((0.6, 0.5, 2), (0.9, 1.0, 2))
     """
     w = np.clip(np.asarray(weights, dtype=float), WEIGHT_CLIP, 1.0 - WEIGHT_CLIP)
@@ -96,4 +103,14 @@ def fit_steps(
             right, count, _ = blocks.pop()
             blocks[-1][0] += right
             blocks[-1][1] += count
+    while len(blocks) > 1 and min(b[1] for b in blocks) < min_answers:
+        index = next(i for i, b in enumerate(blocks) if b[1] < min_answers)
+        into = index + 1 if index + 1 < len(blocks) else index - 1
+        low, high = sorted((index, into))
+        blocks[low] = [
+            blocks[low][0] + blocks[high][0],
+            blocks[low][1] + blocks[high][1],
+            blocks[low][2],
+        ]
+        del blocks[high]
     return tuple((low, right / count, int(count)) for right, count, low in blocks)
