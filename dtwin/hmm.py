@@ -2,12 +2,13 @@
 
 A K-state HMM with diagonal-covariance Gaussian emissions (paper Eq. (3); depmixS4's
 independent ``gaussian()`` responses, r_notes.md §4) is fitted by EM to z-scored residual
-features, arrays time-first ``(T, D)``. EM runs in :class:`hmmlearn.hmm.GaussianHMM` through
-its public methods (``fit``, ``score``, ``score_samples``, ``decode``, ``predict_proba``) and two
-documented extension points: the convergence monitor (``monitor_``, here
-``_DepmixMonitor``, which also applies the variance floor) and the emission hook
-``_compute_log_likelihood`` (``_MatmulGaussianHMM``, O(T·K) memory; checked against hmmlearn's
-own density by the tests). dtwin adds what depmixS4 did and hmmlearn does not:
+features, arrays time-first ``(T, D)``. EM runs hmmlearn 0.3.3's equations and scaled
+recursions compiled with numba, one call per start (:mod:`dtwin._em_kernels`; the starts,
+statuses and fallback in :mod:`dtwin._multistart`); hmmlearn itself is the reference engine
+(``engine="hmmlearn"``, config ``hmm.engine``; :mod:`dtwin._em_reference`) and the fallback
+when the scaled recursions underflow, and is imported only then. ``tests/test_hmm_engine.py``
+holds the two engines to the same iterations, statuses and numbers. dtwin adds what depmixS4
+did and hmmlearn does not:
 
 - z-scoring with the sample standard deviation (R's ``scale``), :func:`zscore`;
 - depmixS4's random start: per-sample state weights drawn from Dirichlet(0.01) (almost a hard
@@ -16,6 +17,8 @@ own density by the tests). dtwin adds what depmixS4 did and hmmlearn does not:
 - a variance floor applied after every M-step (hmmlearn 0.3.3 applies ``min_covar`` only when
   it initialises covariances itself), which is the exact constrained M-step, so EM stays
   monotone;
+- BIC sweeps that double a K's random starts while the second half still gains, fitting only
+  the new half (the seeds are prefix-stable);
 - an honest convergence verdict and depmixS4's relative stopping rule
   ``(LL − LL_old)/|LL_old| < tol``;
 - the filtered (causal) posteriors ``P(S_t = k | e_1:t)``, the normalised forward variables of
@@ -31,22 +34,32 @@ import logging
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
-from hmmlearn import _hmmc
-from hmmlearn.base import ConvergenceMonitor
-from hmmlearn.hmm import GaussianHMM
-from hmmlearn.utils import normalize
 from threadpoolctl import threadpool_limits
 
+from dtwin import _em_kernels as kernels
+from dtwin._multistart import (
+    ENGINES,
+    RESTART_COLUMNS,
+    EmData,
+    EmRun,
+    decode,
+    fit_one_start,
+    fit_starts,
+    restart_seeds,
+)
 from dtwin._validation import (
     DtwinTypeError,
     DtwinValueError,
     require_finite_array,
     require_positive,
 )
+
+if TYPE_CHECKING:
+    from hmmlearn.hmm import GaussianHMM
 
 # re-exported; figures and crosschecks import them from hmm_basics, without hmmlearn
 from dtwin.hmm_basics import ZScored, n_hmm_params, zscore
@@ -65,31 +78,13 @@ __all__ = [
     "bic_minimum_bracketed",
     "split_fits",
     "STABLE_GAIN",
+    "ENGINES",
 ]
 
 logger = logging.getLogger(__name__)
 
 #: Concentration of the Dirichlet draw of per-sample state weights (depmixS4 random start).
 DIRICHLET_ALPHA = 0.01
-
-#: A state whose expected occupancy ``Σ_t γ_t(k)`` falls below this many samples is "empty"
-#: (half a sample, so that a state holding one outlier sample is not flagged by round-off).
-MIN_OCCUPANCY = 0.5
-
-#: Log-likelihood drops smaller than this times ``max(1, |LL|)`` count as round-off.
-_LL_DROP_RTOL = 1e-9
-
-_RESTART_COLUMNS = (
-    "restart",
-    "seed",
-    "log_likelihood",
-    "n_iter",
-    "converged",
-    "status",
-    "implementation",
-    "min_occupancy",
-    "message",
-)
 
 
 class HmmFitError(DtwinValueError):
@@ -177,122 +172,28 @@ class HmmFit:
         return self.means.shape[1]
 
 
-class _MatmulGaussianHMM(GaussianHMM):
-    """GaussianHMM whose diagonal log-densities are two matrix products, with a lean E-step.
-
-    hmmlearn 0.3.3 evaluates ``((X[:, None, :] − μ)² / σ²).sum(-1)``, a T×K×D temporary
-    (320 MB and ~0.7 s per E-step at T = 1e6, D = 10, K = 4). This override of the emission
-    hook (``_compute_log_likelihood``, the method hmmlearn's own emission classes define) gives
-    the same values from ``X²·(1/σ²)ᵀ − 2X·(μ/σ²)ᵀ`` in O(T·K) memory. The E-step of the
-    ``scaling`` implementation (``_do_estep``, :func:`_lean_scaling_estep`) runs hmmlearn's own
-    compiled forward, backward and ξ-sum on the same arrays in the same order, and differs only
-    in memory: the densities are exponentiated in place and freed after the ξ-sum, and the
-    posteriors overwrite the forward lattice instead of being a fifth T×K copy (T = 1e6,
-    K = 4, D = 10: ~110 MB per iteration instead of ~210 MB, benchmarks/hmm_fit.py).
-    These are the places dtwin goes below hmmlearn's public methods; ``tests/test_hmm.py``
-    checks both against hmmlearn's own density and E-step (the latter bit for bit) on every
-    run, so a release that changes the hooks fails loudly (hmmlearn is pinned
-    ``>=0.3.3,<0.4``).
-    """
-
-    def _compute_log_likelihood(self, X: np.ndarray) -> np.ndarray:
-        variances = np.maximum(_variances(self), np.finfo(float).tiny)
-        return _log_emission(X, self.means_, variances)
-
-    def _do_estep(self, X: np.ndarray, lengths: Any) -> tuple[dict[str, Any], float]:
-        if self.implementation != "scaling" or len(lengths) != 1 or self.params != "stmc":
-            return super()._do_estep(X, lengths)
-        return _lean_scaling_estep(self, X)
-
-
-def _lean_scaling_estep(model: _MatmulGaussianHMM, X: np.ndarray) -> tuple[dict[str, Any], float]:
-    """Return the statistics and log p(X) of hmmlearn's scaling E-step in three T×K arrays.
-
-    The same calls and arithmetic as hmmlearn 0.3.3's ``_do_estep`` → ``_fit_scaling`` →
-    ``_accumulate_sufficient_statistics`` (so the statistics are bit-identical), but the
-    emission densities are exponentiated in place and freed after the ξ-sum, and the
-    posteriors ``γ ∝ α·β`` (Eq. (6)) are formed in the forward lattice. Peak memory beyond
-    ``X`` is one T×D temporary (``X²``) or ~3·T·K floats, whichever is larger, instead of
-    ~5·T·K floats plus a T×D temporary.
-    """
-    stats = model._initialize_sufficient_statistics()
-    frameprob = model._compute_log_likelihood(X)
-    with np.errstate(under="ignore"):
-        np.exp(frameprob, out=frameprob)
-    log_prob, forward, scaling = _hmmc.forward_scaling(model.startprob_, model.transmat_, frameprob)
-    backward = _hmmc.backward_scaling(model.startprob_, model.transmat_, frameprob, scaling)
-    xi_sum = (
-        _hmmc.compute_scaling_xi_sum(forward, model.transmat_, backward, frameprob)
-        if len(X) > 1
-        else None
-    )
-    del frameprob, scaling
-    posteriors = np.multiply(forward, backward, out=forward)
-    del backward
-    normalize(posteriors, axis=1)
-    stats["nobs"] += 1
-    stats["start"] += posteriors[0]
-    if xi_sum is not None:
-        stats["trans"] += xi_sum
-    stats["post"] += posteriors.sum(axis=0)
-    stats["obs"] += posteriors.T @ X
-    stats["obs**2"] += posteriors.T @ X**2
-    return stats, log_prob
-
-
-def _new_model(n_states: int, implementation: str, n_iter: int = 1) -> GaussianHMM:
-    # Priors switched off (covars_prior=0, covars_weight=1, means_weight=0, Dirichlet priors 1):
-    # the M-step is plain maximum likelihood, as depmixS4's.
-    return _MatmulGaussianHMM(
-        n_components=n_states,
-        covariance_type="diag",
-        startprob_prior=1.0,
-        transmat_prior=1.0,
-        means_prior=0.0,
-        means_weight=0.0,
-        covars_prior=0.0,
-        covars_weight=1.0,
-        algorithm="viterbi",
-        n_iter=n_iter,
-        tol=0.0,
-        params="stmc",
-        init_params="",
-        implementation=implementation,
-    )
-
-
-def _set_params(
-    model: GaussianHMM,
-    startprob: np.ndarray,
-    transmat: np.ndarray,
-    means: np.ndarray,
-    variances: np.ndarray,
-) -> GaussianHMM:
-    model.startprob_ = np.array(startprob, dtype=float)
-    model.transmat_ = np.array(transmat, dtype=float)
-    model.means_ = np.array(means, dtype=float)
-    model.covars_ = np.array(variances, dtype=float)
-    return model
-
-
-def _variances(model: GaussianHMM) -> np.ndarray:
-    # The public ``covars_`` of a diagonal model is the full (K, D, D) matrix.
-    return np.diagonal(model.covars_, axis1=1, axis2=2).copy()
-
-
 def to_hmmlearn(fit: HmmFit, implementation: str = "scaling") -> GaussianHMM:
     """Return an :class:`hmmlearn.hmm.GaussianHMM` holding the parameters of ``fit``.
 
     Use its public ``score``, ``decode`` and ``predict_proba`` on new z-scored data (z-scored
-    with the training mean and sd, :meth:`ZScored.transform`).
+    with the training mean and sd, :meth:`ZScored.transform`). Imports hmmlearn.
     """
-    model = _new_model(fit.n_states, implementation)
+    from dtwin._em_reference import new_gaussian_model, set_gaussian_params
+
+    model = new_gaussian_model(fit.n_states, implementation)
     model.n_features = fit.n_features
-    return _set_params(model, fit.startprob, fit.transmat, fit.means, fit.sds**2)
+    return set_gaussian_params(model, fit.startprob, fit.transmat, fit.means, fit.sds**2)
 
 
-class _EmError(Exception):
-    """EM produced non-finite values for one start."""
+def _require_engine(engine: Any) -> str:
+    if engine not in ENGINES:
+        raise DtwinValueError(f"engine must be one of {', '.join(ENGINES)} (got {engine!r})")
+    return engine
+
+
+def _em_data(X: np.ndarray) -> EmData:
+    """``X`` as the EM engines read it: ``(x, x²)`` rows for the kernels, ``X`` for hmmlearn."""
+    return EmData(kernels.GAUSSIAN, np.hstack([X, X * X]), X)
 
 
 def _random_start(
@@ -339,156 +240,6 @@ def _kmeanspp_start(
 START_METHODS = {"dirichlet": _random_start, "kmeans++": _kmeanspp_start}
 
 
-class _DepmixMonitor(ConvergenceMonitor):
-    """hmmlearn convergence monitor with depmixS4's rule and a variance floor.
-
-    hmmlearn documents subclassing :class:`~hmmlearn.base.ConvergenceMonitor` to change the
-    stopping rule. ``report`` runs once per EM iteration, right after the M-step: it records
-    the log-likelihood of the parameters that entered the iteration and floors the new
-    variances (the exact M-step under ``σ² ≥ var_floor``, so EM stays monotone). ``converged``
-    stops on ``(LL − LL_old)/|LL_old| < tol``, at the iteration cap, or on non-finite values.
-    """
-
-    def __init__(self, model: GaussianHMM, tol: float, n_iter: int, var_floor: float):
-        super().__init__(tol, n_iter, verbose=False)
-        self.model = model
-        self.var_floor = var_floor
-        self.log_likelihoods: list[float] = []
-        self.stopped_by_tol = False
-        self.non_finite = False
-
-    def report(self, log_prob: float) -> None:
-        super().report(log_prob)
-        self.log_likelihoods.append(float(log_prob))
-        model = self.model
-        variances = _variances(model)
-        finite = (
-            np.isfinite(log_prob)
-            and np.isfinite(variances).all()
-            and np.isfinite(model.means_).all()
-            and np.isfinite(model.transmat_).all()
-            and np.isfinite(model.startprob_).all()
-        )
-        if not finite:
-            self.non_finite = True
-            return
-        model.covars_ = np.maximum(variances, self.var_floor)
-
-    @property
-    def converged(self) -> bool:
-        history = self.log_likelihoods
-        if self.non_finite or self.iter >= self.n_iter:
-            return True
-        if len(history) >= 2 and (history[-1] - history[-2]) < self.tol * abs(history[-2]):
-            self.stopped_by_tol = True
-            return True
-        return False
-
-
-def _run_em(
-    X: np.ndarray,
-    means: np.ndarray,
-    variances: np.ndarray,
-    implementation: str,
-    max_iter: int,
-    tol: float,
-    var_floor: float,
-) -> tuple[GaussianHMM, list[float], bool]:
-    """Run EM in one hmmlearn ``fit`` from the given emission start, π and A uniform.
-
-    Returns the model, the log-likelihood history (LL of the parameters entering each
-    iteration, then of the final parameters) and whether the tolerance stopped it.
-    """
-    n_states = len(means)
-    model = _new_model(n_states, implementation, n_iter=max_iter)
-    uniform = np.full(n_states, 1.0 / n_states)
-    _set_params(model, uniform, np.tile(uniform, (n_states, 1)), means, variances)
-    monitor = _DepmixMonitor(model, tol, max_iter, var_floor)
-    model.monitor_ = monitor
-    model.fit(X)
-    if monitor.non_finite:
-        raise _EmError(f"non-finite log-likelihood or parameters ({implementation})")
-    final, posteriors = model.score_samples(X)
-    if not np.isfinite(final):
-        raise _EmError(f"non-finite final log-likelihood ({implementation})")
-    model.occupancy_ = posteriors.sum(axis=0)
-    return model, [*monitor.log_likelihoods, float(final)], monitor.stopped_by_tol
-
-
-def _monotone(history: Sequence[float]) -> bool:
-    steps = np.diff(history)
-    if steps.size == 0:
-        return True
-    allowed = _LL_DROP_RTOL * max(1.0, float(np.max(np.abs(history))))
-    return bool(steps.min() >= -allowed)
-
-
-def _fit_one_start(
-    X: np.ndarray,
-    n_states: int,
-    seed: int,
-    max_iter: int,
-    tol: float,
-    var_floor: float,
-    start: str = "dirichlet",
-    initial: tuple[np.ndarray, np.ndarray] | None = None,
-) -> tuple[dict[str, Any], GaussianHMM | None]:
-    """Run EM from one start: a random one (``start``, seeded) or ``initial`` (means, variances)."""
-    row: dict[str, Any] = {
-        "seed": seed,
-        "log_likelihood": math.nan,
-        "n_iter": 0,
-        "converged": False,
-        "status": "failed",
-        "implementation": "",
-        "min_occupancy": math.nan,
-        "message": "",
-    }
-    if initial is None:
-        means, variances, occupancy = START_METHODS[start](
-            X, n_states, np.random.default_rng(seed), var_floor
-        )
-    else:
-        means, variances = initial
-        occupancy = np.full(n_states, np.inf)
-    if not np.all(occupancy >= MIN_OCCUPANCY) or not np.isfinite(means).all():
-        row.update(status="degenerate", min_occupancy=float(np.min(occupancy)))
-        row["message"] = f"random start left a state with < {MIN_OCCUPANCY} samples of weight"
-        return row, None
-    messages = []
-    for implementation in ("scaling", "log"):
-        try:
-            model, history, stopped = _run_em(
-                X, means, variances, implementation, max_iter, tol, var_floor
-            )
-        except (_EmError, ValueError, FloatingPointError, RuntimeError) as error:
-            messages.append(f"{implementation}: {error}")
-            continue
-        break
-    else:
-        row["message"] = "; ".join(messages)
-        return row, None
-    occupancy = model.occupancy_
-    monotone = _monotone(history)
-    row.update(
-        log_likelihood=history[-1],
-        n_iter=len(history) - 1,
-        implementation=implementation,
-        min_occupancy=float(occupancy.min()),
-        message="; ".join(messages),
-    )
-    if occupancy.min() < MIN_OCCUPANCY:
-        row["status"] = "degenerate"
-        row["message"] = (row["message"] + "; " if messages else "") + "a state emptied"
-    elif not monotone:
-        row["status"] = "not_monotone"
-    elif not stopped:
-        row["status"] = "max_iter"
-    else:
-        row.update(status="ok", converged=True)
-    return row, model
-
-
 def _split_start(
     means: np.ndarray, variances: np.ndarray, state: int, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -512,6 +263,7 @@ def split_fits(
     max_iter: int = 500,
     tol: float = 1e-8,
     var_floor: float = 1e-3,
+    engine: str = "compiled",
 ) -> tuple[pd.DataFrame, tuple[np.ndarray, np.ndarray] | None]:
     """EM from every split of a K-state fit into K + 1 states (greedy growth of the model).
 
@@ -525,7 +277,7 @@ def split_fits(
         Seed of the split directions.
     first_restart : int, default 1
         Number of the first split start in the returned table.
-    max_iter, tol, var_floor
+    max_iter, tol, var_floor, engine
         As :func:`fit_hmm`.
 
     Returns
@@ -545,30 +297,25 @@ def split_fits(
     what it found (split-and-merge EM, Ueda et al. 2000; greedy mixture learning).
     """
     X = require_finite_array("X", X, ndim=2)
+    engine = _require_engine(engine)
     means = np.asarray(means, dtype=float)
     variances = np.asarray(variances, dtype=float)
     rng = np.random.default_rng(seed)
+    data, options = _em_data(X), {"max_iter": max_iter, "tol": tol, "var_floor": var_floor}
     rows: list[dict[str, Any]] = []
-    best: tuple[float, np.ndarray, np.ndarray] | None = None
+    best: tuple[float, np.ndarray] | None = None
     with threadpool_limits(limits=1):
         for state in range(len(means)):
-            initial = _split_start(means, variances, state, rng)
-            row, model = _fit_one_start(
-                X, len(means) + 1, -1, max_iter, tol, var_floor, initial=initial
-            )
+            initial = np.stack(_split_start(means, variances, state, rng))
+            occupancy = np.full(len(means) + 1, np.inf)
+            row, run = fit_one_start(data, -1, (initial, occupancy), engine, options)
             note = f"split of state {state + 1} of the K={len(means)} fit"
             row["message"] = f"{note}; {row['message']}" if row["message"] else note
             rows.append({"restart": first_restart + state, **row})
-            usable = model is not None and row["status"] != "degenerate"
-            if usable and (best is None or row["log_likelihood"] > best[0]):
-                best = (row["log_likelihood"], model.means_.copy(), _variances(model))
-    table = pd.DataFrame(rows, columns=list(_RESTART_COLUMNS))
-    return table, None if best is None else (best[1], best[2])
-
-
-def _restart_seeds(seed: int | Sequence[int], n_restarts: int) -> list[int]:
-    children = np.random.SeedSequence(seed).spawn(n_restarts)
-    return [int(child.generate_state(1, dtype=np.uint32)[0]) for child in children]
+            if run is not None and (best is None or row["log_likelihood"] > best[0]):
+                best = (row["log_likelihood"], run.emission)
+    table = pd.DataFrame(rows, columns=list(RESTART_COLUMNS))
+    return table, None if best is None else (best[1][0].copy(), best[1][1].copy())
 
 
 def _freeze(array: np.ndarray) -> np.ndarray:
@@ -577,38 +324,48 @@ def _freeze(array: np.ndarray) -> np.ndarray:
     return array
 
 
-def _fit_starts(
+def _em_options(
     X: np.ndarray,
     n_states: int,
-    seed: int | Sequence[int],
-    n_restarts: int,
-    max_iter: int,
-    tol: float,
-    var_floor: float,
+    *,
+    max_iter: int = 500,
+    tol: float = 1e-8,
+    var_floor: float = 1e-3,
     start: str = "dirichlet",
-) -> tuple[pd.DataFrame, dict[int, GaussianHMM]]:
-    """Run every EM start; return the table of starts and the usable models by start number.
+    engine: str = "compiled",
+) -> dict[str, Any]:
+    """Return :func:`fit_hmm`'s EM options checked (names and defaults as there)."""
+    if start not in START_METHODS:
+        raise DtwinValueError(f"start must be one of {', '.join(START_METHODS)} (got {start!r})")
+    if len(X) <= n_states:
+        raise DtwinValueError(f"X must have more rows than n_states={n_states} (got {len(X)})")
+    return {
+        "max_iter": _require_count("max_iter", max_iter, 1),
+        "tol": require_positive("tol", tol),
+        "var_floor": require_positive("var_floor", var_floor),
+        "start": start,
+        "engine": _require_engine(engine),
+    }
 
-    The table has the columns of :data:`_RESTART_COLUMNS`, one row per start (1-based
-    ``restart``); failed and degenerate starts are in the table but not among the models.
-    """
-    rows = []
-    models: dict[int, GaussianHMM] = {}
-    for restart, start_seed in enumerate(_restart_seeds(seed, n_restarts), start=1):
-        row, model = _fit_one_start(X, n_states, start_seed, max_iter, tol, var_floor, start)
-        rows.append({"restart": restart, **row})
-        logger.info(
-            "fit_hmm K=%d restart %d/%d: status=%s logL=%.4f n_iter=%d",
-            n_states,
-            restart,
-            n_restarts,
-            row["status"],
-            row["log_likelihood"],
-            row["n_iter"],
-        )
-        if model is not None and row["status"] != "degenerate":
-            models[restart] = model
-    return pd.DataFrame(rows, columns=list(_RESTART_COLUMNS)), models
+
+def _gaussian_starts(
+    X: np.ndarray,
+    n_states: int,
+    seeds: Sequence[int],
+    first_restart: int,
+    options: Mapping[str, Any],
+) -> tuple[pd.DataFrame, dict[int, EmRun]]:
+    """Run the random starts ``first_restart, …`` (one per seed) of :func:`fit_hmm`."""
+    em = {key: options[key] for key in ("max_iter", "tol", "var_floor")}
+    start_method = START_METHODS[options["start"]]
+
+    def initial(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        means, variances, occupancy = start_method(X, n_states, rng, em["var_floor"])
+        return np.stack([means, variances]), occupancy
+
+    return fit_starts(
+        _em_data(X), seeds, initial, options["engine"], em, first_restart, f"fit_hmm K={n_states}"
+    )
 
 
 def fit_hmm(
@@ -621,6 +378,7 @@ def fit_hmm(
     tol: float = 1e-8,
     var_floor: float = 1e-3,
     start: str = "dirichlet",
+    engine: str = "compiled",
 ) -> HmmFit:
     """Fit a diagonal Gaussian HMM by EM from several random starts and return the best.
 
@@ -645,6 +403,10 @@ def fit_hmm(
     start : {"dirichlet", "kmeans++"}, default "dirichlet"
         Random start of each EM run: depmixS4's Dirichlet(0.01) sample weights (the paper's),
         or k-means++ seeding (states start apart; see :data:`START_METHODS`).
+    engine : {"compiled", "hmmlearn"}, default "compiled"
+        EM engine: the compiled kernels of :mod:`dtwin._em_kernels` (hmmlearn's equations and
+        recursions; imports neither hmmlearn nor scikit-learn unless a start falls back) or
+        hmmlearn itself (the reference; config ``hmm.engine``).
 
     Returns
     -------
@@ -661,10 +423,11 @@ def fit_hmm(
     -----
     Each start draws per-sample state weights ~ Dirichlet(0.01) (almost a hard random
     assignment), fits means and ML standard deviations to those weights, and sets π and A
-    uniform (depmixS4's ``random.start``). EM (Eqs. (4)–(9)) runs in hmmlearn with
-    ``implementation="scaling"``, restarting from the same point with ``"log"`` if scaling
-    fails; BLAS is held to one thread. A start is ``ok`` when the tolerance stopped it, its
-    parameters are finite and its log-likelihood never fell by more than round-off;
+    uniform (depmixS4's ``random.start``). EM (Eqs. (4)–(9)) runs the scaled forward-backward
+    recursions (compiled, or hmmlearn's ``implementation="scaling"``), restarting from the
+    same point in hmmlearn's ``"log"`` implementation if they fail; BLAS is held to one thread.
+    A start is ``ok`` when the tolerance stopped it, its parameters are finite and its
+    log-likelihood never fell by more than round-off;
     ``max_iter`` starts are usable but not converged; ``degenerate`` (a state with expected
     occupancy below :data:`MIN_OCCUPANCY` samples) and ``failed`` starts are recorded and skipped.
 
@@ -679,48 +442,56 @@ def fit_hmm(
     X = require_finite_array("X", X, ndim=2)
     n_states = _require_count("n_states", n_states, 1)
     n_restarts = _require_count("n_restarts", n_restarts, 1)
-    max_iter = _require_count("max_iter", max_iter, 1)
-    tol = require_positive("tol", tol)
-    var_floor = require_positive("var_floor", var_floor)
-    if start not in START_METHODS:
-        raise DtwinValueError(f"start must be one of {', '.join(START_METHODS)} (got {start!r})")
-    if len(X) <= n_states:
-        raise DtwinValueError(f"X must have more rows than n_states={n_states} (got {len(X)})")
-
+    options = _em_options(
+        X, n_states, max_iter=max_iter, tol=tol, var_floor=var_floor, start=start, engine=engine
+    )
     with threadpool_limits(limits=1):
-        restarts, models = _fit_starts(
-            X, n_states, seed, n_restarts, max_iter, tol, var_floor, start
+        seeds = restart_seeds(seed, n_restarts)
+        restarts, runs = _gaussian_starts(X, n_states, seeds, 1, options)
+        return _assemble_fit(X, n_states, restarts, runs, options["engine"])
+
+
+def _require_usable(n_states: int, restarts: pd.DataFrame, runs: dict[int, EmRun]) -> None:
+    if not runs:
+        raise HmmFitError(
+            f"fit_hmm: all {len(restarts)} starts failed or degenerated (K={n_states}); "
+            f"statuses: {', '.join(restarts['status'])}"
         )
-        if not models:
-            raise HmmFitError(
-                f"fit_hmm: all {n_restarts} starts failed or degenerated (K={n_states}); "
-                f"statuses: {', '.join(restarts['status'])}"
-            )
-        restart_viterbi = np.full((n_restarts, len(X)), -1, dtype=int)
-        for restart, fitted in models.items():
-            restart_viterbi[restart - 1] = fitted.decode(X, algorithm="viterbi")[1]
-        usable = restarts[restarts["restart"].isin(models)]
-        best = int(usable.loc[usable["log_likelihood"].idxmax(), "restart"])
-        model = models[best]
-        best_row = restarts.loc[restarts["restart"] == best].iloc[0]
-        log_likelihood = float(model.score(X))
-        smoothed = model.predict_proba(X)
-        viterbi = model.decode(X, algorithm="viterbi")[1]
-        variances = _variances(model)
-        filtered, _ = _forward_filter(X, model.startprob_, model.transmat_, model.means_, variances)
-    n_params = n_hmm_params(n_states, X.shape[1])
+
+
+def _best_restart(restarts: pd.DataFrame, runs: dict[int, EmRun]) -> int:
+    """Return the number of the usable start with the highest log-likelihood (first of ties)."""
+    usable = restarts[restarts["restart"].isin(runs)]
+    return int(usable.loc[usable["log_likelihood"].idxmax(), "restart"])
+
+
+def _assemble_fit(
+    X: np.ndarray, n_states: int, restarts: pd.DataFrame, runs: dict[int, EmRun], engine: str
+) -> HmmFit:
+    """Return the :class:`HmmFit` of the best usable start, with every start's Viterbi path."""
+    _require_usable(n_states, restarts, runs)
+    n_restarts = len(restarts)
+    data = _em_data(X)
+    restart_viterbi = np.full((n_restarts, len(X)), -1, dtype=int)
+    for restart, run in runs.items():
+        restart_viterbi[restart - 1] = decode(data, run, engine)
+    best = _best_restart(restarts, runs)
+    run, best_row = runs[best], restarts.loc[restarts["restart"] == best].iloc[0]
+    means, variances = run.emission
+    filtered, _ = _forward_filter(X, run.startprob, run.transmat, means, variances)
+    log_likelihood, n_params = float(run.history[-1]), n_hmm_params(n_states, X.shape[1])
     logger.info(
         "fit_hmm K=%d: best logL=%.4f (restart %d of %d; %d usable)",
         n_states,
         log_likelihood,
         best,
         n_restarts,
-        len(models),
+        len(runs),
     )
     return HmmFit(
-        startprob=_freeze(model.startprob_),
-        transmat=_freeze(model.transmat_),
-        means=_freeze(model.means_),
+        startprob=_freeze(run.startprob),
+        transmat=_freeze(run.transmat),
+        means=_freeze(means),
         sds=_freeze(np.sqrt(variances)),
         log_likelihood=log_likelihood,
         n_params=n_params,
@@ -729,9 +500,9 @@ def fit_hmm(
         converged=bool(best_row["converged"]),
         restarts=restarts,
         best_restart=best,
-        smoothed=_freeze(smoothed),
+        smoothed=_freeze(run.posteriors),
         filtered=_freeze(filtered),
-        viterbi=_freeze(viterbi.astype(int)),
+        viterbi=_freeze(restart_viterbi[best - 1]),
         restart_viterbi=_freeze(restart_viterbi),
     )
 
@@ -981,20 +752,27 @@ def _grown_splits(
     """Return the splits of the best K − 1 fit (:func:`split_fits`), or (None, None)."""
     if grow_from is None or len(grow_from[0]) != k - 1:
         return None, None
-    em = {key: fit_options[key] for key in ("max_iter", "tol", "var_floor") if key in fit_options}
+    keys = ("max_iter", "tol", "var_floor", "engine")
+    em = {key: fit_options[key] for key in keys if key in fit_options}
     return split_fits(X, *grow_from, seed=[*entropy, k, 2], **em)
 
 
 def _combined_row(
-    fit: HmmFit,
+    k: int,
+    restarts: pd.DataFrame,
+    runs: dict[int, EmRun],
     splits: pd.DataFrame | None,
     grown: tuple[np.ndarray, np.ndarray] | None,
+    n_features: int,
     n_samples: int,
 ) -> tuple[dict[str, Any], tuple[np.ndarray, np.ndarray]]:
     """Return the BIC row of a K's random and split starts, and the best emissions."""
-    n_random = len(fit.restarts)
-    restarts, best = fit.restarts, (np.array(fit.means), np.array(fit.sds) ** 2)
-    log_likelihood, converged = fit.log_likelihood, fit.converged
+    _require_usable(k, restarts, runs)
+    n_random, best_restart = len(restarts), _best_restart(restarts, runs)
+    run = runs[best_restart]
+    best = (run.emission[0].copy(), run.emission[1].copy())
+    log_likelihood = float(run.history[-1])
+    converged = bool(restarts.loc[restarts["restart"] == best_restart, "converged"].iloc[0])
     if splits is not None:
         splits = splits.assign(restart=splits["restart"] + n_random)
         restarts = pd.concat([restarts, splits], ignore_index=True)
@@ -1006,8 +784,9 @@ def _combined_row(
                 bool(top["converged"]),
                 grown,
             )
-    bic = -2.0 * log_likelihood + fit.n_params * math.log(n_samples)
-    row = bic_row(fit.n_states, restarts, fit.n_params, bic, converged, n_random=n_random)
+    n_params = n_hmm_params(k, n_features)
+    bic = -2.0 * log_likelihood + n_params * math.log(n_samples)
+    row = bic_row(k, restarts, n_params, bic, converged, n_random=n_random)
     return row, best
 
 
@@ -1022,20 +801,28 @@ def _sweep_row(
 ) -> tuple[dict[str, Any], tuple[np.ndarray, np.ndarray]]:
     """One K of :func:`bic_by_k`: random starts, then the splits of the best K − 1 fit.
 
-    With ``max_restarts``, the random starts are doubled (the seeds are prefix-stable, so the
-    first ones are the same fits) while the second half still gains :data:`STABLE_GAIN` or
-    more log-likelihood and the doubled count stays within ``max_restarts``.
+    With ``max_restarts``, the random starts are doubled while the second half still gains
+    :data:`STABLE_GAIN` or more log-likelihood and the doubled count stays within
+    ``max_restarts``; the seeds are prefix-stable, so only the new half is fitted.
     """
-    splits, grown = _grown_splits(X, k, entropy, grow_from, fit_options)
-    n = n_restarts
-    while True:
-        fit = fit_hmm(X, k, n_restarts=n, seed=[*entropy, k], **fit_options)
-        row, best = _combined_row(fit, splits, grown, len(X))
-        gain = row["log_likelihood"] - row["log_likelihood_half"]
-        if max_restarts is None or gain < STABLE_GAIN or 2 * n > max_restarts:
-            return row, best
-        logger.info("bic_by_k K=%d: %d starts gain %.3f over %d; doubling", k, n, gain, n // 2)
-        n *= 2
+    options = _em_options(X, k, **fit_options)
+    splits, grown = _grown_splits(X, k, entropy, grow_from, options)
+    tables, runs, n = [], {}, 0
+    target = n_restarts
+    with threadpool_limits(limits=1):
+        while True:
+            seeds = restart_seeds([*entropy, k], target, first=n)
+            table, new_runs = _gaussian_starts(X, k, seeds, n + 1, options)
+            tables.append(table)
+            runs.update(new_runs)
+            n = target
+            restarts = pd.concat(tables, ignore_index=True)
+            row, best = _combined_row(k, restarts, runs, splits, grown, X.shape[1], len(X))
+            gain = row["log_likelihood"] - row["log_likelihood_half"]
+            if max_restarts is None or gain < STABLE_GAIN or 2 * n > max_restarts:
+                return row, best
+            logger.info("bic_by_k K=%d: %d starts gain %.3f over %d; doubling", k, n, gain, n // 2)
+            target = 2 * n
 
 
 def _given_params(row: dict[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:

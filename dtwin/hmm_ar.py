@@ -12,15 +12,16 @@ so a state is a level *and* a dynamic. Parameters per state and feature: the int
 innovation variance ``σ²``; with K states and D features the model has
 ``(K−1) + K(K−1) + 3DK`` free parameters (:func:`n_ar_hmm_params`).
 
-The likelihood is conditional on the first sample: hmmlearn sees the ``T − 1`` pairs
+The likelihood is conditional on the first sample: EM sees the ``T − 1`` pairs
 ``(x_t, x_t−1)`` as one row each (with their squares and product, shape ``(T − 1, 5D)``),
 and every state sequence, posterior and Viterbi path refers to samples ``1 … T−1``; sample 0
 is given the state of sample 1.
 
-EM extends :class:`hmmlearn.base.BaseHMM` through the emission hooks its own model classes
-implement (``_compute_log_likelihood``, ``_initialize_sufficient_statistics``,
-``_accumulate_sufficient_statistics``, ``_do_mstep``); the forward-backward recursion,
-Baum-Welch's π and A updates and Viterbi are hmmlearn's. The M-step is per state and feature
+EM runs in the compiled kernels of :mod:`dtwin._em_kernels` (hmmlearn's scaled
+forward-backward, π and A updates and Viterbi, written out in numba) through the multi-start
+harness the Gaussian HMM uses (:mod:`dtwin._multistart`); the reference engine
+(``engine="hmmlearn"``) extends :class:`hmmlearn.base.BaseHMM` through the emission hooks its
+own model classes implement (:mod:`dtwin._em_reference`). The M-step is per state and feature
 a weighted least-squares regression of ``x_t`` on ``(1, x_t−1)`` with weights γ_t(k), and its
 residual variance floored at ``var_floor`` (the exact constrained maximiser, so EM stays
 monotone). Random starts, the stopping rule and the start table follow :func:`dtwin.hmm.fit_hmm`
@@ -39,18 +40,17 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from hmmlearn.base import BaseHMM, ConvergenceMonitor
 from threadpoolctl import threadpool_limits
 
+from dtwin import _em_kernels as kernels
+from dtwin._multistart import EmData, decode, fit_starts, kernel_array, restart_seeds
 from dtwin._validation import DtwinValueError, require_finite_array, require_positive
 from dtwin.hmm import (
     DIRICHLET_ALPHA,
-    MIN_OCCUPANCY,
     HmmFitError,
     _freeze,
-    _monotone,
     _require_count,
-    _restart_seeds,
+    _require_engine,
     bic_minimum_bracketed,
     bic_row,
 )
@@ -66,21 +66,6 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
-
-#: Letter of the emission parameters (c, φ, σ²) in hmmlearn's ``params`` string.
-_EMISSION = "e"
-
-_RESTART_COLUMNS = (
-    "restart",
-    "seed",
-    "log_likelihood",
-    "n_iter",
-    "converged",
-    "status",
-    "implementation",
-    "min_occupancy",
-    "message",
-)
 
 
 def n_ar_hmm_params(n_states: int, n_features: int) -> int:
@@ -153,94 +138,6 @@ def _ar_mstep(
     intercepts = mean_y - coefs * mean_x
     variances = np.maximum(var_y - coefs * cov, var_floor)
     return intercepts, coefs, variances
-
-
-class _ArGaussianHMM(BaseHMM):
-    """hmmlearn HMM with a diagonal Gaussian AR(1) emission per state.
-
-    Fitted on :func:`_design` rows; attributes ``intercepts_``, ``coefs_``, ``variances_``
-    (K, D). ``params`` letters: ``s`` (π), ``t`` (A), ``e`` (the emission).
-    """
-
-    def __init__(
-        self,
-        n_components: int = 1,
-        var_floor: float = 1e-6,
-        algorithm: str = "viterbi",
-        random_state: Any = None,
-        n_iter: int = 10,
-        tol: float = 0.0,
-        verbose: bool = False,
-        params: str = "ste",
-        init_params: str = "",
-        implementation: str = "scaling",
-    ):
-        super().__init__(
-            n_components=n_components,
-            startprob_prior=1.0,
-            transmat_prior=1.0,
-            algorithm=algorithm,
-            random_state=random_state,
-            n_iter=n_iter,
-            tol=tol,
-            verbose=verbose,
-            params=params,
-            init_params=init_params,
-            implementation=implementation,
-        )
-        self.var_floor = var_floor
-
-    def _get_n_fit_scalars_per_param(self) -> dict[str, int]:
-        k, d = self.n_components, self.n_features // 5
-        return {"s": k - 1, "t": k * (k - 1), _EMISSION: 3 * k * d}
-
-    def _compute_log_likelihood(self, X: np.ndarray) -> np.ndarray:
-        return _ar_log_emission(X, self.intercepts_, self.coefs_, self.variances_)
-
-    def _initialize_sufficient_statistics(self) -> dict[str, Any]:
-        stats = super()._initialize_sufficient_statistics()
-        stats["moments"] = None
-        return stats
-
-    def _accumulate_sufficient_statistics(
-        self, stats, X, lattice, posteriors, fwdlattice, bwdlattice
-    ) -> None:
-        super()._accumulate_sufficient_statistics(
-            stats, X, lattice, posteriors, fwdlattice, bwdlattice
-        )
-        if _EMISSION in self.params:
-            moments = _moments(posteriors, X)
-            if stats["moments"] is not None:
-                moments = {key: stats["moments"][key] + value for key, value in moments.items()}
-            stats["moments"] = moments
-
-    def _do_mstep(self, stats: dict[str, Any]) -> None:
-        super()._do_mstep(stats)
-        if _EMISSION in self.params and stats["moments"] is not None:
-            self.intercepts_, self.coefs_, self.variances_ = _ar_mstep(
-                stats["moments"], self.var_floor
-            )
-
-
-def _new_model(
-    startprob: np.ndarray,
-    transmat: np.ndarray,
-    emission: tuple[np.ndarray, np.ndarray, np.ndarray],
-    implementation: str,
-    max_iter: int = 1,
-    var_floor: float = 1e-6,
-) -> _ArGaussianHMM:
-    model = _ArGaussianHMM(
-        n_components=len(startprob),
-        var_floor=var_floor,
-        n_iter=max_iter,
-        implementation=implementation,
-    )
-    model.n_features = 5 * emission[0].shape[1]
-    model.startprob_ = np.array(startprob, dtype=float)
-    model.transmat_ = np.array(transmat, dtype=float)
-    model.intercepts_, model.coefs_, model.variances_ = (np.array(a, dtype=float) for a in emission)
-    return model
 
 
 # --- the fitted model -----------------------------------------------------------------------
@@ -355,125 +252,15 @@ def sample_ar_hmm(
 # --- EM from random starts ------------------------------------------------------------------
 
 
-class _RelativeMonitor(ConvergenceMonitor):
-    """depmixS4's stopping rule ``(LL − LL_old)/|LL_old| < tol``; records the history."""
-
-    def __init__(self, tol: float, n_iter: int):
-        super().__init__(tol, n_iter, verbose=False)
-        self.log_likelihoods: list[float] = []
-        self.stopped_by_tol = False
-        self.non_finite = False
-
-    def report(self, log_prob: float) -> None:
-        super().report(log_prob)
-        self.log_likelihoods.append(float(log_prob))
-        if not np.isfinite(log_prob):
-            self.non_finite = True
-
-    @property
-    def converged(self) -> bool:
-        history = self.log_likelihoods
-        if self.non_finite or self.iter >= self.n_iter:
-            return True
-        if len(history) >= 2 and (history[-1] - history[-2]) < self.tol * abs(history[-2]):
-            self.stopped_by_tol = True
-            return True
-        return False
-
-
 def _random_emission(
     design: np.ndarray, n_states: int, rng: np.random.Generator, var_floor: float
-) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
-    """depmixS4's random start: Dirichlet(0.01) pair weights, the weighted M-step on them."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """depmixS4's random start: Dirichlet(0.01) pair weights, the weighted M-step on them.
+
+    Returns the emission ``(c, φ, σ²)`` stacked, shape (3, K, D), and the weights' occupancy.
+    """
     weights = rng.dirichlet(np.full(n_states, DIRICHLET_ALPHA), size=len(design))
-    return _ar_mstep(_moments(weights, design), var_floor), weights.sum(axis=0)
-
-
-def _run_em(
-    design: np.ndarray,
-    emission: tuple[np.ndarray, np.ndarray, np.ndarray],
-    implementation: str,
-    max_iter: int,
-    tol: float,
-    var_floor: float,
-) -> tuple[_ArGaussianHMM, list[float], bool]:
-    """One hmmlearn ``fit`` from the given emission start (π and A uniform)."""
-    n_states = emission[0].shape[0]
-    uniform = np.full(n_states, 1.0 / n_states)
-    model = _new_model(
-        uniform, np.tile(uniform, (n_states, 1)), emission, implementation, max_iter, var_floor
-    )
-    monitor = _RelativeMonitor(tol, max_iter)
-    model.monitor_ = monitor
-    with np.errstate(under="ignore"):
-        model.fit(design)
-        final, posteriors = model.score_samples(design)
-    parameters = (model.intercepts_, model.coefs_, model.variances_, model.transmat_)
-    if (
-        monitor.non_finite
-        or not np.isfinite(final)
-        or not all(np.isfinite(p).all() for p in parameters)
-    ):
-        raise FloatingPointError(f"non-finite log-likelihood or parameters ({implementation})")
-    model.occupancy_ = posteriors.sum(axis=0)
-    return model, [*monitor.log_likelihoods, float(final)], monitor.stopped_by_tol
-
-
-def _fit_one_start(
-    design: np.ndarray, n_states: int, seed: int, max_iter: int, tol: float, var_floor: float
-) -> tuple[dict[str, Any], _ArGaussianHMM | None]:
-    row: dict[str, Any] = {
-        "seed": seed,
-        "log_likelihood": math.nan,
-        "n_iter": 0,
-        "converged": False,
-        "status": "failed",
-        "implementation": "",
-        "min_occupancy": math.nan,
-        "message": "",
-    }
-    emission, occupancy = _random_emission(design, n_states, np.random.default_rng(seed), var_floor)
-    if occupancy.min() < MIN_OCCUPANCY:
-        row.update(status="degenerate", min_occupancy=float(occupancy.min()))
-        row["message"] = f"random start left a state with < {MIN_OCCUPANCY} samples of weight"
-        return row, None
-    messages = []
-    for implementation in ("scaling", "log"):
-        try:
-            model, history, stopped = _run_em(
-                design, emission, implementation, max_iter, tol, var_floor
-            )
-        except (FloatingPointError, ValueError, RuntimeError) as error:
-            messages.append(f"{implementation}: {error}")
-            continue
-        break
-    else:
-        row["message"] = "; ".join(messages)
-        return row, None
-    row.update(
-        log_likelihood=history[-1],
-        n_iter=len(history) - 1,
-        implementation=implementation,
-        min_occupancy=float(model.occupancy_.min()),
-        message="; ".join(messages),
-    )
-    if model.occupancy_.min() < MIN_OCCUPANCY:
-        row["status"] = "degenerate"
-    elif not _monotone(history):
-        row["status"] = "not_monotone"
-    elif not stopped:
-        row["status"] = "max_iter"
-    else:
-        row.update(status="ok", converged=True)
-    return row, (None if row["status"] == "degenerate" else model)
-
-
-def _decoded(model: _ArGaussianHMM, design: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Smoothed posteriors and Viterbi path of all T samples (sample 0 copies sample 1)."""
-    with np.errstate(under="ignore"):
-        smoothed = model.predict_proba(design)
-        viterbi = model.decode(design, algorithm="viterbi")[1].astype(int)
-    return np.vstack([smoothed[:1], smoothed]), np.concatenate([viterbi[:1], viterbi])
+    return np.stack(_ar_mstep(_moments(weights, design), var_floor)), weights.sum(axis=0)
 
 
 def fit_ar_hmm(
@@ -485,6 +272,7 @@ def fit_ar_hmm(
     max_iter: int = 500,
     tol: float = 1e-8,
     var_floor: float = 1e-6,
+    engine: str = "compiled",
 ) -> ArHmmFit:
     """Fit a diagonal Gaussian AR(1)-HMM by EM from several random starts; return the best.
 
@@ -506,6 +294,8 @@ def fit_ar_hmm(
         Lower bound on every innovation variance σ², z-units² (innovations of a series with
         lag-1 ACF 0.999 have variance ~2e-3 of the series', so the Gaussian HMM's floor of
         1e-3 would be far too high).
+    engine : {"compiled", "hmmlearn"}, default "compiled"
+        EM engine, as :func:`dtwin.hmm.fit_hmm`.
 
     Returns
     -------
@@ -541,24 +331,28 @@ def fit_ar_hmm(
         raise DtwinValueError(
             f"X must have at least n_states + 2 = {n_states + 2} rows (got {len(X)})"
         )
+    options = {"max_iter": max_iter, "tol": tol, "var_floor": var_floor}
+    engine = _require_engine(engine)
     design = _design(X)
-    rows, models = [], {}
+    data = EmData(kernels.AR1, design, design)
     with threadpool_limits(limits=1):
-        for restart, start_seed in enumerate(_restart_seeds(seed, n_restarts), start=1):
-            row, model = _fit_one_start(design, n_states, start_seed, max_iter, tol, var_floor)
-            rows.append({"restart": restart, **row})
-            if model is not None:
-                models[restart] = model
-        restarts = pd.DataFrame(rows, columns=list(_RESTART_COLUMNS))
-        if not models:
+        restarts, runs = fit_starts(
+            data,
+            restart_seeds(seed, n_restarts),
+            lambda rng: _random_emission(design, n_states, rng, var_floor),
+            engine,
+            options,
+            label=f"fit_ar_hmm K={n_states}",
+        )
+        if not runs:
             raise HmmFitError(
                 f"fit_ar_hmm: all {n_restarts} starts failed or degenerated (K={n_states}); "
                 f"statuses: {', '.join(restarts['status'])}"
             )
-        usable = restarts[restarts["restart"].isin(models)]
+        usable = restarts[restarts["restart"].isin(runs)]
         best = int(usable.loc[usable["log_likelihood"].idxmax(), "restart"])
-        model = models[best]
-        smoothed, viterbi = _decoded(model, design)
+        run = runs[best]
+        viterbi = decode(data, run, engine).astype(int)
     best_row = restarts.loc[restarts["restart"] == best].iloc[0]
     n_params = n_ar_hmm_params(n_states, X.shape[1])
     log_likelihood = float(best_row["log_likelihood"])
@@ -569,12 +363,13 @@ def fit_ar_hmm(
         best,
         n_restarts,
     )
+    intercepts, coefs, variances = run.emission
     return ArHmmFit(
-        startprob=_freeze(model.startprob_),
-        transmat=_freeze(model.transmat_),
-        intercepts=_freeze(model.intercepts_),
-        coefs=_freeze(model.coefs_),
-        sds=_freeze(np.sqrt(model.variances_)),
+        startprob=_freeze(run.startprob),
+        transmat=_freeze(run.transmat),
+        intercepts=_freeze(intercepts),
+        coefs=_freeze(coefs),
+        sds=_freeze(np.sqrt(variances)),
         log_likelihood=log_likelihood,
         n_params=n_params,
         bic=-2.0 * log_likelihood + n_params * math.log(len(design)),
@@ -582,8 +377,8 @@ def fit_ar_hmm(
         converged=bool(best_row["converged"]),
         restarts=restarts,
         best_restart=best,
-        smoothed=_freeze(smoothed),
-        viterbi=_freeze(viterbi),
+        smoothed=_freeze(np.vstack([run.posteriors[:1], run.posteriors])),
+        viterbi=_freeze(np.concatenate([viterbi[:1], viterbi])),
     )
 
 
@@ -592,9 +387,16 @@ def score_ar_hmm(fit: ArHmmFit, X: Any) -> float:
     X = require_finite_array("X", X, ndim=2)
     if X.shape[1] != fit.n_features or len(X) < 2:
         raise DtwinValueError(f"X must have shape (T >= 2, {fit.n_features}) (got {X.shape})")
-    emission = (fit.intercepts, fit.coefs, fit.sds**2)
-    model = _new_model(fit.startprob, fit.transmat, emission, "log")
-    return float(model.score(_design(X)))
+    design = _design(X)
+    data = EmData(kernels.AR1, design, design)
+    emission = np.stack([fit.intercepts, fit.coefs, fit.sds**2])
+    arrays = (design, emission, fit.startprob, fit.transmat)
+    log_likelihood = kernels.score(data.kind, *(kernel_array(a) for a in arrays))
+    if np.isnan(log_likelihood):  # the scaled forward pass underflowed: hmmlearn's log space
+        from dtwin._em_reference import score
+
+        log_likelihood = score(data, fit.startprob, fit.transmat, emission, "log")
+    return float(log_likelihood)
 
 
 # --- model order ----------------------------------------------------------------------------

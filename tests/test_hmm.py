@@ -396,11 +396,11 @@ def test_matmul_emission_hook_equals_hmmlearns_density():
     """The one override below hmmlearn's public API gives hmmlearn's own numbers."""
     from hmmlearn.stats import log_multivariate_normal_density
 
-    from dtwin.hmm import _new_model
+    from dtwin._em_reference import new_gaussian_model
 
     rng = np.random.default_rng(3)
     X = rng.normal(size=(500, 6)) * 3
-    model = _new_model(3, "scaling")
+    model = new_gaussian_model(3, "scaling")
     model.n_features = 6
     model.startprob_ = np.full(3, 1 / 3)
     model.transmat_ = np.full((3, 3), 1 / 3)
@@ -417,11 +417,11 @@ def test_lean_estep_gives_hmmlearns_statistics_bit_for_bit(n_steps):
     """The lean scaling E-step returns exactly hmmlearn's own E-step (same model, same X)."""
     from hmmlearn.hmm import GaussianHMM
 
-    from dtwin.hmm import _new_model
+    from dtwin._em_reference import new_gaussian_model
 
     rng = np.random.default_rng(n_steps)
     X = rng.normal(size=(n_steps, 5)) * 2
-    model = _new_model(3, "scaling")
+    model = new_gaussian_model(3, "scaling")
     model.n_features = 5
     model.startprob_ = rng.dirichlet(np.ones(3))
     model.transmat_ = rng.dirichlet(np.ones(3), size=3)

@@ -22,7 +22,7 @@ import pandas as pd
 
 from dtwin._validation import DtwinValueError, require_mapping, require_positive, require_seed
 from dtwin.fault_injection import REGIMES, regime_features
-from dtwin.hmm import zscore
+from dtwin.hmm import ENGINES, zscore
 from dtwin.hmm_ar import ArHmmFit, ar_bic_by_k
 from dtwin.regime_matching import classification_scores, hungarian_map
 
@@ -46,6 +46,9 @@ AR_HMM_KEYS: tuple[str, ...] = (
 def ar_hmm_options(ar_hmm: Any) -> dict[str, Any]:
     """Return the ``ar_hmm`` section checked: every key of :data:`AR_HMM_KEYS`, typed.
 
+    An ``engine`` key (the rule passes ``hmm.engine``) chooses the EM engine; default
+    ``compiled``. It is not part of the returned settings, since it does not change them.
+
     Examples
     --------
     >>> ar_hmm_options({"seed": 1, "ks": [2, 3], "k_max": 5, "stop_after_rises": 2,
@@ -66,6 +69,13 @@ def ar_hmm_options(ar_hmm: Any) -> dict[str, Any]:
         "tol": require_positive("ar_hmm.tol", section["tol"]),
         "var_floor": require_positive("ar_hmm.var_floor", section["var_floor"]),
     }
+
+
+def _ar_engine(ar_hmm: Any) -> str:
+    engine = ar_hmm.get("engine", "compiled")
+    if engine not in ENGINES:
+        raise DtwinValueError(f"ar_hmm.engine must be one of {', '.join(ENGINES)} (got {engine!r})")
+    return engine
 
 
 def score_ar_fit(fit: ArHmmFit, regimes: Any) -> dict[str, Any]:
@@ -145,6 +155,7 @@ def ar_regime_sweep(
         max_iter=options["max_iter"],
         tol=options["tol"],
         var_floor=options["var_floor"],
+        engine=_ar_engine(ar_hmm),
     )
     scores = {k: score_ar_fit(fit, regimes) for k, fit in sweep.fits.items()}
     table = sweep.table.copy()

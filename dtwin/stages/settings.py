@@ -16,9 +16,10 @@ from dtwin._validation import DtwinValueError, require_mapping, require_positive
 
 __all__ = ["EmSettings", "HmmSettings"]
 
-#: Names of the EM random starts (the keys of :data:`dtwin.hmm.START_METHODS`; kept here so
-#: reading a config does not import hmmlearn).
+#: Names of the EM random starts (the keys of :data:`dtwin.hmm.START_METHODS`) and of the EM
+#: engines (:data:`dtwin.hmm.ENGINES`); kept here so reading a config imports no EM engine.
 _STARTS = ("dirichlet", "kmeans++")
+_ENGINES = ("compiled", "hmmlearn")
 
 
 def _count(section: str, raw: Mapping[str, Any], key: str, minimum: int) -> int:
@@ -43,12 +44,16 @@ class EmSettings:
     start : str, default "dirichlet"
         Random start of every EM run (:data:`dtwin.hmm.START_METHODS`): depmixS4's
         ``dirichlet`` or ``kmeans++``.
+    engine : str, default "compiled"
+        EM engine (:func:`dtwin.hmm.fit_hmm`): ``compiled`` (numba kernels) or ``hmmlearn``
+        (the reference; same equations).
     """
 
     max_iter: int = 500
     tol: float = 1e-8
     var_floor: float = 1e-3
     start: str = "dirichlet"
+    engine: str = "compiled"
 
     @classmethod
     def from_mapping(cls, raw: Any, section: str = "hmm") -> EmSettings:
@@ -66,16 +71,20 @@ class EmSettings:
         for key in ("tol", "var_floor"):
             if key in raw:
                 values[key] = require_positive(f"{section}.{key}", raw[key])
-        if "start" in raw:
-            if raw["start"] not in _STARTS:
-                raise DtwinValueError(
-                    f"{section}.start must be one of {', '.join(_STARTS)} (got {raw['start']!r})"
-                )
-            values["start"] = raw["start"]
+        for key, names in (("start", _STARTS), ("engine", _ENGINES)):
+            if key in raw:
+                if raw[key] not in names:
+                    raise DtwinValueError(
+                        f"{section}.{key} must be one of {', '.join(names)} (got {raw[key]!r})"
+                    )
+                values[key] = raw[key]
         return cls(**values)
 
     def options(self) -> dict[str, Any]:
-        """Return the keyword arguments ``max_iter``, ``tol``, ``var_floor`` of the fit."""
+        """Return the keyword arguments ``max_iter``, ``tol``, ``var_floor``, ``start``, ``engine``.
+
+        (Of :func:`dtwin.hmm.fit_hmm` and :func:`dtwin.hmm.bic_by_k`.)
+        """
         return asdict(self)
 
 

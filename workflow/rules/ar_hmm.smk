@@ -18,7 +18,7 @@ rule ar_hmm_sweep:
         table="results/ar_hmm/bic.csv",
         summary="results/ar_hmm/summary.json",
     params:
-        ar_hmm=config["ar_hmm"],
+        ar_hmm={**config["ar_hmm"], "engine": config["hmm"]["engine"]},
         n_states=config["hmm"]["n_states"],
     log:
         "logs/ar_hmm_sweep.log",

@@ -184,7 +184,7 @@ def sweep_chunk_runtime(wildcards):
 # only choose what the figure shows).
 SENSITIVITY_JOB_PARAMS = {
     "seed": config["sensitivity"]["seed"],
-    "hmm": config["sensitivity"]["hmm"],
+    "hmm": {**config["sensitivity"]["hmm"], "engine": config["hmm"]["engine"]},
     "correction": {m: config["sensitivity"]["correction"][m] for m in ("code", "paper")},
     "r_signals": config["sensitivity"]["r_signals"],
 }

@@ -95,7 +95,7 @@ rule bic_sweep_dataset:
         dataset="|".join(BIC_INPUTS),
     params:
         bic=config["bic"],
-        hmm={k: config["hmm"][k] for k in ("seed", "max_iter", "tol", "var_floor")},
+        hmm={k: config["hmm"][k] for k in ("seed", "max_iter", "tol", "var_floor", "engine")},
     log:
         "logs/bic_sweep_dataset/{dataset}.log",
     benchmark:

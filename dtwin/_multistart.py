@@ -1,0 +1,283 @@
+"""EM from several starts for the regime HMMs, one harness for every emission (paper §2.1, §5).
+
+:func:`dtwin.hmm.fit_hmm` (Gaussian emissions) and :func:`dtwin.hmm_ar.fit_ar_hmm` (AR(1)
+emissions) run their starts here: each start's EM through the chosen engine (``compiled``:
+:func:`dtwin._em_kernels.em`; ``hmmlearn``: :mod:`dtwin._em_reference`), hmmlearn's log-space
+implementation when the scaled recursions fail, and one row per start with an honest status
+(``ok``, ``max_iter``, ``not_monotone``, ``degenerate``, ``failed``). hmmlearn is imported only
+by the reference engine and the fallback.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dtwin import _em_kernels as kernels
+
+__all__ = [
+    "ENGINES",
+    "MIN_OCCUPANCY",
+    "RESTART_COLUMNS",
+    "EmData",
+    "EmError",
+    "EmRun",
+    "decode",
+    "fit_starts",
+    "kernel_array",
+    "restart_seeds",
+    "run_start",
+]
+
+logger = logging.getLogger(__name__)
+
+#: EM engines: numba kernels (default) or hmmlearn (the reference).
+ENGINES = ("compiled", "hmmlearn")
+
+#: A state whose expected occupancy ``Σ_t γ_t(k)`` falls below this many samples is "empty"
+#: (half a sample, so that a state holding one outlier sample is not flagged by round-off).
+MIN_OCCUPANCY = 0.5
+
+#: Log-likelihood drops smaller than this times ``max(1, |LL|)`` count as round-off.
+_LL_DROP_RTOL = 1e-9
+
+#: Columns of a fit's table of starts (:attr:`dtwin.hmm.HmmFit.restarts`).
+RESTART_COLUMNS = (
+    "restart",
+    "seed",
+    "log_likelihood",
+    "n_iter",
+    "converged",
+    "status",
+    "implementation",
+    "min_occupancy",
+    "message",
+)
+
+_KERNEL_FAILURES = {
+    kernels.UNDERFLOW: "forward pass failed with underflow; consider using implementation='log'",
+    kernels.NON_FINITE: "non-finite log-likelihood or parameters (scaling)",
+    kernels.NOT_DISTRIBUTION: "startprob_ or transmat_ rows do not sum to 1 (scaling)",
+}
+
+
+class EmError(Exception):
+    """EM produced non-finite values, or a forward pass underflowed, for one start."""
+
+
+@dataclass(frozen=True)
+class EmData:
+    """The training sequence as each engine reads it.
+
+    Attributes
+    ----------
+    kind : int
+        :data:`dtwin._em_kernels.GAUSSIAN` or :data:`dtwin._em_kernels.AR1`.
+    kernel : ndarray, shape (T', C)
+        Rows of the compiled kernels: ``(x, x²)`` (Gaussian) or ``(y, x, y², yx, x²)`` (AR(1)).
+    reference : ndarray
+        Rows of the hmmlearn models: ``X`` (Gaussian) or the AR design rows.
+    """
+
+    kind: int
+    kernel: np.ndarray
+    reference: np.ndarray
+
+
+@dataclass(frozen=True)
+class EmRun:
+    """One finished EM start.
+
+    Attributes
+    ----------
+    startprob, transmat : ndarray, shapes (K,), (K, K)
+        π and A.
+    emission : ndarray, shape (P, K, D)
+        Emission parameters: (means, variances) or (intercepts, coefs, variances).
+    history : ndarray, shape (n_iter + 1,)
+        log p(X) of the parameters entering each iteration, then of the returned ones.
+    stopped : bool
+        The tolerance stopped EM (not the iteration cap).
+    posteriors : ndarray, shape (T', K)
+        Smoothed posteriors γ_t(k) under the returned parameters.
+    implementation : str
+        ``scaling`` (scaled recursions, compiled or hmmlearn's) or ``log`` (hmmlearn's).
+    """
+
+    startprob: np.ndarray
+    transmat: np.ndarray
+    emission: np.ndarray
+    history: np.ndarray
+    stopped: bool
+    posteriors: np.ndarray
+    implementation: str
+
+    @property
+    def occupancy(self) -> np.ndarray:
+        """Expected occupancy ``Σ_t γ_t(k)`` per state, samples."""
+        return self.posteriors.sum(axis=0)
+
+
+def restart_seeds(seed: int | Sequence[int], n_restarts: int, first: int = 0) -> list[int]:
+    """Seeds of starts ``first … n_restarts − 1``: children of ``SeedSequence(seed)``.
+
+    Prefix-stable: the first starts of a longer run are those of a shorter one.
+    """
+    children = np.random.SeedSequence(seed).spawn(n_restarts)[first:]
+    return [int(child.generate_state(1, dtype=np.uint32)[0]) for child in children]
+
+
+def kernel_array(array: Any) -> np.ndarray:
+    """Return a writable C-contiguous float64 copy: the one array type the cached kernels take.
+
+    (A read-only or strided array would make numba compile a new specialisation in the job.)
+    """
+    return np.array(array, dtype=float, order="C")
+
+
+def _compiled_em(data: EmData, emission: np.ndarray, options: dict[str, Any]) -> EmRun:
+    code, history, stopped, startprob, transmat, fitted, final, posteriors = kernels.em(
+        int(data.kind),
+        kernel_array(data.kernel),
+        kernel_array(emission),
+        int(options["max_iter"]),
+        float(options["tol"]),
+        float(options["var_floor"]),
+    )
+    if code != kernels.OK:
+        raise EmError(_KERNEL_FAILURES[code])
+    history = np.append(history, final)
+    return EmRun(startprob, transmat, fitted, history, bool(stopped), posteriors, "scaling")
+
+
+def run_start(
+    data: EmData, emission: np.ndarray, engine: str, options: dict[str, Any]
+) -> tuple[EmRun | None, list[str]]:
+    """Run EM from one emission start (π, A uniform); scaled recursions, then hmmlearn's log.
+
+    Returns the run (None if both failed) and the failure messages, ``"<implementation>: …"``.
+    """
+    messages = []
+    for implementation in ("scaling", "log"):
+        try:
+            if engine == "compiled" and implementation == "scaling":
+                return _compiled_em(data, emission, options), messages
+            from dtwin import _em_reference
+
+            return _em_reference.run_em(data, emission, implementation, options), messages
+        except (EmError, ValueError, FloatingPointError, RuntimeError) as error:
+            messages.append(f"{implementation}: {error}")
+    return None, messages
+
+
+def _monotone(history: np.ndarray) -> bool:
+    steps = np.diff(history)
+    if steps.size == 0:
+        return True
+    allowed = _LL_DROP_RTOL * max(1.0, float(np.max(np.abs(history))))
+    return bool(steps.min() >= -allowed)
+
+
+def _start_row(seed: int, run: EmRun | None, messages: list[str]) -> dict[str, Any]:
+    """Return the table row of one start that ran EM (statuses: see :func:`fit_starts`)."""
+    row: dict[str, Any] = {
+        "seed": seed,
+        "log_likelihood": math.nan,
+        "n_iter": 0,
+        "converged": False,
+        "status": "failed",
+        "implementation": "",
+        "min_occupancy": math.nan,
+        "message": "; ".join(messages),
+    }
+    if run is None:
+        return row
+    occupancy = run.occupancy
+    row.update(
+        log_likelihood=float(run.history[-1]),
+        n_iter=len(run.history) - 1,
+        implementation=run.implementation,
+        min_occupancy=float(occupancy.min()),
+    )
+    if occupancy.min() < MIN_OCCUPANCY:
+        row["status"] = "degenerate"
+        row["message"] = (row["message"] + "; " if messages else "") + "a state emptied"
+    elif not _monotone(run.history):
+        row["status"] = "not_monotone"
+    elif not run.stopped:
+        row["status"] = "max_iter"
+    else:
+        row.update(status="ok", converged=True)
+    return row
+
+
+def fit_one_start(
+    data: EmData,
+    seed: int,
+    initial: tuple[np.ndarray, np.ndarray],
+    engine: str,
+    options: dict[str, Any],
+) -> tuple[dict[str, Any], EmRun | None]:
+    """EM from one start ``initial = (emission (P, K, D), occupancy (K,))``; row and usable run.
+
+    A start whose initial occupancy leaves a state below :data:`MIN_OCCUPANCY` samples, or
+    whose emission is not finite, is ``degenerate`` and not run.
+    """
+    emission, occupancy = initial
+    if not np.all(occupancy >= MIN_OCCUPANCY) or not np.isfinite(emission).all():
+        row = _start_row(seed, None, [])
+        row.update(status="degenerate", min_occupancy=float(np.min(occupancy)))
+        row["message"] = f"random start left a state with < {MIN_OCCUPANCY} samples of weight"
+        return row, None
+    run, messages = run_start(data, emission, engine, options)
+    row = _start_row(seed, run, messages)
+    return row, (run if row["status"] not in ("failed", "degenerate") else None)
+
+
+def fit_starts(
+    data: EmData,
+    seeds: Sequence[int],
+    initial: Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]],
+    engine: str,
+    options: dict[str, Any],
+    first_restart: int = 1,
+    label: str = "fit_hmm",
+) -> tuple[pd.DataFrame, dict[int, EmRun]]:
+    """Run one EM start per seed; return the table of starts and the usable runs by number.
+
+    ``initial(rng)`` draws a start's emission and initial occupancy from its generator.
+    Statuses: ``ok`` (the tolerance stopped it, log-likelihood never fell beyond round-off),
+    ``max_iter`` (usable, not converged), ``not_monotone``, ``degenerate`` (a state with
+    expected occupancy below :data:`MIN_OCCUPANCY`), ``failed`` (both implementations failed).
+    """
+    rows, runs = [], {}
+    for restart, seed in enumerate(seeds, start=first_restart):
+        row, run = fit_one_start(data, seed, initial(np.random.default_rng(seed)), engine, options)
+        rows.append({"restart": restart, **row})
+        logger.info(
+            "%s restart %d: status=%s logL=%.4f n_iter=%d",
+            label,
+            restart,
+            row["status"],
+            row["log_likelihood"],
+            row["n_iter"],
+        )
+        if run is not None:
+            runs[restart] = run
+    return pd.DataFrame(rows, columns=list(RESTART_COLUMNS)), runs
+
+
+def decode(data: EmData, run: EmRun, engine: str) -> np.ndarray:
+    """Viterbi path (Eq. (10)) of the training rows under ``run``'s parameters, states 0 … K−1."""
+    if engine == "hmmlearn":
+        from dtwin import _em_reference
+
+        return _em_reference.viterbi(data, run)
+    arrays = (data.kernel, run.emission, run.startprob, run.transmat)
+    return kernels.viterbi(int(data.kind), *(kernel_array(a) for a in arrays))

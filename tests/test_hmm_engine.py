@@ -1,0 +1,175 @@
+"""The compiled EM engine against hmmlearn (the reference): same iterations, same numbers.
+
+Acceptance fixture of issue 24: on R's seed-11 fault features (T = 2000, D = 10), random and
+split starts at K = 2 … 12 give the same iteration counts and statuses in both engines, the
+log-likelihood within 1e-9 (relative) at every iteration and the parameters within 1e-8.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from dtwin import _em_kernels as kernels
+from dtwin._multistart import EmData, decode, fit_one_start
+from dtwin.fault_injection import regime_features
+from dtwin.hmm import (
+    _em_data,
+    _random_start,
+    _split_start,
+    fit_hmm,
+    split_fits,
+    zscore,
+)
+from dtwin.hmm_ar import _design, _random_emission, fit_ar_hmm, sample_ar_hmm, score_ar_hmm
+from tests.conftest import REPO
+
+OPTIONS = {"max_iter": 500, "tol": 1e-8, "var_floor": 1e-3}
+
+
+@pytest.fixture(scope="module")
+def features(r_pipeline) -> np.ndarray:
+    return zscore(regime_features(r_pipeline)).values
+
+
+def _both(data: EmData, initial: tuple[np.ndarray, np.ndarray], options=OPTIONS):
+    return [fit_one_start(data, 0, initial, engine, options) for engine in ("compiled", "hmmlearn")]
+
+
+def _assert_same_run(compiled, reference):
+    (row, run), (ref_row, ref_run) = compiled, reference
+    assert (row["status"], row["n_iter"], row["implementation"]) == (
+        ref_row["status"],
+        ref_row["n_iter"],
+        ref_row["implementation"],
+    )
+    if ref_run is None:
+        assert run is None
+        return
+    np.testing.assert_allclose(run.history, ref_run.history, rtol=1e-9, atol=0)
+    for ours, theirs in [
+        (run.startprob, ref_run.startprob),
+        (run.transmat, ref_run.transmat),
+        (run.emission, ref_run.emission),
+        (run.posteriors, ref_run.posteriors),
+    ]:
+        np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-8)
+
+
+def _gaussian_initial(X, k, seed):
+    means, variances, occupancy = _random_start(X, k, np.random.default_rng(seed), 1e-3)
+    return np.stack([means, variances]), occupancy
+
+
+@pytest.mark.parametrize("k", range(2, 13))
+def test_random_and_split_starts_match_hmmlearn(features, k):
+    data = _em_data(features)
+    compiled, reference = _both(data, _gaussian_initial(features, k, 100 + k))
+    _assert_same_run(compiled, reference)
+    if reference[1] is not None:
+        np.testing.assert_array_equal(
+            decode(data, compiled[1], "compiled"), decode(data, reference[1], "hmmlearn")
+        )
+    if k == 2:
+        return
+    # a split start grows the (K − 1)-state random start's fit
+    grow = _both(data, _gaussian_initial(features, k - 1, 200 + k))[1][1]
+    assert grow is not None
+    split = np.stack(_split_start(*grow.emission, k // 2, np.random.default_rng(k)))
+    _assert_same_run(*_both(data, (split, np.full(k, np.inf))))
+
+
+def test_ar_starts_match_hmmlearn():
+    truth = {
+        "startprob": [0.5, 0.5],
+        "transmat": [[0.97, 0.03], [0.05, 0.95]],
+        "intercepts": [[0.0, 1.0], [1.0, -1.0]],
+        "coefs": [[0.9, 0.5], [0.2, -0.3]],
+        "sds": [[0.3, 0.3], [0.5, 0.2]],
+    }
+    X, _ = sample_ar_hmm(**truth, n_steps=600, rng=np.random.default_rng(2))
+    design = _design(X)
+    data = EmData(kernels.AR1, design, design)
+    for k in (2, 3, 4):
+        initial = _random_emission(design, k, np.random.default_rng(k), 1e-6)
+        _assert_same_run(*_both(data, initial, {**OPTIONS, "var_floor": 1e-6}))
+
+
+def test_whole_fits_agree_and_capped_starts_stop_alike(features):
+    fits = [fit_hmm(features, 5, n_restarts=3, seed=4, engine=e) for e in ("compiled", "hmmlearn")]
+    compiled, reference = fits
+    np.testing.assert_array_equal(compiled.restart_viterbi, reference.restart_viterbi)
+    assert compiled.restarts["status"].tolist() == reference.restarts["status"].tolist()
+    assert compiled.log_likelihood == pytest.approx(reference.log_likelihood, rel=1e-12)
+    np.testing.assert_allclose(compiled.smoothed, reference.smoothed, atol=1e-8)
+    np.testing.assert_allclose(compiled.filtered, reference.filtered, atol=1e-8)
+    capped = [
+        fit_hmm(features, 3, n_restarts=2, seed=1, max_iter=3, engine=e)
+        for e in ("compiled", "hmmlearn")
+    ]
+    assert [list(c.restarts["status"]) for c in capped] == [["max_iter"] * 2] * 2
+    splits = [
+        split_fits(features, compiled.means, compiled.sds**2, seed=3, engine=e)[0]
+        for e in ("compiled", "hmmlearn")
+    ]
+    assert splits[0]["n_iter"].tolist() == splits[1]["n_iter"].tolist()
+    ar = [
+        fit_ar_hmm(features[:400, :3], 2, n_restarts=2, seed=0, engine=e)
+        for e in ("compiled", "hmmlearn")
+    ]
+    np.testing.assert_array_equal(ar[0].viterbi, ar[1].viterbi)
+    assert ar[0].log_likelihood == pytest.approx(ar[1].log_likelihood, rel=1e-10)
+
+
+def test_compiled_viterbi_breaks_ties_as_hmmlearn():
+    # two identical states: every step ties; hmmlearn keeps the first state at the end and the
+    # later state going back
+    X = np.random.default_rng(0).normal(size=(30, 2))
+    emission = np.stack([np.zeros((2, 2)), np.ones((2, 2))])
+    startprob, transmat = np.full(2, 0.5), np.full((2, 2), 0.5)
+    path = kernels.viterbi(kernels.GAUSSIAN, np.hstack([X, X * X]), emission, startprob, transmat)
+    from dtwin._em_reference import new_gaussian_model, set_gaussian_params
+
+    model = set_gaussian_params(new_gaussian_model(2, "scaling"), startprob, transmat, *emission)
+    model.n_features = 2
+    np.testing.assert_array_equal(path, model.decode(X, algorithm="viterbi")[1])
+
+
+def test_kernel_sums_are_numpys():
+    rng = np.random.default_rng(1)
+    for n in range(1, 129):
+        a = rng.normal(size=(2, n))
+        assert kernels._numpy_sum(a[1].copy()) == a[1].sum()
+        assert kernels._row_sum(a, 0, 0, n) == a.sum(axis=1)[0]
+
+
+def test_fit_hmm_rejects_an_unknown_engine(features):
+    with pytest.raises(ValueError, match=r"engine must be one of compiled, hmmlearn \(got 'R'\)"):
+        fit_hmm(features, 2, engine="R")
+
+
+def test_every_call_site_uses_the_one_warmed_signature(features):
+    """dtwin passes each kernel one argument type, the one warm_up compiles into the cache."""
+    fit_hmm(features[:300], 3, n_restarts=2, seed=0)
+    split_fits(features[:300], np.zeros((2, 10)), np.ones((2, 10)), seed=0)
+    fit = fit_ar_hmm(features[:300, :2], 2, n_restarts=2, seed=0)
+    score_ar_hmm(fit, features[:300, :2])
+    kernels.warm_up()
+    for kernel in (kernels.em, kernels.viterbi, kernels.score):
+        assert len(kernel.signatures) == 1, kernel
+
+
+def test_a_fresh_process_loads_the_kernels_from_the_cache():
+    """After one warm-up (``make venv``), a new process compiles nothing."""
+    code = (
+        "from dtwin import _em_kernels as k; k.warm_up(); "
+        "print(sum(sum(f.stats.cache_misses.values()) for f in (k.em, k.viterbi, k.score)))"
+    )
+    for _ in range(2):  # the first run may fill the cache (a fresh checkout without make)
+        out = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO
+        )
+    assert out.stdout.strip() == "0"
