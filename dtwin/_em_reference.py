@@ -23,8 +23,7 @@ from hmmlearn.base import BaseHMM, ConvergenceMonitor
 from hmmlearn.hmm import GaussianHMM
 from hmmlearn.utils import normalize
 
-from dtwin._em_kernels import GAUSSIAN
-from dtwin._multistart import EmData, EmError, EmRun
+from dtwin._multistart import GAUSSIAN, EmData, EmError, EmRun
 from dtwin.hmm import _log_emission
 from dtwin.hmm_ar import _ar_log_emission, _ar_mstep, _moments
 

@@ -5,7 +5,7 @@ emissions) run their starts here: each start's EM through the chosen engine (``c
 :func:`dtwin._em_kernels.em`; ``hmmlearn``: :mod:`dtwin._em_reference`), hmmlearn's log-space
 implementation when the scaled recursions fail, and one row per start with an honest status
 (``ok``, ``max_iter``, ``not_monotone``, ``degenerate``, ``failed``). hmmlearn is imported only
-by the reference engine and the fallback.
+by the reference engine and the fallback, numba only when a start runs or a path is decoded.
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dtwin import _em_kernels as kernels
-
 __all__ = [
+    "AR1",
     "ENGINES",
+    "GAUSSIAN",
     "MIN_OCCUPANCY",
     "RESTART_COLUMNS",
     "EmData",
@@ -39,6 +39,9 @@ logger = logging.getLogger(__name__)
 
 #: EM engines: numba kernels (default) or hmmlearn (the reference).
 ENGINES = ("compiled", "hmmlearn")
+
+#: Emission families of :class:`EmData` (``kind`` of :mod:`dtwin._em_kernels`, equal there).
+GAUSSIAN, AR1 = 0, 1
 
 #: A state whose expected occupancy ``Σ_t γ_t(k)`` falls below this many samples is "empty"
 #: (half a sample, so that a state holding one outlier sample is not flagged by round-off).
@@ -60,10 +63,11 @@ RESTART_COLUMNS = (
     "message",
 )
 
+#: Messages of the kernels' failure codes (:data:`dtwin._em_kernels.UNDERFLOW`, ...).
 _KERNEL_FAILURES = {
-    kernels.UNDERFLOW: "forward pass failed with underflow; consider using implementation='log'",
-    kernels.NON_FINITE: "non-finite log-likelihood or parameters (scaling)",
-    kernels.NOT_DISTRIBUTION: "startprob_ or transmat_ rows do not sum to 1 (scaling)",
+    "UNDERFLOW": "forward pass failed with underflow; consider using implementation='log'",
+    "NON_FINITE": "non-finite log-likelihood or parameters (scaling)",
+    "NOT_DISTRIBUTION": "startprob_ or transmat_ rows do not sum to 1 (scaling)",
 }
 
 
@@ -142,6 +146,8 @@ def kernel_array(array: Any) -> np.ndarray:
 
 
 def _compiled_em(data: EmData, emission: np.ndarray, options: dict[str, Any]) -> EmRun:
+    from dtwin import _em_kernels as kernels
+
     code, history, stopped, startprob, transmat, fitted, final, posteriors = kernels.em(
         int(data.kind),
         kernel_array(data.kernel),
@@ -151,7 +157,8 @@ def _compiled_em(data: EmData, emission: np.ndarray, options: dict[str, Any]) ->
         float(options["var_floor"]),
     )
     if code != kernels.OK:
-        raise EmError(_KERNEL_FAILURES[code])
+        failure = next(name for name in _KERNEL_FAILURES if getattr(kernels, name) == code)
+        raise EmError(_KERNEL_FAILURES[failure])
     history = np.append(history, final)
     return EmRun(startprob, transmat, fitted, history, bool(stopped), posteriors, "scaling")
 
@@ -279,5 +286,7 @@ def decode(data: EmData, run: EmRun, engine: str) -> np.ndarray:
         from dtwin import _em_reference
 
         return _em_reference.viterbi(data, run)
+    from dtwin import _em_kernels as kernels
+
     arrays = (data.kernel, run.emission, run.startprob, run.transmat)
     return kernels.viterbi(int(data.kind), *(kernel_array(a) for a in arrays))

@@ -40,9 +40,9 @@ import numpy as np
 import pandas as pd
 from threadpoolctl import threadpool_limits
 
-from dtwin import _em_kernels as kernels
 from dtwin._multistart import (
     ENGINES,
+    GAUSSIAN,
     RESTART_COLUMNS,
     EmData,
     EmRun,
@@ -193,7 +193,7 @@ def _require_engine(engine: Any) -> str:
 
 def _em_data(X: np.ndarray) -> EmData:
     """``X`` as the EM engines read it: ``(x, x²)`` rows for the kernels, ``X`` for hmmlearn."""
-    return EmData(kernels.GAUSSIAN, np.hstack([X, X * X]), X)
+    return EmData(GAUSSIAN, np.hstack([X, X * X]), X)
 
 
 def _random_start(

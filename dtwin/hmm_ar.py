@@ -42,8 +42,7 @@ import numpy as np
 import pandas as pd
 from threadpoolctl import threadpool_limits
 
-from dtwin import _em_kernels as kernels
-from dtwin._multistart import EmData, decode, fit_starts, kernel_array, restart_seeds
+from dtwin._multistart import AR1, EmData, decode, fit_starts, kernel_array, restart_seeds
 from dtwin._validation import DtwinValueError, require_finite_array, require_positive
 from dtwin.hmm import (
     DIRICHLET_ALPHA,
@@ -334,7 +333,7 @@ def fit_ar_hmm(
     options = {"max_iter": max_iter, "tol": tol, "var_floor": var_floor}
     engine = _require_engine(engine)
     design = _design(X)
-    data = EmData(kernels.AR1, design, design)
+    data = EmData(AR1, design, design)
     with threadpool_limits(limits=1):
         restarts, runs = fit_starts(
             data,
@@ -388,9 +387,11 @@ def score_ar_hmm(fit: ArHmmFit, X: Any) -> float:
     if X.shape[1] != fit.n_features or len(X) < 2:
         raise DtwinValueError(f"X must have shape (T >= 2, {fit.n_features}) (got {X.shape})")
     design = _design(X)
-    data = EmData(kernels.AR1, design, design)
+    data = EmData(AR1, design, design)
     emission = np.stack([fit.intercepts, fit.coefs, fit.sds**2])
     arrays = (design, emission, fit.startprob, fit.transmat)
+    from dtwin import _em_kernels as kernels
+
     log_likelihood = kernels.score(data.kind, *(kernel_array(a) for a in arrays))
     if np.isnan(log_likelihood):  # the scaled forward pass underflowed: hmmlearn's log space
         from dtwin._em_reference import score

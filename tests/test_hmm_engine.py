@@ -173,3 +173,16 @@ def test_a_fresh_process_loads_the_kernels_from_the_cache():
             [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO
         )
     assert out.stdout.strip() == "0"
+
+
+def test_emission_kinds_agree_and_importing_the_hmm_loads_no_engine():
+    import dtwin._multistart as multistart
+
+    assert (multistart.GAUSSIAN, multistart.AR1) == (kernels.GAUSSIAN, kernels.AR1)
+    code = (
+        "import sys, dtwin.hmm, dtwin.hmm_ar\nprint(sorted({'numba', 'hmmlearn'} & {*sys.modules}))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO
+    )
+    assert out.stdout.strip() == "[]"
