@@ -1,6 +1,7 @@
 """Rule fig09_bic: paper Fig. 9, BIC against K for both data sets, beside R's.
 
-Input   results/bic_sweep.csv, config/reference/{bic_vs_K_6ch_nofault_singlefit_rerun,
+Input   results/bic_sweep.csv, results/bic/r_signals.csv (the sweep on R's own signals),
+        config/reference/{bic_vs_K_6ch_nofault_singlefit_rerun,
         bic_vs_K_10feat_faulted_multistart5}.csv, r_numbers.yaml
 Output  paper_figures/fig09_bic.{png,pdf,json}
 Params  bic (ks, n_restarts)
@@ -26,5 +27,6 @@ artifact = fig09_bic(
     r_tables,
     crosscheck_bic_formula(r_tables, r_log_likelihood),
     snakemake.params.bic,
+    pd.read_csv(inputs.r_signals),
 )
 publish_artifact(artifact, [snakemake.output.png, snakemake.output.pdf], snakemake.output.json)

@@ -399,3 +399,37 @@ def test_panel_f_names_every_arm_of_the_gap_layer():
 
     assert set(_GROUP_LABELS) == {DEFAULT_ARM, *ARMS, "rig"}
     assert list(_GROUP_LABELS)[1 : 1 + len(ARMS)] == list(ARMS)
+
+
+def test_a_moved_minimum_that_moves_on_r_signals_too_blames_the_optimiser():
+    from dtwin.artifacts import Check
+    from dtwin.figures.fig09_bic import _on_r_signals
+
+    claim = Check(
+        id="bic_minimum_at_k8_fault_features",
+        kind="claim",
+        statement="paper: minimum at K = 8",
+        expected=8,
+        observed=15,
+        passed=False,
+    )
+    ks = np.arange(2, 19)
+    r_signals = pd.DataFrame(
+        {"dataset": "fault_features", "K": ks, "log_likelihood": 10.0 * ks, "bic": (ks - 16.0) ** 2}
+    )
+    r_tables = {"fault_features": pd.DataFrame({"K": [8, 9], "log_likelihood": [91.7, 219.1]})}
+    on_r = _on_r_signals(r_signals, r_tables)
+    assert {k: v for k, v in on_r["fault_features"].items() if k != "sweep"} == {
+        "k_star": 16,
+        "log_likelihood_k8": 80.0,
+        "r_log_likelihood_k8": 91.7,
+    }
+    noted = _with_interior_note(claim, {"fault_features": 8}, {}, on_r)
+    assert "Cause: optimiser (this sweep on R's own seed-11 signals gives K* = 16, not 8" in (
+        noted.note
+    )
+    assert _figure_causes([noted]) == {
+        "fault_features": "min K=15, not 8: optimiser (see R's signals)"
+    }
+    same = {"fault_features": {**on_r["fault_features"], "k_star": 8}}
+    assert "Cause: draw (" in _with_interior_note(claim, {"fault_features": 8}, {}, same).note

@@ -25,7 +25,7 @@ from tests.conftest import REPO
 
 pytestmark = pytest.mark.slow
 
-IGNORED = shutil.ignore_patterns(
+_IGNORED_NAMES = shutil.ignore_patterns(
     ".git",
     ".venv",
     ".snakemake",
@@ -42,6 +42,18 @@ IGNORED = shutil.ignore_patterns(
     ".hypothesis",
     "*.egg-info",
 )
+
+
+def IGNORED(directory: str, names: list[str]) -> set[str]:
+    """What a workflow copy leaves out; it keeps dtwin/__pycache__, numba's cache of the EM
+    kernels (``make venv`` warms it; copytree keeps the sources' times, so it stays valid),
+    so the jobs of a copy do not each compile the kernels."""
+    ignored = _IGNORED_NAMES(directory, names)
+    if Path(directory) == REPO / "dtwin":
+        ignored.discard("__pycache__")
+    return ignored
+
+
 #: Every published artifact (workflow/artifacts.yaml, the list `rule all` is built from).
 ARTIFACTS = tuple(
     name

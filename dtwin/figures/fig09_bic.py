@@ -215,6 +215,7 @@ def fig09_bic(
     r_tables: Mapping[str, pd.DataFrame],
     crosscheck: CrosscheckResult,
     bic: Mapping[str, Any],
+    r_signals: pd.DataFrame | None = None,
 ) -> FigureArtifact:
     """Paper Fig. 9 with the BIC minima beside the paper's K = 8 and a formula crosscheck.
 
@@ -228,6 +229,10 @@ def fig09_bic(
         :func:`dtwin.reference.bic_crosscheck.crosscheck_bic_formula`.
     bic : mapping
         The ``bic`` config section (``n_restarts`` is reported).
+    r_signals : DataFrame, optional
+        ``results/bic/r_signals.csv``: the same sweep on R's own seed-11 signals
+        (:func:`dtwin.stages.regimes.bic_sweep_r_signals`); where its minimum is not at
+        K = 8 either, a moved minimum's cause is the optimiser, not the draw.
     """
     minima = {
         name: int(group.loc[group["bic"].idxmin(), "K"])
@@ -282,15 +287,15 @@ def fig09_bic(
         "sweep": table.to_dict(orient="records"),
         "r_sweep": {name: r.to_dict(orient="records") for name, r in r_tables.items()},
         "formula_max_abs_deviation": crosscheck.metrics,
+        "r_signals": _on_r_signals(r_signals, r_tables),
         "best_of_half_vs_all_starts": start_stability(table),
         "still_decreasing_at_max_k": {
             name: bool(np.diff(group.sort_values("K")["bic"].to_numpy())[-1] < 0)
             for name, group in table.groupby("dataset", sort=False)
         },
     }
-    falling = metrics["still_decreasing_at_max_k"]
-    max_k = max(metrics["ks"])
-    checks = _with_causes(checks, falling, max_k, r_minima, bic)
+    falling, max_k = metrics["still_decreasing_at_max_k"], max(metrics["ks"])
+    checks = _with_causes(checks, falling, max_k, r_minima, bic, metrics["r_signals"])
     figure = plot_bic(table, r_tables, bic["n_restarts"], _figure_causes(checks))
     return FigureArtifact(
         "fig09_bic",
@@ -335,16 +340,59 @@ def _with_causes(
     max_k: int,
     r_minima: Mapping[str, int],
     bic: Mapping[str, Any],
+    on_r_signals: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> list[Check]:
     """Give every failed claim and target of the sweep its cause (edge, interior, targets)."""
     stability = next((c.observed for c in checks if c.id == "best_loglik_stable_in_starts"), {})
     checks = [_with_edge_note(check, falling, max_k) for check in checks]
-    checks = [_with_interior_note(check, r_minima, stability) for check in checks]
+    checks = [_with_interior_note(check, r_minima, stability, on_r_signals) for check in checks]
     return [_with_target_note(check, bic) for check in checks]
 
 
-def _interior_cause(gain: Mapping[str, Any] | None) -> str:
-    """Return the cause of an interior minimum away from K = 8, from the start-stability check."""
+def _on_r_signals(
+    r_signals: pd.DataFrame | None, r_tables: Mapping[str, pd.DataFrame]
+) -> dict[str, dict[str, Any]]:
+    """Return, per data set swept on R's own signals, its K* and the log-likelihoods at K = 8.
+
+    ``k_star`` (our sweep's minimum on R's signals), ``log_likelihood_k8`` (ours there),
+    ``r_log_likelihood_k8`` (R's, on the same signals; NaN where R's table has none) and
+    ``sweep`` (the table's rows).
+    """
+    out: dict[str, dict[str, Any]] = {}
+    for name, group in [] if r_signals is None else r_signals.groupby("dataset", sort=False):
+        at8 = group.loc[group["K"] == PAPER_K_MIN, "log_likelihood"]
+        r_table = r_tables.get(name, pd.DataFrame(columns=["K", "log_likelihood"]))
+        r_at8 = r_table.loc[r_table["K"] == PAPER_K_MIN].get("log_likelihood", pd.Series())
+        out[name] = {
+            "k_star": int(group.loc[group["bic"].idxmin(), "K"]),
+            "log_likelihood_k8": float(at8.iloc[0]) if len(at8) else float("nan"),
+            "r_log_likelihood_k8": float(r_at8.iloc[0]) if len(r_at8) else float("nan"),
+            "sweep": group.to_dict(orient="records"),
+        }
+    return out
+
+
+def _optimiser_cause(on_r: Mapping[str, Any]) -> str:
+    """Return the cause when the sweep on R's own signals moves K* away from 8 as well."""
+    return (
+        f"optimiser (this sweep on R's own seed-11 signals gives K* = {on_r['k_star']}, not "
+        f"{PAPER_K_MIN}: at K = {PAPER_K_MIN} it reaches log-likelihood "
+        f"{on_r['log_likelihood_k8']:.1f} where R's 5 starts per K <= 9 reached "
+        f"{on_r['r_log_likelihood_k8']:.1f}, so R's K = {PAPER_K_MIN} reflects R's few EM "
+        "starts, not its draw)"
+    )
+
+
+def _interior_cause(gain: Mapping[str, Any] | None, on_r: Mapping[str, Any] | None = None) -> str:
+    """Return the cause of an interior minimum away from K = 8.
+
+    From the sweep on R's own signals where there is one (``on_r``, :func:`_on_r_signals`),
+    else from the start-stability check (``gain``).
+    """
+    if on_r is not None and on_r["k_star"] != PAPER_K_MIN:
+        return _optimiser_cause(on_r)
+    if on_r is not None:
+        return f"draw (this sweep on R's own seed-11 signals gives K* = {PAPER_K_MIN} as R's)"
     if gain and gain["max_gain"] < STABLE_LOGLIK:
         return (
             "draw (doubling the EM starts moves no best fit up to K* + 2; other kinds of EM "
@@ -359,7 +407,10 @@ def _interior_cause(gain: Mapping[str, Any] | None) -> str:
 
 
 def _with_interior_note(
-    check: Check, r_minima: Mapping[str, int], stability: Mapping[str, Any]
+    check: Check,
+    r_minima: Mapping[str, int],
+    stability: Mapping[str, Any],
+    on_r_signals: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> Check:
     """Give a failed K-minimum claim its cause when the sweep found a minimum at another K."""
     if check.kind != "claim" or check.passed or check.note is not None:
@@ -369,7 +420,8 @@ def _with_interior_note(
     name = check.id.removeprefix("bic_minimum_at_k8_")
     note = (
         f"minimum at K = {check.observed} inside the sweep, on our draw; R's K = "
-        f"{r_minima.get(name)} is on R's own draw. Cause: {_interior_cause(stability.get(name))}"
+        f"{r_minima.get(name)} is on R's own draw. Cause: "
+        f"{_interior_cause(stability.get(name), (on_r_signals or {}).get(name))}"
     )
     return replace(check, note=note)
 
@@ -384,7 +436,14 @@ def _moved(checks: Sequence[Check]) -> list[Check]:
 
 
 def _short_cause(check: Check) -> str:
-    return "our draw" if "moves no best fit" in (check.note or "") else "draw or optimiser"
+    note = check.note or ""
+    if "Cause: optimiser" in note:
+        return "optimiser (see R's signals)"
+    return (
+        "our draw"
+        if "moves no best fit" in note or "Cause: draw (" in note
+        else ("draw or optimiser")
+    )
 
 
 def _figure_causes(checks: Sequence[Check]) -> dict[str, str]:
