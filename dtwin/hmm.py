@@ -216,7 +216,7 @@ def _kmeanspp_start(
     """k-means++ seeding: K samples drawn far apart, every sample to its nearest, ML emissions.
 
     Unlike the Dirichlet start, whose near-random assignment puts every state's mean close to
-    the global mean, the states start apart (issue 12 item 4: the sweep's low optimum).
+    the global mean, the states start apart (a way out of the sweep's low optima).
     """
     centres = [X[rng.integers(len(X))]]
     distance = ((X - centres[0]) ** 2).sum(axis=1)

@@ -246,7 +246,7 @@ def test_no_citation_outside_the_repository():
 HISTORY = re.compile(r"\bissue #?\d+|\b20\d\d-\d\d-\d\d\b", re.IGNORECASE)
 #: Files of open work (the engine and gap issues) that still carry such a line: to be cleaned
 #: there; every other file of the library must stay clean.
-HISTORY_PENDING = {"dtwin/hmm.py", "dtwin/gap/benchmark.py", "dtwin/gap/diagnose.py"}
+HISTORY_PENDING = {"dtwin/gap/benchmark.py", "dtwin/gap/diagnose.py"}
 
 
 def test_the_library_carries_no_issue_numbers_or_dated_measurements():
