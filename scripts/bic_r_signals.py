@@ -13,8 +13,8 @@ start_rule(snakemake)
 import pandas as pd
 
 from dtwin.artifacts import write_csv
-from dtwin.stages.regimes import bic_sweep_r_signals
+from dtwin.stages.regimes import bic_r_signals
 
 r_pipeline = pd.read_csv(snakemake.input.r_pipeline)
-table = bic_sweep_r_signals(r_pipeline, snakemake.params.bic, snakemake.params.hmm)
+table = bic_r_signals(r_pipeline, snakemake.params.bic, snakemake.params.hmm)
 write_csv(table, snakemake.output.table)

@@ -231,7 +231,7 @@ def fig09_bic(
         The ``bic`` config section (``n_restarts`` is reported).
     r_signals : DataFrame, optional
         ``results/bic/r_signals.csv``: the same sweep on R's own seed-11 signals
-        (:func:`dtwin.stages.regimes.bic_sweep_r_signals`); where its minimum is not at
+        (:func:`dtwin.stages.regimes.bic_r_signals`); where its minimum is not at
         K = 8 either, a moved minimum's cause is the optimiser, not the draw.
     """
     minima = {

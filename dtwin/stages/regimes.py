@@ -45,7 +45,7 @@ __all__ = [
     "bic_dataset",
     "sweep_bic",
     "bic_sweep_dataset",
-    "bic_sweep_r_signals",
+    "bic_r_signals",
 ]
 
 logger = logging.getLogger(__name__)
@@ -306,7 +306,7 @@ def bic_sweep_dataset(
     return sweep_bic({name: features}, bic, hmm, {name: model})
 
 
-def bic_sweep_r_signals(
+def bic_r_signals(
     r_pipeline: pd.DataFrame, bic: BicSettings | Mapping[str, Any], hmm: Mapping[str, Any]
 ) -> pd.DataFrame:
     """Fig. 9's sweep of the fault features on R's own seed-11 signals (paper §5).
