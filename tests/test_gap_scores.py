@@ -5,12 +5,9 @@ docs/gap.md §How far (the three shrinks) and §Scores (parameters, reliability,
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pandas as pd
 import pytest
-from scipy.stats import norm
 
 from dtwin.gap import (
     diagnose,
@@ -27,7 +24,6 @@ from dtwin.gap.benchmark import (
     reliability_table,
     score_cases,
     true_parameter,
-    wilson_interval,
 )
 from dtwin.gap.report import render_markdown
 
@@ -101,22 +97,6 @@ def test_true_parameter_only_where_the_form_is_the_catalogues():
     assert true_parameter(gain, 0.02) == ("gain", 1.2, 1.0)  # the error is relative to 0.2
     rig = {"family": "rig", "effect": "quadratic_damping", "params": {"c2": 3.0}}
     assert true_parameter(rig, 1e-3) == ("c2", 3.0, 0.0)
-
-
-@pytest.mark.parametrize(("k", "n"), [(0, 5), (3, 3), (8, 10), (41, 57)])
-def test_wilson_interval_matches_the_closed_form(k, n):
-    z = norm.ppf(0.975)
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    low, high = wilson_interval(k, n)
-    assert low == pytest.approx(max(0.0, centre - half), abs=1e-12)
-    assert high == pytest.approx(min(1.0, centre + half), abs=1e-12)
-    assert low <= p <= high
-
-
-def test_wilson_interval_of_no_case_is_nan():
-    assert all(np.isnan(wilson_interval(0, 0)))
 
 
 def _table(confidences, right, arm=None) -> pd.DataFrame:

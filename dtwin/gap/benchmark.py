@@ -27,10 +27,10 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 import pandas as pd
-from statsmodels.stats.proportion import proportion_confint
 
 from dtwin.artifacts import Check
 from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED
+from dtwin.proportions import wilson_interval
 
 #: The benchmark arm of two effects at once (:mod:`dtwin.gap.arms`, case type ``two__a+b``).
 TWO_ARM = "two"
@@ -43,7 +43,6 @@ __all__ = [
     "CONFIDENCE_BINS",
     "MAGNITUDE_BINS",
     "SHRINK_COLUMNS",
-    "wilson_interval",
     "true_parameter",
     "reliability_table",
     "score_cases",
@@ -84,25 +83,6 @@ MAGNITUDE_BINS: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
 
 #: The three shrinks of docs/gap.md §How far, the effect's own share first (the headline).
 SHRINK_COLUMNS: tuple[str, ...] = ("own_shrink_pct", "raw_shrink_pct", "excess_shrink_pct")
-
-
-def wilson_interval(successes: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    """Return the Wilson score interval of ``successes / n``; ``(nan, nan)`` when ``n`` is 0.
-
-    A thin wrapper over :func:`statsmodels.stats.proportion.proportion_confint` with
-    ``method="wilson"``: ``(p̂ + z²/2n ∓ z·√(p̂(1−p̂)/n + z²/4n²)) / (1 + z²/n)``.
-
-    Examples
-    --------
-    >>> [round(v, 4) for v in wilson_interval(8, 10)]
-    [0.4902, 0.9433]
-    """
-    if n == 0:
-        return math.nan, math.nan
-    low, high = proportion_confint(int(successes), int(n), alpha=1 - level, method="wilson")
-    rate = successes / n
-    # at k = 0 or k = n the formula's bound can pass k/n by round-off (1e-17)
-    return min(float(low), rate), max(float(high), rate)
 
 
 def _paper_truth(effect: str, params: Mapping[str, Any], key: Mapping[str, Any], dt: float):
