@@ -20,6 +20,8 @@ from tests.conftest import REPO
 
 #: Modules no figure needs: EM engines and signal processing belong to the stage rules.
 MODEL_FITTING = ("sklearn", "hmmlearn", "numba", "scipy.signal", "statsmodels")
+#: hmmlearn and scikit-learn: the reference EM engine, which no rule loads by default.
+REFERENCE_ENGINE = ("sklearn", "hmmlearn")
 #: Plotting, which a table rule never needs.
 PLOTTING = ("matplotlib",)
 
@@ -37,6 +39,13 @@ BUDGETS = {
     "mcda_actions": (*MODEL_FITTING, *PLOTTING, "scipy"),
     "simulate": (*MODEL_FITTING, "scipy.stats", *PLOTTING),
     "sweep_chunk": ("sklearn", "hmmlearn", "statsmodels", *PLOTTING),
+    # the HMM jobs: the compiled engine, no hmmlearn or scikit-learn (hmmlearn only if it falls
+    # back or hmm.engine says so, imported then)
+    "ar_hmm_sweep": (*REFERENCE_ENGINE, "statsmodels", "scipy.stats", *PLOTTING),
+    "bic_draws": (*REFERENCE_ENGINE, "statsmodels", *PLOTTING),
+    "bic_sweep_dataset": (*REFERENCE_ENGINE, "statsmodels", "scipy.stats", *PLOTTING),
+    "fault_regimes": (*REFERENCE_ENGINE, "statsmodels", "scipy.stats", *PLOTTING),
+    "nominal_regimes": (*REFERENCE_ENGINE, "statsmodels", "scipy.stats", *PLOTTING),
     "gap_cases": ("sklearn", "hmmlearn", "statsmodels", *PLOTTING),
 }
 #: fig09's imports plus the HMM fitting's engines (compiled and hmmlearn, the reference): what
