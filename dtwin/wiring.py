@@ -56,11 +56,6 @@ class Module:
         """The module's output proper (first of :attr:`outputs`)."""
         return self.outputs[0]
 
-    @property
-    def params(self) -> str:
-        """Former name of :attr:`section`, read by ``dtwin.gap.diagnose`` until it moves over."""
-        return self.section
-
 
 MODULES: tuple[Module, ...] = (
     Module("M0", "Actuator LPF", ("u_cmd",), ("u_act",), "e0", "actuator", "arx"),

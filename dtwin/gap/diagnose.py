@@ -87,7 +87,7 @@ from dtwin.gap.oe_reference import output_error_reference
 from dtwin.gap.recording import Recording, diagnosable_modules
 from dtwin.modules import EULER
 from dtwin.params import TwinParams, discretisation_from_mapping, twin_params_from_mapping
-from dtwin.wiring import MODULES
+from dtwin.wiring import MODULES, module_by_name
 
 __all__ = [
     "GapSettings",
@@ -339,7 +339,7 @@ def twin_discretisation(mapping: Any) -> str | None:
 
 
 def _nominal_lin(name: str, twin: TwinParams) -> dict[str, float] | None:
-    section = getattr(twin, next(m.params for m in MODULES if m.name == name))
+    section = getattr(twin, module_by_name(name).section)
     if section is None:
         return None
     return {key: float(getattr(section, key)) for key in LINEAR_PARAMS[name]}
@@ -350,7 +350,7 @@ def _module_data(
 ) -> ModuleData:
     """Return the module's recorded signals; the plant's state estimate follows ``scheme``."""
     inputs = module_inputs(name, rec.signals, rec.dt)
-    module = next(m for m in MODULES if m.name == name)
+    module = module_by_name(name)
     output = rec.signals[module.output]
     velocity, position, lead = inputs.get("v"), None, 0
     if name == "M1":
@@ -410,7 +410,7 @@ def _scales(
 
 def _check_inputs_vary(rec: Recording, names: list[str], n_train: int) -> None:
     for name in names:
-        module = next(m for m in MODULES if m.name == name)
+        module = module_by_name(name)
         for signal in module.inputs:
             if signal not in rec.signals:
                 continue
