@@ -388,7 +388,7 @@ def _family_metrics(table: pd.DataFrame) -> dict[str, Any]:
     ``effect_accuracy``: right module and effect over in-list cases; ``none_accuracy``;
     ``unexplained_accuracy``: out-of-list cases answered ``unexplained`` in the right module;
     ``out_of_list_labelled``: out-of-list cases answered with a catalogue effect instead (a
-    wrong label; issue 16's arm (f) allows at most 20 %); ``intervals``: each of them as
+    wrong label; docs/gap.md §Scores: arm (f) allows at most 20 %); ``intervals``: each of them as
     ``{k, n, rate, low, high}`` (Wilson 95 %); the three shrinks' medians over in-list cases
     diagnosed right (docs/gap.md §Scores).
     """

@@ -1061,8 +1061,8 @@ def _other_gaps(
     Each is ``{module, effect, choosing_share_pct, gap_over_threshold}``, furthest above its
     threshold first: ``effect`` is the module's best-scored candidate if it clears
     :func:`required_share` on the choosing part (as the source's answer must), else
-    ``unexplained``. The answer itself is unchanged (issue 16, arm (g): name the larger
-    effect, say when two are needed).
+    ``unexplained``. The answer itself is unchanged: it names the larger effect and these
+    say when two are needed (docs/gap.md, arm (g)).
     """
     others = sorted((w for w in flagged if w is not source), key=lambda w: -w.gap_cal / w.threshold)
     found = []
