@@ -336,6 +336,7 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     edit_config(workflow_copy, lambda c: c["bic"].update(n_restarts=3))
     assert planned_rules(workflow_copy) == {
         "bic_sweep_dataset",
+        "bic_r_signals",  # Fig. 9's sweep on R's seed-11 signals reads the bic section too
         "bic_sweep",
         "fig09_bic",
         "fig13_ar_hmm",
