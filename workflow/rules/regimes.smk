@@ -150,6 +150,7 @@ rule bic_r_signals:
         "logs/bic_r_signals.log",
     benchmark:
         "benchmarks/rules/bic_r_signals.tsv"
+    priority: PRIORITY_CRITICAL_PATH
     threads: 1
     resources:
         mem_mb=500,
