@@ -7,7 +7,7 @@ step and was half of a 130,000-sample rig's diagnosis. A force that names its la
 ``law`` attribute) is stepped here instead, compiled by numba (``cache=True``: compiled once
 per machine into ``__pycache__``), with the same arithmetic in the same order. Any other force
 keeps the Python loop. :mod:`dtwin.exact_plant` imports this module (and numba, ~0.5 s) only
-when it first steps such a force.
+when it first steps such a force. Without numba the same loop runs in Python (:mod:`dtwin._jit`).
 
 The laws (``x`` position, ``v`` velocity, ``p`` the parameters):
 
@@ -23,8 +23,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numba
 import numpy as np
+
+from dtwin._jit import njit
 
 __all__ = ["LAWS", "ForceLaw", "force_windows"]
 
@@ -39,7 +40,7 @@ class ForceLaw(NamedTuple):
     params: tuple[float, ...]
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _law_value(code, x, v, p):
     if code == 0:
         return p[0] * math.tanh(v / p[1])
@@ -52,7 +53,7 @@ def _law_value(code, x, v, p):
     return (p[0] + p[1] * math.exp(-ratio * ratio)) * math.tanh(v / p[3])
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _windows_loop(drive_x, drive_v, x0, v0, steps, code, p, inv_m, out):
     a11, a12, a21, a22, q1, q2, r1, r2 = steps
     n_windows, length = drive_x.shape

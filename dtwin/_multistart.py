@@ -19,6 +19,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dtwin._jit import HAVE_NUMBA
+
 __all__ = [
     "AR1",
     "ENGINES",
@@ -39,6 +41,22 @@ logger = logging.getLogger(__name__)
 
 #: EM engines: numba kernels (default) or hmmlearn (the reference).
 ENGINES = ("compiled", "hmmlearn")
+_FALLBACK_WARNED: list[bool] = []  # the fallback is logged once per process
+
+
+def available_engine(engine: str) -> str:
+    """Return ``engine``, or ``"hmmlearn"`` for ``"compiled"`` when numba is not installed.
+
+    The two engines give the same iterations and statuses (tests/test_hmm_engine.py), so the
+    reference engine is the documented fallback of the compiled one.
+    """
+    if engine == "compiled" and not HAVE_NUMBA:
+        if not _FALLBACK_WARNED:
+            logger.warning("numba is not installed: EM runs in hmmlearn (hmm.engine: hmmlearn)")
+            _FALLBACK_WARNED.append(True)
+        return "hmmlearn"
+    return engine
+
 
 #: Emission families of :class:`EmData` (``kind`` of :mod:`dtwin._em_kernels`, equal there).
 GAUSSIAN, AR1 = 0, 1
@@ -171,6 +189,7 @@ def run_start(
     Returns the run (None if both failed) and the failure messages, ``"<implementation>: …"``.
     """
     messages = []
+    engine = available_engine(engine)
     for implementation in ("scaling", "log"):
         try:
             if engine == "compiled" and implementation == "scaling":
@@ -282,7 +301,7 @@ def fit_starts(
 
 def decode(data: EmData, run: EmRun, engine: str) -> np.ndarray:
     """Viterbi path (Eq. (10)) of the training rows under ``run``'s parameters, states 0 … K−1."""
-    if engine == "hmmlearn":
+    if available_engine(engine) == "hmmlearn":
         from dtwin import _em_reference
 
         return _em_reference.viterbi(data, run)

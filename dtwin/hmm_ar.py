@@ -42,7 +42,15 @@ import numpy as np
 import pandas as pd
 from threadpoolctl import threadpool_limits
 
-from dtwin._multistart import AR1, EmData, decode, fit_starts, kernel_array, restart_seeds
+from dtwin._multistart import (
+    AR1,
+    EmData,
+    available_engine,
+    decode,
+    fit_starts,
+    kernel_array,
+    restart_seeds,
+)
 from dtwin._validation import DtwinValueError, require_finite_array, require_positive
 from dtwin.hmm import (
     DIRICHLET_ALPHA,
@@ -390,10 +398,12 @@ def score_ar_hmm(fit: ArHmmFit, X: Any) -> float:
     data = EmData(AR1, design, design)
     emission = np.stack([fit.intercepts, fit.coefs, fit.sds**2])
     arrays = (design, emission, fit.startprob, fit.transmat)
-    from dtwin import _em_kernels as kernels
+    log_likelihood = math.nan
+    if available_engine("compiled") == "compiled":
+        from dtwin import _em_kernels as kernels
 
-    log_likelihood = kernels.score(data.kind, *(kernel_array(a) for a in arrays))
-    if np.isnan(log_likelihood):  # the scaled forward pass underflowed: hmmlearn's log space
+        log_likelihood = kernels.score(data.kind, *(kernel_array(a) for a in arrays))
+    if np.isnan(log_likelihood):  # underflow (or no numba): hmmlearn's log space
         from dtwin._em_reference import score
 
         log_likelihood = score(data, fit.startprob, fit.transmat, emission, "log")
