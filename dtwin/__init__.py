@@ -72,7 +72,7 @@ _EXPORTS: dict[str, str] = {
     # sim-to-real gap diagnosis
     "diagnose": "dtwin.gap",
     "read_recording": "dtwin.gap",
-    "generate_case": "dtwin.gap",
+    "generate_case": "dtwin.gapbench",
     # sensitivity sweep (paper §5, Fig. 11)
     "SweepPoint": "dtwin.sensitivity_sweep",
     "SweepRun": "dtwin.sensitivity_sweep",

@@ -203,7 +203,7 @@ def _replicate_entries(payload: Mapping[str, Any], level: float) -> dict[str, di
 def _gap_denominators(table: Any) -> dict[str, tuple[int, int]]:
     """(k, n) of each gap accuracy target, from ``results/gap/benchmark.csv``.
 
-    The denominators of :func:`dtwin.gap.benchmark.benchmark_metrics`: cases with an effect
+    The denominators of :func:`dtwin.gapbench.scores.benchmark_metrics`: cases with an effect
     (module), in-list cases (effect), ``none`` cases, out-of-list cases (``unexplained``).
     """
     expected = table["expected_effect"].astype(str)

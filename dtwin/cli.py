@@ -13,7 +13,7 @@ folders are written into a temporary folder beside ``DIR`` and renamed into plac
 never half-written (:func:`dtwin.artifacts.atomic_write_folder`, beside
 :func:`~dtwin.artifacts.atomic_write`).
 Like the Snakemake scripts it is a front end: it parses arguments and the twin file, then calls
-the library (:func:`dtwin.gap.diagnose`, :func:`dtwin.gap.generate_case`), which reads the
+the library (:func:`dtwin.gap.diagnose`, :func:`dtwin.gapbench.generate_case`), which reads the
 recording itself (:func:`dtwin.gap.read_recording`).
 """
 
@@ -141,7 +141,7 @@ def _generate(args: argparse.Namespace) -> int:
     import yaml
 
     from dtwin.artifacts import atomic_write_folder, write_csv, write_json
-    from dtwin.gap.rigs import (
+    from dtwin.gapbench.rigs import (
         HARD_RIG_PREFIX,
         RIG_PREFIX,
         generate_any_case,
@@ -189,8 +189,8 @@ def _fraction(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the ``dtwin`` argument parser (one subparser per subcommand)."""
-    from dtwin.gap.generator import ALL_CASE_EFFECTS
-    from dtwin.gap.rigs import HARD_RIG_EFFECTS, HARD_RIG_PREFIX, RIG_EFFECTS, RIG_PREFIX
+    from dtwin.gapbench.generator import ALL_CASE_EFFECTS
+    from dtwin.gapbench.rigs import HARD_RIG_EFFECTS, HARD_RIG_PREFIX, RIG_EFFECTS, RIG_PREFIX
 
     parser = argparse.ArgumentParser(
         prog="dtwin", description="Find, explain and mitigate error in modular digital twins."

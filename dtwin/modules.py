@@ -3,7 +3,7 @@
 The six modules of the paper's pipeline (§3.1, r_notes.md §1) are written here once and used by
 the paper simulator (:mod:`dtwin.physics`), the gap diagnoser's module twins
 (:mod:`dtwin.gap.models`, :mod:`dtwin.gap.noise`) and the gap generator's asset
-(:mod:`dtwin.gap.generator`), in the way python-control's interconnected systems keep each
+(:mod:`dtwin.gapbench.generator`), in the way python-control's interconnected systems keep each
 subsystem's law apart from the wiring (:data:`dtwin.wiring.MODULES`). Arrays are time-first,
 shape ``(n_steps,)``.
 

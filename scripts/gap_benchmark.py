@@ -6,7 +6,7 @@ files in them.
 Outputs: ``paper_figures/gap_benchmark.{png,pdf}`` (drawn by
 :mod:`dtwin.figures.gap_benchmark`), ``gap_benchmark.json`` ({artifact, files, figure, metrics,
 checks}; the targets of docs/gap.md §Targets are claims), ``results/gap/benchmark.csv`` (one
-row per case, columns in :mod:`dtwin.gap.benchmark`). Config: none beyond the case list.
+row per case, columns in :mod:`dtwin.gapbench.scores`). Config: none beyond the case list.
 """
 
 from dtwin._script import start_rule
@@ -20,7 +20,7 @@ from pathlib import Path
 from dtwin.artifacts import write_csv
 from dtwin.figures._style import publish_artifact
 from dtwin.figures.gap_benchmark import gap_benchmark
-from dtwin.gap.benchmark import TARGETS, benchmark_checks, benchmark_metrics, score_cases
+from dtwin.gapbench.scores import TARGETS, benchmark_checks, benchmark_metrics, score_cases
 from dtwin.gap.effects import NONE
 
 triples = [

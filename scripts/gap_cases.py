@@ -16,7 +16,7 @@ start_rule(snakemake)
 
 from pathlib import Path
 
-from dtwin.gap.batch import write_case_folder
+from dtwin.gapbench.batch import write_case_folder
 
 for case in snakemake.params.cases:
     write_case_folder(case, snakemake.params.benchmark, Path(snakemake.output.folder) / case)

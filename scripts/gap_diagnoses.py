@@ -16,7 +16,7 @@ start_rule(snakemake)
 
 from pathlib import Path
 
-from dtwin.gap.batch import diagnose_case_folder
+from dtwin.gapbench.batch import diagnose_case_folder
 
 for case in snakemake.params.cases:
     diagnose_case_folder(

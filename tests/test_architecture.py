@@ -14,7 +14,9 @@ Layers of ``dtwin/`` (who may import whom, directly or through any chain of dtwi
 - reference (``dtwin/reference/``): everything about the R code; its crosschecks run our
   stages on R's signals, so it sits above the stages; never a figure or gap module;
 - gap (``dtwin/gap/``): the diagnoser; never a stage, figure or reference module (it draws
-  its own figure in the shared style, ``dtwin.figures._style``).
+  its own figure in the shared style, ``dtwin.figures._style``) and never its benchmark;
+- gapbench (``dtwin/gapbench/``): the diagnoser's benchmark (generated cases, their scores);
+  may import the diagnoser, never a stage, figure or reference module. No other layer imports it.
 
 Every forbidden name is checked against each file's imports and those of every dtwin module it
 reaches. A compute rule (a script that publishes no artifact) never reaches a figure module, so a
@@ -43,16 +45,25 @@ MAX_FUNCTION_LINES = 80
 #: report in the shared style; Fig. 11 compares its rebuilt R inputs itself (numpy and pandas only).
 ALLOWED = {
     "gap": ("dtwin.figures._style", "dtwin.figures._print_check"),
+    "gapbench": ("dtwin.figures._style", "dtwin.figures._print_check"),
     "figures": ("dtwin.reference.sweep_crosscheck",),
 }
 #: The shared drawing style, which rules that draw no artifact may use (a diagnosis's gap.png).
 SHARED_STYLE = {"__init__.py", "_style.py", "_print_check.py"}
 
 FORBIDDEN = {
-    "concept": ("dtwin.stages", "dtwin.figures", "dtwin.reference", "dtwin.gap", "yaml"),
+    "concept": (
+        "dtwin.stages",
+        "dtwin.figures",
+        "dtwin.reference",
+        "dtwin.gap",
+        "dtwin.gapbench",
+        "yaml",
+    ),
     "stages": (
         "dtwin.figures",
         "dtwin.gap",
+        "dtwin.gapbench",
         "dtwin.reference.arx_crosscheck",
         "dtwin.reference.bic_crosscheck",
         "dtwin.reference.correction_crosscheck",
@@ -64,6 +75,7 @@ FORBIDDEN = {
     "figures": (
         "dtwin.stages",
         "dtwin.gap",
+        "dtwin.gapbench",
         "dtwin.reference.loaders",
         "dtwin.reference.arx_crosscheck",
         "dtwin.reference.bic_crosscheck",
@@ -82,8 +94,9 @@ FORBIDDEN = {
         "hmmlearn",
         "scipy.signal",
     ),
-    "reference": ("dtwin.figures", "dtwin.gap"),
-    "gap": ("dtwin.stages", "dtwin.figures", "dtwin.reference"),
+    "reference": ("dtwin.figures", "dtwin.gap", "dtwin.gapbench"),
+    "gap": ("dtwin.stages", "dtwin.figures", "dtwin.reference", "dtwin.gapbench"),
+    "gapbench": ("dtwin.stages", "dtwin.figures", "dtwin.reference"),
 }
 
 

@@ -3,10 +3,11 @@
 Every recording here has a valid time axis (a uniform ``dt`` from 1e-6 s to 100 s), at least
 200 rows and the columns of at least one module, so it reaches the diagnosis (or the recording's
 content checks of docs/gap.md §Bad input). It starts from a generated withheld-effect case
-(:func:`dtwin.gap.generate_case`: realistic signals with a gap to find) and is then made hostile:
-spikes of 1e3–1e15 spreads in any column, constant and all-zero channels, scales 1e-12 to 1e12,
-steps, flat clipped stretches, NaN runs, duplicated (held) samples, inputs without excitation, a
-twin without noise levels or without any section, calibration on or off, any training fraction.
+(:func:`dtwin.gapbench.generate_case`: realistic signals with a gap to find) and is then made
+hostile: spikes of 1e3–1e15 spreads in any column, constant and all-zero channels, scales 1e-12
+to 1e12, steps, flat clipped stretches, NaN runs, duplicated (held) samples, inputs without
+excitation, a twin without noise levels or without any section, calibration on or off, any
+training fraction.
 
 Each one must exit 0 (a complete output folder) or 2 (one line on stderr, no output folder,
 nothing left behind), never 3; no traceback and no Python warning may reach stderr, and the
@@ -32,7 +33,7 @@ from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
 from dtwin.cli import main
-from dtwin.gap.generator import ALL_CASE_EFFECTS, generate_case
+from dtwin.gapbench.generator import ALL_CASE_EFFECTS, generate_case
 from tests.conftest import n_examples
 
 #: Derandomized deep examples per CI run (each takes about one second).

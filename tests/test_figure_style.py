@@ -51,7 +51,7 @@ from dtwin.figures.fig09_bic import (
 from dtwin.figures.fig10_mcda_actions import single_step_lock_ins
 from dtwin.figures.fig11_sensitivity import _with_notes
 from dtwin.figures.gap_benchmark import gap_benchmark
-from dtwin.gap.benchmark import TARGETS, benchmark_metrics
+from dtwin.gapbench.scores import TARGETS, benchmark_metrics
 from tests.conftest import REPO
 
 FIGURE_MODULES = [
@@ -223,7 +223,7 @@ def test_fig01_is_drawn_at_print_size_without_collisions():
 
 
 def benchmark_table() -> pd.DataFrame:
-    """A made-up scored table (the columns of dtwin.gap.benchmark.score_cases a figure reads)."""
+    """A made-up scored table (the columns of dtwin.gapbench.scores.score_cases a figure reads)."""
     rows = []
     for effect in ("coulomb_friction", "sensor_delay", "none", "unexplained"):
         for i in range(3):
@@ -326,7 +326,7 @@ def test_gap_benchmark_draws_the_paper_family_only():
 
 def test_gap_benchmark_draws_each_arm_and_the_rig_family_in_panel_f():
     """Issues 10 and 16: the arms and the rig family are rows of the figure, not only JSON."""
-    from dtwin.gap.benchmark import benchmark_metrics
+    from dtwin.gapbench.scores import benchmark_metrics
 
     paper = benchmark_table().assign(family="paper", arm="default")
     noisy = benchmark_table().assign(family="paper", arm="noisy_x")
@@ -393,9 +393,9 @@ def test_the_sweeps_failed_targets_and_fig11_balanced_claim_get_causes():
 
 def test_panel_f_names_every_arm_of_the_gap_layer():
     """The figures layer may not import dtwin.gap, so panel F keeps its own arm labels: they
-    must cover every arm of dtwin/gap/arms.py, the default arm and the rig family."""
+    must cover every arm of dtwin/gapbench/arms.py, the default arm and the rig family."""
     from dtwin.figures.gap_benchmark import _GROUP_LABELS
-    from dtwin.gap.arms import ARMS, DEFAULT_ARM
+    from dtwin.gapbench.arms import ARMS, DEFAULT_ARM
 
     assert set(_GROUP_LABELS) == {DEFAULT_ARM, *ARMS, "rig"}
     assert list(_GROUP_LABELS)[1 : 1 + len(ARMS)] == list(ARMS)

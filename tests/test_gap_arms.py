@@ -1,4 +1,4 @@
-"""The gap benchmark's arms (dtwin/gap/arms.py): conditions, forms and answer keys."""
+"""The gap benchmark's arms (dtwin/gapbench/arms.py): conditions, forms and answer keys."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 from scipy.signal import savgol_filter
 
 from dtwin._validation import DtwinValueError
-from dtwin.gap.arms import (
+from dtwin.gapbench.arms import (
     NEAR_CATALOGUE,
     NOISY_X_FRACTION,
     TWO_EFFECT_PAIRS,
@@ -23,8 +23,8 @@ from dtwin.gap.arms import (
     split_case_type,
     stiction_plant,
 )
-from dtwin.gap.generator import ARM_EFFECTS, NOMINAL_TWIN, case_spec, generate_case
-from dtwin.gap.rigs import generate_any_case
+from dtwin.gapbench.generator import ARM_EFFECTS, NOMINAL_TWIN, case_spec, generate_case
+from dtwin.gapbench.rigs import generate_any_case
 from dtwin.modules import plant_response
 
 N = 1200

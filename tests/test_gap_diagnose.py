@@ -18,13 +18,13 @@ from dtwin.exact_plant import exact_plant_response
 from dtwin.gap import (
     diagnose,
     diagnosis_to_dict,
-    generate_case,
     recording_from_frame,
     twin_discretisation,
     twin_from_mapping,
 )
 from dtwin.gap.effects import EFFECT_NAMES
-from dtwin.gap.generator import IN_LIST_EFFECTS
+from dtwin.gapbench import generate_case
+from dtwin.gapbench.generator import IN_LIST_EFFECTS
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = json.loads((ROOT / "workflow/schemas/diagnosis.schema.json").read_text())

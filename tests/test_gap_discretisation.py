@@ -253,7 +253,7 @@ def test_calibration_recovers_a_rigs_parameters_and_offset(samples_per_period, s
     Measured: within 0.4 % at 5 samples per period (band-limited hold chosen) and 500 (first-order).
     """
     from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping
-    from dtwin.gap.rigs import generate_rig_case
+    from dtwin.gapbench.rigs import generate_rig_case
 
     case = generate_rig_case("none", seed, samples_per_period=samples_per_period, n_samples=4000)
     recording = recording_from_frame(case.recording)

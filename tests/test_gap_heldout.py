@@ -10,7 +10,7 @@ import yaml
 from dtwin._validation import DtwinValueError
 from dtwin.cli import main
 from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping
-from dtwin.gap.rigs import generate_rig_case
+from dtwin.gapbench.rigs import generate_rig_case
 
 
 def _plant_csv(path, n=600, dt=0.01, columns=("t", "u_cmd", "u_act", "x"), seed=0):

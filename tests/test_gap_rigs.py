@@ -9,8 +9,8 @@ import pytest
 
 from dtwin._validation import DtwinValueError
 from dtwin.gap.effects import ARRAY_OPS, SCALAR_OPS, effect_by_name
-from dtwin.gap.generator import accepted_effects, generate_case
-from dtwin.gap.rigs import HARD_RIG_EFFECTS, generate_any_case, generate_hard_rig_case
+from dtwin.gapbench.generator import accepted_effects, generate_case
+from dtwin.gapbench.rigs import HARD_RIG_EFFECTS, generate_any_case, generate_hard_rig_case
 
 
 def test_stribeck_friction_is_coulomb_without_a_bump_and_breaks_away_at_rest():
@@ -57,7 +57,7 @@ def test_the_harder_rig_family_draws_its_conditions(seed):
 
 
 def test_the_harder_family_holds_its_force_and_colours_its_noise():
-    from dtwin.gap.rigs import _draw_hard_rig, _Drive, _measurement_noise
+    from dtwin.gapbench.rigs import _draw_hard_rig, _Drive, _measurement_noise
 
     rng = np.random.default_rng(4)
     rig = _draw_hard_rig(rng, "none", 40.0)
@@ -78,7 +78,7 @@ def test_unknown_hard_rig_effects_are_refused_and_the_prefix_dispatches():
 
 
 def test_cogging_is_a_near_catalogue_plant_force_periodic_in_the_position():
-    from dtwin.gap.arms import NEAR_CATALOGUE, plant_form_force
+    from dtwin.gapbench.arms import NEAR_CATALOGUE, plant_form_force
 
     assert "cogging" in NEAR_CATALOGUE and "stiction" not in NEAR_CATALOGUE
     force = plant_form_force({"effect": "cogging", "A": 2.0, "period": 0.5, "phase": 0.3}, 1.0)
@@ -117,7 +117,7 @@ def test_a_plain_coulomb_rig_reads_coulomb_not_its_stribeck_generalisation():
     """Rig seed 16001 (a sharp Coulomb friction): Stribeck friction removed 65 % of the choosing
     excess, Coulomb friction 61 %, and the score chose Stribeck (a shape mismatch, no bump)."""
     from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping
-    from dtwin.gap.rigs import generate_rig_case
+    from dtwin.gapbench.rigs import generate_rig_case
 
     case = generate_rig_case("coulomb_friction", 16001)
     recording = recording_from_frame(case.recording)

@@ -12,12 +12,13 @@ import pytest
 from dtwin.gap import (
     diagnose,
     diagnosis_to_dict,
-    generate_case,
     recording_from_frame,
     twin_discretisation,
     twin_from_mapping,
 )
-from dtwin.gap.benchmark import (
+from dtwin.gap.report import render_markdown
+from dtwin.gapbench import generate_case
+from dtwin.gapbench.scores import (
     TARGETS,
     benchmark_checks,
     benchmark_metrics,
@@ -25,7 +26,6 @@ from dtwin.gap.benchmark import (
     score_cases,
     true_parameter,
 )
-from dtwin.gap.report import render_markdown
 
 NONLINEAR_PLANT = ("coulomb_friction", "cubic_stiffness", "quadratic_damping")
 

@@ -28,8 +28,8 @@ from hypothesis import strategies as st
 
 from dtwin._validation import DtwinTypeError, DtwinValueError
 from dtwin.cli import main
-from dtwin.gap.generator import generate_case
 from dtwin.gap.recording import OUTLIER_GAP, outlier_mask, read_recording, recording_from_frame
+from dtwin.gapbench.generator import generate_case
 from dtwin.params import command_params_from_mapping, twin_params_from_mapping
 from tests.conftest import REPO, n_examples
 

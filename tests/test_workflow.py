@@ -514,7 +514,7 @@ def test_each_config_seed_gives_byte_identical_draws_and_another_seed_different_
     """Every random draw derives from a seed in the config: simulation.seed (command steps and
     process noise), faults.seed (SensorNoisy noise), hmm.seed (EM starts) and the gap
     benchmark's case seeds. Each stage is run twice with its seed and once with seed + 1."""
-    from dtwin.gap.generator import generate_case
+    from dtwin.gapbench.generator import generate_case
     from dtwin.stages.faults import inject_scenario
     from dtwin.stages.regimes import fit_regimes
     from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset

@@ -8,7 +8,7 @@ effect's own share first, one mark per case, on the confusion matrix's rows),
 of cases), :func:`draw_reliability` (the reliability table: accuracy against mean confidence
 per confidence bin) and :func:`draw_parameter_errors` (fitted against true parameter, one dot
 per case), and with several arms or a rig family :func:`draw_arms` (each arm's and family's
-accuracies). The scoring, the intervals included, is :mod:`dtwin.gap.benchmark`'s; this module
+accuracies). The scoring, the intervals included, is :mod:`dtwin.gapbench.scores`'s; this module
 only draws its table and metrics.
 """
 
@@ -122,7 +122,7 @@ def draw_shrinks(ax: Axes, table: pd.DataFrame, target_pct: float) -> None:
 
 
 def _rate_arrays(rates: Sequence[Mapping[str, Any]]) -> tuple[np.ndarray, ...]:
-    """Return ``(rate, low, high, n)`` arrays of :func:`dtwin.gap.benchmark`'s rate entries."""
+    """Return ``(rate, low, high, n)`` arrays of :func:`dtwin.gapbench.scores`'s rate entries."""
     rate = np.array([np.nan if r["rate"] is None else r["rate"] for r in rates], dtype=float)
     low = np.array([r["low"] for r in rates], dtype=float)
     high = np.array([r["high"] for r in rates], dtype=float)
@@ -202,7 +202,7 @@ def draw_reliability(ax: Axes, metrics: Mapping[str, Any]) -> None:
 def draw_parameter_errors(ax: Axes, table: pd.DataFrame, target: float) -> None:
     """Panel D: per effect, each right diagnosis's fitted-parameter error (one dot per case).
 
-    ``param_error`` of :func:`dtwin.gap.benchmark.score_cases` on a log axis (at least 1e-4);
+    ``param_error`` of :func:`dtwin.gapbench.scores.score_cases` on a log axis (at least 1e-4);
     effects whose real form has no catalogue parameter have no dot.
     """
     scored = table.dropna(subset=["param_error"]) if "param_error" in table else table.iloc[:0]
@@ -227,7 +227,7 @@ def draw_parameter_errors(ax: Axes, table: pd.DataFrame, target: float) -> None:
     panel_title(ax, "D", "Parameter error")
 
 
-#: Panel F's rows, in order: short names of the arms (dtwin/gap/arms.py ``ARMS``; the figures
+#: Panel F's rows, in order: short names of the arms (dtwin/gapbench/arms.py ``ARMS``; the figures
 #: layer does not import the gap layer) and the rig family.
 _GROUP_LABELS = {
     "default": "default",
@@ -241,7 +241,7 @@ _GROUP_LABELS = {
     "rig": "rig family",
 }
 
-#: Panel F's accuracies: (metric of :func:`dtwin.gap.benchmark._family_metrics`, label, marker).
+#: Panel F's accuracies: (metric of :func:`dtwin.gapbench.scores._family_metrics`, label, marker).
 _ARM_MARKS = (
     ("module_accuracy", "module", "o"),
     ("effect_accuracy", "effect", "s"),
@@ -320,7 +320,7 @@ def plot_gap_benchmark(
     targets: Mapping[str, float],
     no_effect: str = "none",
 ) -> Figure:
-    """Draw the benchmark (five or six panels; the scoring is :mod:`dtwin.gap.benchmark`'s).
+    """Draw the benchmark (five or six panels; the scoring is :mod:`dtwin.gapbench.scores`'s).
 
     Above: confusion matrix and the three shrinks on shared rows, accuracy by magnitude; below:
     the parameter errors and the reliability table; when the cases come from more than one arm
@@ -329,9 +329,9 @@ def plot_gap_benchmark(
     Parameters
     ----------
     table : DataFrame
-        :func:`dtwin.gap.benchmark.score_cases` (one row per case).
+        :func:`dtwin.gapbench.scores.score_cases` (one row per case).
     metrics : mapping
-        :func:`dtwin.gap.benchmark.benchmark_metrics` of the same cases.
+        :func:`dtwin.gapbench.scores.benchmark_metrics` of the same cases.
     targets : mapping
         docs/gap.md §Targets: ``median_own_shrink_pct`` (%) and ``median_parameter_error``.
     no_effect : str
@@ -444,14 +444,14 @@ def gap_benchmark(
     Parameters
     ----------
     table : DataFrame
-        :func:`dtwin.gap.benchmark.score_cases`; only the paper asset's cases (``family``
+        :func:`dtwin.gapbench.scores.score_cases`; only the paper asset's cases (``family``
         ``"paper"``, or every case without that column) are drawn.
     metrics : mapping
-        :func:`dtwin.gap.benchmark.benchmark_metrics`.
+        :func:`dtwin.gapbench.scores.benchmark_metrics`.
     checks : sequence of Check
-        :func:`dtwin.gap.benchmark.benchmark_checks`.
+        :func:`dtwin.gapbench.scores.benchmark_checks`.
     targets : mapping
-        :data:`dtwin.gap.benchmark.TARGETS` (``median_own_shrink_pct`` and
+        :data:`dtwin.gapbench.scores.TARGETS` (``median_own_shrink_pct`` and
         ``median_parameter_error`` are drawn).
     no_effect : str
         The effect name of cases without an effect.

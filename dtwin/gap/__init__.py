@@ -1,15 +1,15 @@
 """Sim-to-real gap diagnosis: where the gap lies, which effect causes it, how far it shrinks.
 
-Checked on generated recordings whose effect is withheld.
-
-Specification: docs/gap.md.
+Specification: docs/gap.md. The recordings it is checked on (a withheld effect each) and their
+scoring are :mod:`dtwin.gapbench`'s, which this package never imports.
 
 Modules: :mod:`~dtwin.gap.recording` (load and validate a recording), :mod:`~dtwin.gap.effects`
 (the candidate catalogue), :mod:`~dtwin.gap.models` (module twins with effects),
 :mod:`~dtwin.gap.noise` (noise floors), :mod:`~dtwin.gap.fit` (fitting and calibration),
-:mod:`~dtwin.gap.localise` (gaps and the chain), :mod:`~dtwin.gap.diagnose` (the diagnoser),
-:mod:`~dtwin.gap.report` (JSON, markdown, figure), :mod:`~dtwin.gap.generator` (withheld-effect
-recordings) and :mod:`~dtwin.gap.benchmark` (scoring diagnoses against the truth).
+:mod:`~dtwin.gap.localise` (gaps and the chain), :mod:`~dtwin.gap.intervals` (parameter
+intervals), :mod:`~dtwin.gap.confidence` (calibrated confidence), :mod:`~dtwin.gap.oe_reference`
+(the output-error reference fit), :mod:`~dtwin.gap.diagnose` (the diagnoser) and
+:mod:`~dtwin.gap.report` (JSON, markdown, figure).
 
 Arrays are time-first: every signal has shape ``(n_samples,)``.
 """
@@ -22,7 +22,6 @@ from dtwin.gap.diagnose import (
     twin_from_mapping,
 )
 from dtwin.gap.effects import EFFECT_NAMES, EFFECTS, Effect
-from dtwin.gap.generator import GeneratedCase, generate_case
 from dtwin.gap.recording import Recording, read_recording, recording_from_frame
 from dtwin.gap.report import diagnosis_to_dict, write_report
 
@@ -35,8 +34,6 @@ __all__ = [
     "EFFECT_NAMES",
     "EFFECTS",
     "Effect",
-    "GeneratedCase",
-    "generate_case",
     "Recording",
     "read_recording",
     "recording_from_frame",

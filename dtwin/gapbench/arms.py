@@ -2,7 +2,7 @@
 
 Specification: this docstring (docs/gap.md §Benchmark describes the benchmark around it).
 
-The default cases of :mod:`dtwin.gap.generator` give the diagnoser the twin's true noise levels
+The default cases of :mod:`dtwin.gapbench.generator` give the diagnoser the twin's true noise levels
 (±10 %), the plant's exact state, an asset that is the twin's own recursion and effects in the
 catalogue's families. Each *arm* takes one of these away (a case type ``<arm>__<effect>``):
 

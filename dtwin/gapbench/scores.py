@@ -2,8 +2,8 @@
 
 Specification: docs/gap.md §Benchmark (cases, rules), §Scores and §Targets.
 
-:func:`score_cases` joins each case's key (the truth from :mod:`dtwin.gap.generator` or
-:mod:`dtwin.gap.rigs`) with its ``diagnosis.json`` and returns one row per case;
+:func:`score_cases` joins each case's key (the truth from :mod:`dtwin.gapbench.generator` or
+:mod:`dtwin.gapbench.rigs`) with its ``diagnosis.json`` and returns one row per case;
 :func:`benchmark_metrics` gives the accuracies (each with its Wilson interval), the three
 shrinks (docs/gap.md §How far), the fitted parameters' errors and the reliability of the
 confidence; :func:`benchmark_checks` states the targets as checks. The figure is drawn by
@@ -32,7 +32,7 @@ from dtwin.artifacts import Check
 from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED
 from dtwin.proportions import wilson_interval
 
-#: The benchmark arm of two effects at once (:mod:`dtwin.gap.arms`, case type ``two__a+b``).
+#: The benchmark arm of two effects at once (:mod:`dtwin.gapbench.arms`, case type ``two__a+b``).
 TWO_ARM = "two"
 
 __all__ = [
@@ -130,7 +130,7 @@ def true_parameter(key: Mapping[str, Any], dt: float) -> tuple[str, float, float
     Parameters
     ----------
     key : mapping
-        A case's ``key.json`` (:mod:`dtwin.gap.generator`, :mod:`dtwin.gap.rigs`).
+        A case's ``key.json`` (:mod:`dtwin.gapbench.generator`, :mod:`dtwin.gapbench.rigs`).
     dt : float
         The recording's sample time, s (a delay's truth is in samples).
 

@@ -2,7 +2,7 @@
 
 Specification: docs/gap.md §Rig family.
 
-The paper's asset (:mod:`dtwin.gap.generator`) is the twin's own Euler recursion at ~150
+The paper's asset (:mod:`dtwin.gapbench.generator`) is the twin's own Euler recursion at ~150
 samples per period, with every signal recorded and the twin's parameters known. Measured rigs
 are none of that: a continuous plant sampled anywhere from 3 to 1000 samples per period, in
 volts or micrometres, with offsets, often integrating (``k = 0``) and run in a closed loop,
@@ -32,7 +32,7 @@ import pandas as pd
 from scipy.signal import lfilter
 
 from dtwin._validation import DtwinValueError
-from dtwin.gap.generator import GeneratedCase, accepted_effects, generate_case
+from dtwin.gapbench.generator import GeneratedCase, accepted_effects, generate_case
 
 __all__ = [
     "RIG_EFFECTS",
@@ -418,8 +418,8 @@ def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
 def generate_any_case(case_type: str, seed: int, **paper_options) -> GeneratedCase:
     """Generate a benchmark case: a rig family's (``rig_``, ``hardrig_``), else the paper asset.
 
-    A paper-asset case type may carry an arm (``no_noise__none``, dtwin/gap/arms.py).
-    ``paper_options`` go to :func:`dtwin.gap.generator.generate_case` (``miscalibration``,
+    A paper-asset case type may carry an arm (``no_noise__none``, dtwin/gapbench/arms.py).
+    ``paper_options`` go to :func:`dtwin.gapbench.generator.generate_case` (``miscalibration``,
     ``noise_error``); the rig family has none.
     """
     if case_type.startswith(RIG_PREFIX):

@@ -19,7 +19,7 @@ holding the truth, which the diagnoser never reads. It is deliberately unkind:
 - out-of-list effects (``stiffness_change``: a mid-run change of k; ``sensor_interference``: a
   sinusoid on one sensor), which the diagnoser should call ``unexplained``.
 
-The benchmark's *arms* (:mod:`dtwin.gap.arms`: case types ``<arm>__<effect>``) take away what
+The benchmark's *arms* (:mod:`dtwin.gapbench.arms`: case types ``<arm>__<effect>``) take away what
 these default cases still give: the twin's noise levels, the exact state, the twin's own
 discretisation, the catalogue's families of forms, a single effect. Every key carries its
 ``arm`` (``default`` here; the rig family's is ``rig``). The arms' extra draws come from a
@@ -38,7 +38,9 @@ import pandas as pd
 
 from dtwin._validation import DtwinValueError, require_in_range
 from dtwin.command import make_command, time_axis
-from dtwin.gap.arms import (
+from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED, fractional_delay
+from dtwin.gap.noise import plant_noise_gain
+from dtwin.gapbench.arms import (
     ARM_DRAWS,
     CONTINUOUS_SUBSTEPS,
     DEFAULT_ARM,
@@ -57,8 +59,6 @@ from dtwin.gap.arms import (
     stiction_plant,
     unseen_expected,
 )
-from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED, fractional_delay
-from dtwin.gap.noise import plant_noise_gain
 from dtwin.modules import CONTRACTS, fuse, kpi, lag_coefficient, lag_response, plant_response
 from dtwin.params import CommandParams
 
@@ -95,7 +95,7 @@ OUT_OF_LIST_EFFECTS: dict[str, tuple[str, ...]] = {
 }
 #: Every case type, ``none`` included.
 ALL_CASE_EFFECTS: tuple[str, ...] = (*IN_LIST_EFFECTS, *OUT_OF_LIST_EFFECTS, NONE)
-#: The effects each arm may carry (dtwin/gap/arms.py); arms (a)–(d) change the conditions of
+#: The effects each arm may carry (dtwin/gapbench/arms.py); arms (a)–(d) change the conditions of
 #: the catalogue's effects and ``none``, (e)–(g) the effects.
 ARM_EFFECTS: dict[str, tuple[str, ...]] = {
     DEFAULT_ARM: ALL_CASE_EFFECTS,
@@ -479,7 +479,7 @@ def _run_continuous_asset(asset, u_cmd, noises, specs, t):
     """Return the signals of the continuous asset (arm ``continuous``), each ``(n,)``.
 
     The command after the actuator's effect is held over each sample; actuator and plant are
-    integrated together (:func:`dtwin.gap.arms.continuous_chain`), the sensors' lags on the
+    integrated together (:func:`dtwin.gapbench.arms.continuous_chain`), the sensors' lags on the
     continuous position; noise and the sensors' output effects are added at the samples.
     """
     dt = asset["dt"]
@@ -555,7 +555,7 @@ def generate_case(
     nominal : mapping, optional
         The nominal twin (default :data:`NOMINAL_TWIN`; all sections and ``noise`` needed).
     arm : str, default "default"
-        The benchmark arm (:data:`dtwin.gap.arms.ARMS`), or ``"default"``.
+        The benchmark arm (:data:`dtwin.gapbench.arms.ARMS`), or ``"default"``.
 
     Returns
     -------
@@ -639,7 +639,7 @@ def _check_case(effect: str, arm: str) -> tuple[str, list[str]]:
     """Return ``(arm, effects)`` after checking that ``effect`` belongs to ``arm``.
 
     ``effect`` may carry the arm as a prefix (``no_noise__none``); the ``two`` arm's effect is
-    ``<effect>+<effect>`` (a pair of :data:`~dtwin.gap.arms.TWO_EFFECT_PAIRS`).
+    ``<effect>+<effect>`` (a pair of :data:`~dtwin.gapbench.arms.TWO_EFFECT_PAIRS`).
     """
     prefixed, bare = split_case_type(effect)
     if prefixed != DEFAULT_ARM:
@@ -679,7 +679,7 @@ def accepted_effects(expected: str, params: Mapping[str, Any]) -> list[str]:
     """Return the answers that are right for a case: ``expected``, or either friction name.
 
     A friction with a breakaway force above its sliding one (``Fs > Fc``) is right as
-    ``coulomb_friction`` or ``stribeck_friction`` (:data:`~dtwin.gap.arms.FRICTION_FAMILY`):
+    ``coulomb_friction`` or ``stribeck_friction`` (:data:`~dtwin.gapbench.arms.FRICTION_FAMILY`):
     Coulomb friction is Stribeck friction without its bump, which a faint effect or a fast
     motion does not show.
     """
@@ -731,7 +731,7 @@ def _expected(arm, case_effect, effects, placed, snrs) -> dict[str, Any]:
 
 
 def _apply_arm(arm, frame, twin_file, noise_true, rng) -> tuple[pd.DataFrame, dict]:
-    """Return the recording and twin file under the arm's condition (dtwin/gap/arms.py)."""
+    """Return the recording and twin file under the arm's condition (dtwin/gapbench/arms.py)."""
     twin = dict(twin_file["twin"])
     if arm == "no_noise":
         del twin["noise"]
@@ -907,7 +907,7 @@ def case_spec(case: str, effects: Sequence[str], first_seed: int = 1000) -> dict
     """Return ``{"case", "effect", "arm", "seed"}`` of a case name ``<effect>_<NN>``.
 
     ``effect`` is the case type as listed (``[<arm>__]<effect>``, or ``rig_<effect>``);
-    ``arm`` is its arm (:func:`dtwin.gap.arms.split_case_type`; ``default`` without a prefix).
+    ``arm`` is its arm (:func:`dtwin.gapbench.arms.split_case_type`; ``default`` without a prefix).
 
     The seed is ``first_seed + 1000·(index of effect in effects) + NN``, so adding cases keeps
     the earlier ones (docs/gap.md §Benchmark).

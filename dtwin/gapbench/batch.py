@@ -35,7 +35,7 @@ def write_case_folder(
     Parameters
     ----------
     case : str
-        Case name ``<effect>_<NN>`` (:func:`dtwin.gap.generator.case_spec` picks the effect and
+        Case name ``<effect>_<NN>`` (:func:`dtwin.gapbench.generator.case_spec` picks the effect and
         the seed; ``rig_<effect>`` cases come from the rig family).
     benchmark : mapping
         The ``gap.benchmark`` config section (``effects``, ``first_seed``, ``miscalibration``,
@@ -44,8 +44,8 @@ def write_case_folder(
         Created if missing; ``recording.csv``, ``twin.yaml`` and ``key.json`` are each written
         atomically.
     """
-    from dtwin.gap.generator import case_spec
-    from dtwin.gap.rigs import generate_any_case
+    from dtwin.gapbench.generator import case_spec
+    from dtwin.gapbench.rigs import generate_any_case
 
     spec = case_spec(case, benchmark["effects"], benchmark["first_seed"])
     generated = generate_any_case(

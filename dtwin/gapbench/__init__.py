@@ -1,0 +1,36 @@
+"""The gap diagnoser's benchmark: recordings with a withheld effect, and their scores.
+
+A test-data factory for :mod:`dtwin.gap`, which never imports it (tests/test_architecture.py).
+Specification: docs/gap.md §Generator, §Benchmark.
+
+Modules: :mod:`~dtwin.gapbench.generator` (a case: recording, twin file and key from the paper's
+asset with one effect), :mod:`~dtwin.gapbench.arms` (the arms' harder cases),
+:mod:`~dtwin.gapbench.rigs` (the rig families), :mod:`~dtwin.gapbench.batch` (a chunk of cases
+written to and diagnosed from folders) and :mod:`~dtwin.gapbench.scores` (diagnoses scored
+against their keys, the benchmark's metrics and checks).
+
+The package re-exports :func:`generate_case` and :class:`GeneratedCase` lazily (PEP 562), so
+importing one module loads only what it needs.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "GeneratedCase": "dtwin.gapbench.generator",
+    "generate_case": "dtwin.gapbench.generator",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'dtwin.gapbench' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])
