@@ -85,31 +85,51 @@ def _numpy_sum(a):
 
 @njit(cache=True)
 def _predict(fwd, t, transmat, frameprob, out):
-    """``out_j = (Σ_i α_t−1(i) A_ij) b_j(e_t)``, the sum over i in order (hmmlearn's)."""
+    """``out_j = (Σ_i α_t−1(i) A_ij) b_j(e_t)``, the sum over i in order (hmmlearn's).
+
+    Two terms of the sum per pass over j (``(out + a) + b`` is the sequential order), so
+    the running sums go through memory half as often; the j loop vectorises.
+    """
     n_states = out.shape[0]
     for j in range(n_states):
         out[j] = 0.0
-    for i in range(n_states):
-        weight = fwd[t - 1, i]
+    i = 0
+    while i + 2 <= n_states:
+        w0, w1 = fwd[t - 1, i], fwd[t - 1, i + 1]
         for j in range(n_states):
-            out[j] += weight * transmat[i, j]
+            out[j] = (out[j] + w0 * transmat[i, j]) + w1 * transmat[i + 1, j]
+        i += 2
+    if i < n_states:
+        w0 = fwd[t - 1, i]
+        for j in range(n_states):
+            out[j] += w0 * transmat[i, j]
     for j in range(n_states):
         out[j] *= frameprob[t, j]
+
+
+@njit(cache=True)
+def _exp_row(frameprob, t):
+    for j in range(frameprob.shape[1]):
+        frameprob[t, j] = math.exp(frameprob[t, j])
 
 
 @njit(cache=True)
 def _forward(startprob, transmat, frameprob, fwd, scaling):
     """Scaled forward pass (Eq. (4)); returns log p(X), or NaN on hmmlearn's underflow.
 
-    hmmlearn's ``forward_scaling``: every α_t is scaled to sum 1 (the scale is ``1/Σ_j``,
-    summed in order; below 1e-300 the pass fails), ``log p(X) = −Σ_t log scale_t``.
+    ``frameprob`` enters holding log b and leaves holding b: row t is exponentiated as the
+    pass reaches it (then the exponentials overlap the recursion's latency). hmmlearn's
+    ``forward_scaling``: every α_t is scaled to sum 1 (the scale is ``1/Σ_j``, summed in
+    order; below 1e-300 the pass fails), ``log p(X) = −Σ_t log scale_t``.
     """
     n_steps, n_states = frameprob.shape
     row = np.empty(n_states)
+    _exp_row(frameprob, 0)
     for j in range(n_states):
         row[j] = startprob[j] * frameprob[0, j]
     for t in range(n_steps):
         if t > 0:
+            _exp_row(frameprob, t)
             _predict(fwd, t, transmat, frameprob, row)
         total = 0.0
         for j in range(n_states):
@@ -127,8 +147,29 @@ def _forward(startprob, transmat, frameprob, fwd, scaling):
 
 
 @njit(cache=True)
-def _backward(transmat_t, frameprob, scaling, bwd):
-    """Scaled backward pass; ``transmat_t`` is Aᵀ (contiguous), sums run over j in order."""
+def _backward_step(transmat_t, ahead, row):
+    """``row_i = Σ_j Aᵀ_ji ahead_j``, the sum over j in order, two terms per pass over i."""
+    n_states = row.shape[0]
+    for i in range(n_states):
+        row[i] = 0.0
+    j = 0
+    while j + 2 <= n_states:
+        b0, b1 = ahead[j], ahead[j + 1]
+        for i in range(n_states):
+            row[i] = (row[i] + transmat_t[j, i] * b0) + transmat_t[j + 1, i] * b1
+        j += 2
+    if j < n_states:
+        b0 = ahead[j]
+        for i in range(n_states):
+            row[i] += transmat_t[j, i] * b0
+
+
+@njit(cache=True)
+def _backward(transmat_t, frameprob, scaling, bwd, weighted):
+    """Scaled backward pass; ``transmat_t`` is Aᵀ (contiguous), sums run over j in order.
+
+    Row t ≥ 1 of ``weighted`` receives ``b_t ⊙ β_t``, the ξ-sum's right factor.
+    """
     n_steps, n_states = frameprob.shape
     ahead, row = np.empty(n_states), np.empty(n_states)
     for i in range(n_states):
@@ -136,27 +177,10 @@ def _backward(transmat_t, frameprob, scaling, bwd):
     for t in range(n_steps - 2, -1, -1):
         for j in range(n_states):
             ahead[j] = frameprob[t + 1, j] * bwd[t + 1, j]
-            row[j] = 0.0
-        for j in range(n_states):
-            after = ahead[j]
-            for i in range(n_states):
-                row[i] += transmat_t[j, i] * after
+            weighted[t + 1, j] = ahead[j]
+        _backward_step(transmat_t, ahead, row)
         for i in range(n_states):
             bwd[t, i] = row[i] * scaling[t]
-
-
-@njit(cache=True)
-def _xi_sum(fwd, transmat, bwd, frameprob, out):
-    """Σ_t ξ_t(i, j) of the scaled lattices (hmmlearn's ``compute_scaling_xi_sum``).
-
-    ``Σ_t α_t(i) A_ij b_j(e_t+1) β_t+1(j) = A_ij · [α_0:T−1ᵀ (b ⊙ β)_1:T]_ij``: A is constant
-    over t, so the sum is one matrix product (BLAS) instead of T·K² scalar updates.
-    """
-    weighted = frameprob[1:] * bwd[1:]
-    products = np.dot(fwd[:-1].T, weighted)
-    for i in range(out.shape[0]):
-        for j in range(out.shape[1]):
-            out[i, j] = transmat[i, j] * products[i, j]
 
 
 @njit(cache=True)
@@ -171,6 +195,20 @@ def _posteriors(fwd, bwd, out):
             total = 1.0
         for k in range(n_states):
             out[t, k] /= total
+
+
+@njit(cache=True)
+def _xi_sum(fwd, transmat, weighted, products, out):
+    """Σ_t ξ_t(i, j) of the scaled lattices (hmmlearn's ``compute_scaling_xi_sum``).
+
+    ``Σ_t α_t(i) A_ij b_j(e_t+1) β_t+1(j) = A_ij · [α_0:T−1ᵀ (b ⊙ β)_1:T]_ij``: A is constant
+    over t, so the sum is one matrix product (BLAS, into ``products``) instead of T·K² scalar
+    updates; ``weighted`` holds ``b ⊙ β`` (:func:`_backward`).
+    """
+    np.dot(fwd[:-1].T, weighted[1:], products)
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[i, j] = transmat[i, j] * products[i, j]
 
 
 @njit(cache=True)
@@ -193,13 +231,27 @@ def _normalise(counts, previous, zero_rows_kept):
 
 
 @njit(cache=True)
-def _estep(startprob, transmat, frameprob, fwd, bwd, scaling, gamma, xi):
-    """Forward, backward, ξ-sum and γ; returns log p(X) (NaN on underflow)."""
+def _lattices(n_steps, n_states):
+    """Return the E-step's buffers, reused by every iteration of a start (see :func:`_estep`)."""
+    frameprob, fwd = np.empty((n_steps, n_states)), np.empty((n_steps, n_states))
+    bwd, gamma = np.empty((n_steps, n_states)), np.empty((n_steps, n_states))
+    weighted, products = np.empty((n_steps, n_states)), np.empty((n_states, n_states))
+    return frameprob, fwd, bwd, gamma, weighted, products, np.empty(n_steps)
+
+
+@njit(cache=True)
+def _estep(kind, data, emission, startprob, transmat, buffers, xi):
+    """Emission densities, forward, backward, γ and the ξ-sum; returns log p(X) (NaN on underflow).
+
+    ``buffers`` are :func:`_lattices`' (T, K) arrays; γ ends in ``buffers[3]``, Σ_t ξ_t in ``xi``.
+    """
+    frameprob, fwd, bwd, gamma, weighted, products, scaling = buffers
+    _log_frameprob(kind, data, emission, frameprob)
     log_prob = _forward(startprob, transmat, frameprob, fwd, scaling)
     if math.isnan(log_prob):
         return log_prob
-    _backward(np.ascontiguousarray(transmat.T), frameprob, scaling, bwd)
-    _xi_sum(fwd, transmat, bwd, frameprob, xi)
+    _backward(np.ascontiguousarray(transmat.T), frameprob, scaling, bwd, weighted)
+    _xi_sum(fwd, transmat, weighted, products, xi)
     _posteriors(fwd, bwd, gamma)
     return log_prob
 
@@ -284,18 +336,10 @@ def _log_frameprob(kind, data, emission, out):
         weights, constant = _gaussian_weights(emission)
     else:
         weights, constant = _ar_weights(emission)
-    products = np.dot(data, weights)
+    np.dot(data, weights, out)
     for t in range(out.shape[0]):
         for k in range(out.shape[1]):
-            out[t, k] = -0.5 * (products[t, k] + constant[k])
-
-
-@njit(cache=True)
-def _frameprob(kind, data, emission, out):
-    _log_frameprob(kind, data, emission, out)
-    for t in range(out.shape[0]):
-        for k in range(out.shape[1]):
-            out[t, k] = math.exp(out[t, k])
+            out[t, k] = -0.5 * (out[t, k] + constant[k])
 
 
 @njit(cache=True)
@@ -388,17 +432,15 @@ def em(kind, data, emission, max_iter, tol, var_floor):
     n_steps, n_states = data.shape[0], emission.shape[1]
     startprob = np.full(n_states, 1.0 / n_states)
     transmat = np.full((n_states, n_states), 1.0 / n_states)
-    frameprob, fwd = np.empty((n_steps, n_states)), np.empty((n_steps, n_states))
-    bwd, gamma = np.empty((n_steps, n_states)), np.empty((n_steps, n_states))
-    scaling, xi = np.empty(n_steps), np.empty((n_states, n_states))
+    buffers, xi = _lattices(n_steps, n_states), np.empty((n_states, n_states))
     history = np.empty(max_iter)
     n_done, stopped, code = 0, False, OK
     while True:
-        _frameprob(kind, data, emission, frameprob)
-        log_prob = _estep(startprob, transmat, frameprob, fwd, bwd, scaling, gamma, xi)
+        log_prob = _estep(kind, data, emission, startprob, transmat, buffers, xi)
         if math.isnan(log_prob):
             code = UNDERFLOW
             break
+        gamma = buffers[3]
         startprob, transmat = _transition_mstep(startprob, transmat, gamma, xi)
         emission = _emission_mstep(kind, gamma, data, var_floor)
         history[n_done] = log_prob
@@ -417,9 +459,9 @@ def em(kind, data, emission, max_iter, tol, var_floor):
     if code == OK and not _is_distribution(startprob, transmat):
         code = NOT_DISTRIBUTION
     if code == OK:
-        _frameprob(kind, data, emission, frameprob)
-        final = _estep(startprob, transmat, frameprob, fwd, bwd, scaling, gamma, xi)
+        final = _estep(kind, data, emission, startprob, transmat, buffers, xi)
         code = UNDERFLOW if math.isnan(final) else OK
+    gamma = buffers[3]
     return code, history[:n_done].copy(), stopped, startprob, transmat, emission, final, gamma
 
 
@@ -474,7 +516,7 @@ def score(kind, data, emission, startprob, transmat):
     """Log p(rows) by the scaled forward pass; NaN where hmmlearn's would underflow."""
     n_steps, n_states = data.shape[0], emission.shape[1]
     frameprob, fwd = np.empty((n_steps, n_states)), np.empty((n_steps, n_states))
-    _frameprob(kind, data, emission, frameprob)
+    _log_frameprob(kind, data, emission, frameprob)
     return _forward(startprob, transmat, frameprob, fwd, np.empty(n_steps))
 
 
