@@ -447,10 +447,11 @@ def _plant_from_arx(x, u, dt, factor, hold=EULER, delay=0):
     return {"m": m, "c": c, "k": k, "u_offset": -gamma / beta, "delay_samples": delay}
 
 
-def _exact_arx_by_delay(x, u, dt, hold, cost) -> dict[int, dict]:
+def _exact_arx_by_delay(x, u, dt, hold, cost) -> dict[int, tuple[float, dict]]:
     """Return the best ARX start of the exact plant per whole-sample delay (over decimations).
 
-    Each candidate is scored by ``cost`` (training simulation error).
+    Each candidate is scored by ``cost`` (training simulation error); the values are
+    ``(cost, start)``.
     """
     by_delay = {}
     for delay in range(0, MAX_DELAY_SAMPLES + 1):
@@ -463,7 +464,8 @@ def _exact_arx_by_delay(x, u, dt, hold, cost) -> dict[int, dict]:
                 scored.append((cost(lin), factor, lin))
             factor *= 2
         if scored:
-            by_delay[delay] = min(scored, key=lambda item: item[0])[2]
+            best_cost, _, best = min(scored, key=lambda item: item[0])
+            by_delay[delay] = (best_cost, best)
     return by_delay
 
 
@@ -472,20 +474,24 @@ DELAY_GRID = (0, 1, 2, 4, 6, 9, 13, 18, 25)
 
 
 def _fit_delay(
-    data: ModuleData, starts: dict[int, dict], n_train: int, near: int | None = None
+    data: ModuleData, starts: dict[int, tuple[float, dict]], n_train: int, near: int | None = None
 ) -> dict[str, float]:
     """Output-error fits over a grid of delays, then around the best one; the best fit wins.
 
     ARX estimates of a delay are biased by output noise; the training simulation error of the
-    refined fits is not. With ``near`` (a delay already found) only its neighbours are tried.
+    refined fits is not. With ``near`` (a delay already found with another hold) its
+    neighbours are tried, and the delay of this hold's best ARX start: a hold that does not
+    fit the recording (a zero-order hold on a continuous input at 3 samples per period) finds
+    a wrong delay (18 samples for a true 0), which the right hold must not inherit.
     """
     fits = {}
 
     def fit_at(delay: int) -> None:
         if delay in starts and delay not in fits:
-            fits[delay] = fit_candidate(data, None, starts[delay], n_train=n_train)
+            fits[delay] = fit_candidate(data, None, starts[delay][1], n_train=n_train)
 
-    for delay in DELAY_GRID if near is None else (near,):
+    best_start = min(starts, key=lambda d: starts[d][0])
+    for delay in DELAY_GRID if near is None else (near, best_start):
         fit_at(delay)
     if not fits:  # no ARX start at the tried delays: the one nearest to them
         fit_at(min(starts, key=lambda d: abs(d - (near or 0))))

@@ -44,6 +44,8 @@ def _simulate(theta, u, y, windows, warmup) -> np.ndarray:
         pad = np.zeros((2, length))
         pad[:, :2] = seeds
         basis = lfilter([1.0], f, pad, axis=1).T  # (length, 2)
+        if not np.all(np.isfinite(basis[:warmup])):  # a trial F unstable enough to overflow
+            continue  # its windows stay NaN (the fit's residual clips them)
         solve = np.linalg.pinv(basis[:warmup])
         states = (y[rows[:, :warmup]] - forced[:, :warmup]) @ solve.T
         prediction = forced + states @ basis.T
@@ -84,11 +86,14 @@ def output_error_reference(data: ModuleData, delay: int, n_train: int) -> np.nda
     windows = [w for w in plant_windows(len(y), horizon, data.restarts) if w[1] - w[0] > warmup]
     train = [w for w in windows if w[1] <= n_train]
     scale = float(np.std(y[:n_train])) or 1.0
+    scored = np.zeros(len(y), dtype=bool)  # the same samples at every trial
+    for start, stop in train:
+        scored[start + warmup : stop] = True
 
     def residual(theta):
         with np.errstate(all="ignore"):  # an unstable trial denominator: errors clipped
             predicted = _simulate(theta, u, y, train, warmup)
-            error = (predicted - y)[~np.isnan(predicted)] / scale
+            error = (predicted - y)[scored] / scale
         return np.clip(np.nan_to_num(error, nan=1e6, posinf=1e6, neginf=-1e6), -1e6, 1e6)
 
     start = _arx_start(u[:n_train], y[:n_train])
