@@ -104,9 +104,10 @@ def _with_warning_notes(result, caught: Sequence[warnings.WarningMessage]):
 
 def _diagnose(args: argparse.Namespace) -> int:
     from dtwin.artifacts import atomic_write_folder
-    from dtwin.gap.diagnose import diagnose, twin_discretisation, twin_from_mapping
+    from dtwin.gap.diagnose import diagnose
     from dtwin.gap.recording import read_recording
     from dtwin.gap.report import write_report
+    from dtwin.gap.twin_file import twin_discretisation, twin_from_mapping
 
     twin_content = load_twin_file(args.twin)
     recording = read_recording(args.recording)

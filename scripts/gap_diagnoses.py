@@ -6,7 +6,7 @@ Outputs: ``folder`` = results/gap/diagnoses/{scatteritem}/ with one sub-folder p
 ``diagnosis.json`` (schema workflow/schemas/diagnosis.schema.json), ``report.md``, ``gap.png``.
 Params: ``cases`` (this chunk's case names), ``diagnose`` = config ``gap.diagnose``
 (``train_frac``, ``calibrate`` and the decision constants of
-:class:`dtwin.gap.diagnose.GapSettings`).
+:class:`dtwin.gap.results.GapSettings`).
 """
 
 from dtwin._script import start_rule

@@ -267,7 +267,7 @@ def test_a_true_plant_behind_a_noisy_position_is_within_its_noise(seed):
     """Arm (c) without an effect and with the asset's own parameters: the Euler run started
     at the edge of the smoothing read a training-part gap of 0.0145 for a floor of 0.011, and
     M1 was flagged; started at its lead it reads `none`."""
-    from dtwin.gap.diagnose import diagnose, twin_discretisation, twin_from_mapping
+    from dtwin.gap import diagnose, twin_discretisation, twin_from_mapping
     from dtwin.gap.recording import recording_from_frame
 
     case = generate_any_case("noisy_x__none", seed, miscalibration=0.0, noise_error=0.0)
@@ -284,7 +284,7 @@ def test_a_quantizer_is_named_without_noise_levels_in_the_twin(seed):
     """Arm (a): the noise before a quantizer is its maximum-likelihood value, not the data
     floor of a staircase (most differences zero: it read 0.008 for a true 0.02, and 3 of 3
     such cases read `unexplained`)."""
-    from dtwin.gap.diagnose import diagnose, twin_discretisation, twin_from_mapping
+    from dtwin.gap import diagnose, twin_discretisation, twin_from_mapping
     from dtwin.gap.recording import recording_from_frame
 
     case = generate_any_case("no_noise__sensor_quantization", seed)
@@ -306,7 +306,7 @@ def test_a_noisy_position_case_never_hides_its_effect_in_the_unrecorded_kpi():
 
 
 def _diagnose_case(case_type: str, seed: int):
-    from dtwin.gap.diagnose import diagnose, twin_discretisation, twin_from_mapping
+    from dtwin.gap import diagnose, twin_discretisation, twin_from_mapping
     from dtwin.gap.recording import recording_from_frame
 
     case = generate_any_case(case_type, seed, miscalibration=0.03, noise_error=0.10)
@@ -331,7 +331,7 @@ def test_a_near_catalogue_effect_a_linear_re_fit_only_approximates_reads_unexpla
     (parameter_mismatch, a sensor gain) that removes 53–65 % of their excess gap; such a
     candidate is exact when right, so it needs min_linear_share (0.75) and these read
     `unexplained` (they read parameter_mismatch / sensor_scale_error at min_share 0.5)."""
-    from dtwin.gap.diagnose import GapSettings
+    from dtwin.gap import GapSettings
     from dtwin.gap.effects import effect_by_name
     from dtwin.gap.report import render_markdown
 
@@ -358,7 +358,7 @@ def test_a_near_catalogue_effect_a_linear_re_fit_only_approximates_reads_unexpla
 def test_a_true_linear_form_effect_clears_the_linear_share(case_type, seed):
     """The other side of the rule: a true parameter mismatch or sensor gain leaves only noise
     after its re-fit (96–100 % of the excess removed here), so it is still named."""
-    from dtwin.gap.diagnose import GapSettings
+    from dtwin.gap import GapSettings
 
     case, result = _diagnose_case(case_type, seed)
     assert (result.module, result.effect) == (case.key["module"], case.key["expected_effect"])
@@ -385,7 +385,7 @@ def test_a_second_module_with_its_own_gap_is_said_to_need_a_second_effect():
     """Arm (g): Coulomb friction in M1 and a bias drift on a sensor. The answer is one effect
     (the module furthest above its threshold); the sensor's gap is reported as needing a
     second effect, named when its best candidate clears the same bar."""
-    from dtwin.gap.diagnose import diagnose, twin_discretisation, twin_from_mapping
+    from dtwin.gap import diagnose, twin_discretisation, twin_from_mapping
     from dtwin.gap.recording import recording_from_frame
     from dtwin.gap.report import diagnosis_to_dict, render_markdown
 

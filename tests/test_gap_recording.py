@@ -8,7 +8,7 @@ import pytest
 
 from dtwin._validation import DtwinValueError
 from dtwin.cli import main
-from dtwin.gap.diagnose import diagnose, twin_from_mapping
+from dtwin.gap import diagnose, twin_from_mapping
 from dtwin.gap.recording import read_recording, recording_from_frame
 
 TWIN = "twin:\n  dt: 0.02\n  plant: {m: 1.0, c: 0.4, k: 4.0}\n"

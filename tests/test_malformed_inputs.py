@@ -349,7 +349,7 @@ def parse_with_the_library(config: dict) -> None:
     from dtwin.bias_correction import exponential_moving_average, rate_limit
     from dtwin.command import n_steps_for
     from dtwin.fault_injection import fault_schedule
-    from dtwin.gap.diagnose import GapSettings
+    from dtwin.gap import GapSettings
     from dtwin.residual_stats import white_noise_band
     from dtwin.sensitivity_sweep import sweep_grid
     from dtwin.stages.decisions import mcda_settings_from_mapping

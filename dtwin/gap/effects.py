@@ -138,7 +138,7 @@ class Effect:
     nests : tuple of str
         Catalogue effects this one contains as a special case (Stribeck friction with
         ``Fs = Fc`` is Coulomb friction): the plain one is the answer unless this one removes
-        clearly more (``dtwin.gap.diagnose.NEST_MARGIN_PCT``).
+        clearly more (``dtwin.gap.which.NEST_MARGIN_PCT``).
     force_law : callable or None
         A ``force`` effect's law: ``force_law(theta, velocity_std, ops) -> F(x, v)``, built on
         ``ops`` (:data:`ARRAY_OPS` for numpy arrays, :data:`SCALAR_OPS` for Python floats).

@@ -19,8 +19,9 @@ from typing import Any
 import numpy as np
 
 from dtwin.artifacts import atomic_write, to_jsonable, write_json
-from dtwin.gap.diagnose import Diagnosis, required_share
 from dtwin.gap.effects import effect_by_name
+from dtwin.gap.results import Diagnosis
+from dtwin.gap.which import required_share
 
 __all__ = [
     "SCHEMA_VERSION",

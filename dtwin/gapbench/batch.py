@@ -76,11 +76,11 @@ def diagnose_case_folder(
         not read.
     diagnose_settings : mapping
         The ``gap.diagnose`` config section: ``train_frac``, ``calibrate`` and the decision
-        constants of :class:`dtwin.gap.diagnose.GapSettings`.
+        constants of :class:`dtwin.gap.results.GapSettings`.
     out_folder : path
         Created if missing; receives the files of :func:`dtwin.gap.report.write_report`.
     """
-    from dtwin.gap.diagnose import GapSettings, diagnose, twin_discretisation, twin_from_mapping
+    from dtwin.gap import GapSettings, diagnose, twin_discretisation, twin_from_mapping
     from dtwin.gap.recording import read_recording
     from dtwin.gap.report import write_report
 
