@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from dtwin._lfilter import lfilter, lfiltic
 from dtwin._validation import (
     DtwinValueError,
     require_finite_array,
@@ -164,7 +165,8 @@ def simulate_arx(fit: ArxFit, u: np.ndarray, initial_y: np.ndarray) -> np.ndarra
     -----
     ``ŷ_t = Σ a_i·ŷ_{t−i} + Σ b_j·u_{t−d−j}`` for ``t = p … n−1``: the model's own past
     predictions feed back (a simulation, not a one-step prediction). Implemented as one linear
-    filter with initial conditions (:func:`scipy.signal.lfilter`), exact to rounding.
+    filter with initial conditions (:func:`scipy.signal.lfilter`'s arithmetic, through
+    :mod:`dtwin._lfilter`), exact to rounding.
     """
     u = require_finite_array("u", u)
     orders = fit.orders
@@ -179,8 +181,6 @@ def simulate_arx(fit: ArxFit, u: np.ndarray, initial_y: np.ndarray) -> np.ndarra
     denominator = np.concatenate([[1.0], -fit.a])
     past_y = y_hat[p - 1 :: -1] if p > 0 else np.zeros(0)
     past_u = u[p - 1 :: -1]
-    from scipy.signal import lfilter, lfiltic  # here: reading ARX orders stays light
-
     state = lfiltic(numerator, denominator, past_y, past_u)
     y_hat[p:], _ = lfilter(numerator, denominator, u[p:], zi=state)
     return y_hat

@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy.signal import lfilter
 
+from dtwin._lfilter import lfilter
 from dtwin._validation import (
     DtwinValueError,
     require_finite_array,

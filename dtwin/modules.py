@@ -37,18 +37,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from dtwin._lfilter import lfilter
 from dtwin.wiring import MODULES, Module
-
-
-def lfilter(b: Sequence[float], a: Sequence[float], x: np.ndarray, axis: int = -1) -> np.ndarray:
-    """:func:`scipy.signal.lfilter`, imported on first use (scipy.signal costs ~1 s to import).
-
-    Figures import this module for the wiring and ``fuse``/``kpi`` only.
-    """
-    from scipy.signal import lfilter as scipy_lfilter
-
-    return scipy_lfilter(b, a, x, axis=axis)
-
 
 __all__ = [
     "EULER",

@@ -20,6 +20,7 @@ from collections.abc import Callable
 import numpy as np
 import pandas as pd
 
+from dtwin._lfilter import lfilter
 from dtwin._validation import DtwinValueError, require_finite_array, require_min_length
 from dtwin.command import time_axis
 from dtwin.modules import (
@@ -86,8 +87,6 @@ def actuator_lpf(
     noise = _noise_or_zeros(process_noise, len(u_cmd), "process_noise").copy()
     noise[0] = 0.0
     a = lag_coefficient(tau, dt)
-    from scipy.signal import lfilter  # lazy: figures import physics only for fuse and kpi
-
     return lag_response(u_cmd, a) + lfilter([1.0], [1.0, -a], noise)
 
 

@@ -36,9 +36,12 @@ BUDGETS = {
     "fig08_feature_separability": (*MODEL_FITTING, "scipy.stats", "scipy.linalg"),
     "fig09_bic": (*MODEL_FITTING, "scipy.stats"),
     "fig11_sensitivity": (*MODEL_FITTING, "scipy"),
+    "fit_surrogates": (*MODEL_FITTING, "scipy.stats", *PLOTTING),
     "mcda_actions": (*MODEL_FITTING, *PLOTTING, "scipy"),
+    "residuals": (*MODEL_FITTING, "scipy.stats", *PLOTTING),
     "simulate": (*MODEL_FITTING, "scipy.stats", *PLOTTING),
     "sweep_chunk": ("sklearn", "hmmlearn", "statsmodels", *PLOTTING),
+    "targeted_intervention": (*MODEL_FITTING, "scipy.stats", *PLOTTING),
     # the HMM jobs: the compiled engine, no hmmlearn or scikit-learn (hmmlearn only if it falls
     # back or hmm.engine says so, imported then)
     "ar_hmm_sweep": (*REFERENCE_ENGINE, "statsmodels", "scipy.stats", *PLOTTING),
