@@ -28,7 +28,7 @@ rule fault_regimes:
         "logs/fault_regimes.log",
     benchmark:
         "benchmarks/rules/fault_regimes.tsv"
-    priority: PRIORITY_CRITICAL_PATH
+    priority: PRIORITY_FAULT_FIT
     threads: 1
     resources:
         mem_mb=500,

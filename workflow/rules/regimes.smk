@@ -25,7 +25,7 @@ rule nominal_regimes:
         "logs/nominal_regimes.log",
     benchmark:
         "benchmarks/rules/nominal_regimes.tsv"
-    priority: PRIORITY_CRITICAL_PATH
+    priority: PRIORITY_TWIN
     threads: 1
     resources:
         mem_mb=500,
@@ -100,7 +100,7 @@ rule bic_sweep_dataset:
         "logs/bic_sweep_dataset/{dataset}.log",
     benchmark:
         "benchmarks/rules/bic_sweep_dataset/{dataset}.tsv"
-    priority: PRIORITY_CRITICAL_PATH
+    priority: bic_sweep_priority
     threads: 1
     resources:
         mem_mb=500,

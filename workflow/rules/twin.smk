@@ -16,7 +16,7 @@ rule simulate:
         "logs/simulate.log",
     benchmark:
         "benchmarks/rules/simulate.tsv"
-    priority: PRIORITY_CRITICAL_PATH
+    priority: PRIORITY_TWIN
     threads: 1
     resources:
         mem_mb=500,
@@ -46,7 +46,7 @@ rule fit_surrogates:
         "logs/fit_surrogates.log",
     benchmark:
         "benchmarks/rules/fit_surrogates.tsv"
-    priority: PRIORITY_CRITICAL_PATH
+    priority: PRIORITY_TWIN
     threads: 1
     resources:
         mem_mb=500,
@@ -74,7 +74,7 @@ rule residuals:
         "logs/residuals.log",
     benchmark:
         "benchmarks/rules/residuals.tsv"
-    priority: PRIORITY_CRITICAL_PATH
+    priority: PRIORITY_TWIN
     threads: 1
     resources:
         mem_mb=500,
