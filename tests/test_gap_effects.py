@@ -7,7 +7,14 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from dtwin.gap.effects import quantization_variance
+from dtwin.gap.effects import (
+    ARRAY_OPS,
+    EFFECTS,
+    FRICTION_SMOOTHING,
+    SCALAR_OPS,
+    Scales,
+    quantization_variance,
+)
 
 
 def test_quantization_variance_is_continuous_across_the_closed_form_threshold():
@@ -56,3 +63,112 @@ def test_bias_drift_is_a_line_at_zero_curvature_and_settles_or_accelerates_other
     # the initial rate is `rate` whatever the curvature
     for curvature in (0.5, 1e-12, -0.05):
         assert (bias_drift(t[:2], 0.3, curvature)[1] / t[1]) == pytest.approx(0.3, rel=0.03)
+
+
+# --- the catalogue: each effect in one place ---------------------------------------------
+
+#: A module's data scales as the diagnoser measures them (recording units).
+SCALES = Scales(
+    input_max=2.0,
+    input_std=0.7,
+    output_std=0.3,
+    velocity_std=1.1,
+    duration=20.0,
+    dt=0.01,
+    noise_std=0.01,
+    stiffness=4.0,
+    mass=1.0,
+    output_mean=0.05,
+)
+
+#: Which form each stage carries (and only it).
+FORM_OF_STAGE = {
+    "input": "input_map",
+    "delay": "input_map",
+    "force": "force_law",
+    "output": "output_map",
+    "linear": None,
+}
+
+
+@pytest.mark.parametrize("effect", EFFECTS, ids=lambda e: e.name)
+def test_every_effect_holds_its_parameters_and_exactly_the_form_of_its_stage(effect):
+    forms = {"input_map", "force_law", "output_map"}
+    own = FORM_OF_STAGE[effect.stage]
+    assert [f for f in sorted(forms) if getattr(effect, f) is not None] == ([own] if own else [])
+    assert (effect.compiled_law is not None) == (effect.stage == "force")
+    assert effect.refits_linear == (effect.stage == "linear") == (effect.n_params == 0)
+    assert len(effect.units) == effect.n_params
+    bounds, typical = effect.bounds(SCALES), effect.typical(SCALES)
+    assert len(bounds) == len(typical) == effect.n_params
+    assert all(low < high for low, high in bounds)
+    for start in effect.starts(SCALES):
+        if start:  # an empty start: the effect finds its own (the quantizer's lattice)
+            assert len(start) == effect.n_params
+            assert all(low <= v <= high for v, (low, high) in zip(start, bounds, strict=True))
+
+
+def _inside(effect) -> list[float]:
+    """Each parameter at its typical magnitude, inside its bounds (a quantizer: no noise before).
+
+    Noise before a quantizer as large as its step averages the staircase away.
+    """
+    values = [
+        float(np.clip(abs(typical), low, high))
+        for typical, (low, high) in zip(effect.typical(SCALES), effect.bounds(SCALES), strict=True)
+    ]
+    return [*values[:-1], 0.0] if effect.lattice else values
+
+
+@pytest.mark.parametrize("effect", EFFECTS, ids=lambda e: e.name)
+def test_every_effects_form_changes_the_twin_and_keeps_its_shape(effect):
+    t = np.arange(500) * SCALES.dt
+    signal = np.sin(2 * np.pi * 0.5 * t) * SCALES.input_max
+    theta = _inside(effect)
+    if effect.input_map is not None:
+        changed = effect.input_map(signal, theta, SCALES.dt)
+    elif effect.output_map is not None:
+        changed = effect.output_map(signal, 0.1, t, theta)
+        signal = signal + 0.1
+    elif effect.force_law is not None:
+        force = effect.force_law(theta, SCALES.velocity_std, ARRAY_OPS)
+        changed, signal = force(signal, np.cos(t)), np.zeros_like(signal)
+    else:
+        return
+    assert changed.shape == signal.shape and np.all(np.isfinite(changed))
+    assert not np.allclose(changed, signal)
+
+
+@pytest.mark.parametrize("effect", [e for e in EFFECTS if e.stage == "force"], ids=lambda e: e.name)
+def test_a_force_effects_compiled_law_is_its_array_law(effect):
+    """The compiled loop steps the same force as the numpy and scalar forms (to rounding)."""
+    from dtwin._force_kernels import LAWS, _law_value
+
+    theta = _inside(effect)
+    smooth = max(FRICTION_SMOOTHING * SCALES.velocity_std, 1e-300)
+    name, params = effect.compiled_law([float(v) for v in theta], smooth)
+    x, v = np.linspace(-0.8, 0.9, 7), np.linspace(-2.0, 1.5, 7)
+    arrays = effect.force_law(theta, SCALES.velocity_std, ARRAY_OPS)(x, v)
+    scalars = effect.force_law(theta, SCALES.velocity_std, SCALAR_OPS)
+    compiled = [
+        _law_value(LAWS.index(name), a, b, np.array(params)) for a, b in zip(x, v, strict=True)
+    ]
+    np.testing.assert_allclose(compiled, arrays, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(
+        [scalars(a, b) for a, b in zip(x, v, strict=True)], arrays, rtol=1e-12
+    )
+
+
+def test_the_benchmark_draws_every_catalogue_effect_in_its_modules():
+    """Each catalogue effect has generated cases, in modules it can belong to.
+
+    An effect that only widens another (``nests``: Stribeck friction around Coulomb friction)
+    is drawn as the one it widens (the benchmark's friction has a Stribeck bump).
+    """
+    from dtwin.gapbench.generator import IN_LIST_EFFECTS
+
+    assert sorted(e.name for e in EFFECTS if not e.nests) == sorted(IN_LIST_EFFECTS)
+    modules = {e.name: set(e.modules) for e in EFFECTS}
+    assert [
+        name for name, where in IN_LIST_EFFECTS.items() if not set(where) <= modules[name]
+    ] == []

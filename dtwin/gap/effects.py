@@ -2,9 +2,11 @@
 
 Specification: docs/gap.md §Candidate effects (the catalogue table).
 
-Each :class:`Effect` names the modules it can belong to, its parameters with units, bounds and
-starting points (scaled from the data, so the catalogue works in any units), and how it enters
-the module's twin:
+Each :class:`Effect` is the one place of its effect in the diagnoser: the modules it can belong
+to, its parameters with units, bounds and starting points (scaled from the data, so the
+catalogue works in any units), and the form the twin takes with it (its ``input_map``,
+``force_law`` or ``output_map``). No code branches on an effect's name
+(tests/test_gap_effects.py walks the catalogue). How it enters the module's twin, its ``stage``:
 
 ``input``
     a static map on the module input before its linear dynamics (Hammerstein form):
@@ -30,7 +32,7 @@ it is only close.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -142,6 +144,20 @@ class Effect:
     force_law : callable or None
         A ``force`` effect's law: ``force_law(theta, velocity_std, ops) -> F(x, v)``, built on
         ``ops`` (:data:`ARRAY_OPS` for numpy arrays, :data:`SCALAR_OPS` for Python floats).
+    compiled_law : callable or None
+        The same law for the exact plant's compiled loop (:mod:`dtwin._force_kernels`):
+        ``compiled_law(values, smoothing) -> (kernel name, parameters)``, ``values`` the floats
+        of ``theta``, ``smoothing`` the friction's smoothing velocity.
+    input_map : callable or None
+        An ``input`` or ``delay`` effect's map on the module input before its linear dynamics:
+        ``input_map(u, theta, dt) -> u'``, shape ``(n_samples,)``.
+    output_map : callable or None
+        An ``output`` effect's sensor reading: ``output_map(lag, bias, t, theta) -> y``, from
+        the sensor's noise-free lag of x, its bias and the time axis (s), shape
+        ``(n_samples,)``.
+    lattice : bool
+        The effect puts the output on a lattice (a quantizer): it is fitted on the lattice the
+        values sit on and chosen by its own likelihood, not a Gaussian's (docs/gap.md §Which).
     """
 
     name: str
@@ -156,11 +172,20 @@ class Effect:
     linear_form: bool = False
     nests: tuple[str, ...] = ()
     force_law: Callable[..., Callable[[float, float], float]] | None = None
+    compiled_law: Callable[[list[float], float], CompiledLaw] | None = None
+    input_map: Callable[[np.ndarray, Sequence[float], float], np.ndarray] | None = None
+    output_map: Callable[..., np.ndarray] | None = None
+    lattice: bool = False
 
     @property
     def n_params(self) -> int:
         """Number of effect parameters."""
         return len(self.params)
+
+    @property
+    def refits_linear(self) -> bool:
+        """Whether this is ``parameter_mismatch``: no new term, the linear twin re-fitted."""
+        return self.stage == "linear"
 
 
 # --- the forms --------------------------------------------------------------------------
@@ -224,6 +249,29 @@ def _quadratic_damping_law(theta, velocity_std: float, ops: ForceOps):
     """``F = c2·v·|v|``."""
     c2 = float(theta[0])
     return lambda x, v: c2 * v * ops.abs(v)
+
+
+#: A force law for the compiled loop: the kernel's name and its parameters.
+CompiledLaw = tuple[str, tuple[float, ...]]
+
+
+def _coulomb_compiled(values: list[float], smooth: float) -> CompiledLaw:
+    return "tanh_friction", (values[0], smooth)
+
+
+def _stribeck_compiled(values: list[float], smooth: float) -> CompiledLaw:
+    fc, fs, vs = values
+    return "stribeck_friction", (fc, max(fs - fc, 0.0), max(abs(vs), 1e-300), smooth)
+
+
+def _cubic_compiled(values: list[float], smooth: float) -> CompiledLaw:
+    return "cubic_spring", (values[0], values[1])
+
+
+def _quadratic_damping_compiled(
+    values: list[float], smooth: float
+) -> tuple[str, tuple[float, ...]]:
+    return "quadratic_damping", (values[0],)
 
 
 def soft_saturation(u: np.ndarray, limit: float, sharpness: float) -> np.ndarray:
@@ -475,6 +523,31 @@ def find_lattice(y: np.ndarray, low: float, high: float, n_grid: int = 400):
     return q, float(phase * q / (2 * np.pi)), float(max(fine_conc))
 
 
+def _saturation_input(u: np.ndarray, theta: Sequence[float], dt: float) -> np.ndarray:
+    return soft_saturation(u, theta[0], theta[1])
+
+
+def _deadzone_input(u: np.ndarray, theta: Sequence[float], dt: float) -> np.ndarray:
+    return deadzone(u, theta[0])
+
+
+def _delay_input(u: np.ndarray, theta: Sequence[float], dt: float) -> np.ndarray:
+    return fractional_delay(u, theta[0] / dt)
+
+
+def _scale_output(lag, bias, t, theta) -> np.ndarray:
+    return theta[0] * lag + bias
+
+
+def _drift_output(lag, bias, t, theta) -> np.ndarray:
+    return lag + bias + bias_drift(t, theta[0], theta[1])
+
+
+def _quantizer_output(lag, bias, t, theta) -> np.ndarray:
+    step, offset, before = theta
+    return offset + smooth_quantize(lag + bias - offset, step, before)
+
+
 # --- the catalogue ----------------------------------------------------------------------
 
 
@@ -507,6 +580,7 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [(0.02 * s.input_max, 3.0 * s.input_max), (1.0, 40.0)],
         lambda s: [[f * s.input_max, p] for f in (0.4, 0.7, 1.0) for p in (3.0, 12.0)],
         lambda s: [s.input_max, 5.0],
+        input_map=_saturation_input,
     ),
     Effect(
         "actuator_deadzone",
@@ -518,6 +592,7 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [(0.0, 0.9 * s.input_max)],
         lambda s: [[f * s.input_max] for f in (0.05, 0.2, 0.45)],
         lambda s: [0.1 * s.input_max],
+        input_map=_deadzone_input,
     ),
     Effect(
         "actuator_delay",
@@ -529,6 +604,7 @@ EFFECTS: tuple[Effect, ...] = (
         _delay_bounds,
         _delay_starts,
         lambda s: [s.dt],
+        input_map=_delay_input,
     ),
     Effect(
         "coulomb_friction",
@@ -541,6 +617,7 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [[0.05 * s.input_std]],
         lambda s: [0.1 * s.input_std],
         force_law=_coulomb_law,
+        compiled_law=_coulomb_compiled,
     ),
     Effect(
         "stribeck_friction",
@@ -558,6 +635,7 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [0.1 * s.input_std, 0.1 * s.input_std, 0.1 * s.velocity_std],
         nests=("coulomb_friction",),
         force_law=_stribeck_law,
+        compiled_law=_stribeck_compiled,
     ),
     Effect(
         "cubic_stiffness",
@@ -573,6 +651,7 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [[0.0, 0.0], [0.0, s.output_mean]],
         lambda s: [0.1 * s.stiffness / s.output_std**2, s.output_std],
         force_law=_cubic_law,
+        compiled_law=_cubic_compiled,
     ),
     Effect(
         "quadratic_damping",
@@ -585,6 +664,7 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [[0.05 * s.input_std / s.velocity_std**2]],
         lambda s: [0.1 * s.input_std / s.velocity_std**2],
         force_law=_quadratic_damping_law,
+        compiled_law=_quadratic_damping_compiled,
     ),
     Effect(
         "sensor_quantization",
@@ -596,6 +676,8 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [(1e-12, 4.0 * s.output_std), (-np.inf, np.inf), (0.0, np.inf)],
         lambda s: [[]],
         lambda s: [max(s.noise_std, 0.01 * s.output_std), s.output_std, s.noise_std or 1.0],
+        output_map=_quantizer_output,
+        lattice=True,
     ),
     Effect(
         "sensor_scale_error",
@@ -608,6 +690,7 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [[1.0]],
         lambda s: [0.1],
         linear_form=True,
+        output_map=_scale_output,
     ),
     Effect(
         "sensor_bias_drift",
@@ -622,6 +705,7 @@ EFFECTS: tuple[Effect, ...] = (
         ],
         lambda s: [[0.0, 0.0], [0.0, 3.0 / s.duration], [0.0, -1.0 / s.duration]],
         lambda s: [0.1 * s.output_std / s.duration, 1.0 / s.duration],
+        output_map=_drift_output,
     ),
     Effect(
         "sensor_delay",
@@ -633,6 +717,7 @@ EFFECTS: tuple[Effect, ...] = (
         _delay_bounds,
         _delay_starts,
         lambda s: [s.dt],
+        input_map=_delay_input,
     ),
     Effect(
         PARAMETER_MISMATCH,
@@ -654,7 +739,7 @@ EFFECT_NAMES: tuple[str, ...] = (*(effect.name for effect in EFFECTS), NONE, UNE
 
 def effects_for_module(module: str, *, include_mismatch: bool = True) -> list[Effect]:
     """Return the candidate effects of ``module`` (``parameter_mismatch`` first if included)."""
-    found = [e for e in EFFECTS if module in e.modules and e.name != PARAMETER_MISMATCH]
+    found = [e for e in EFFECTS if module in e.modules and not e.refits_linear]
     if include_mismatch:
         found.insert(0, effect_by_name(PARAMETER_MISMATCH))
     return found

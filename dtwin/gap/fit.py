@@ -251,7 +251,7 @@ def fit_candidate(
     CandidateFit
     """
     scales = data.scales
-    if effect is not None and effect.name == "sensor_quantization":
+    if effect is not None and effect.lattice:
         return _fit_quantization(data, effect, lin_start, n_train, free, lin_bounds)
     lin_start = dict(lin_start)
     if free is None:

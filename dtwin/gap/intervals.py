@@ -26,7 +26,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.stats import t as student_t
 
-from dtwin.gap.effects import PARAMETER_MISMATCH, Effect
+from dtwin.gap.effects import Effect
 from dtwin.gap.fit import fit_candidate, linear_typical, training_view
 from dtwin.gap.models import LINEAR_PARAMS, ModuleData, simulate_module
 from dtwin.modules import EULER
@@ -50,7 +50,7 @@ def fitted_names(
     (:data:`~dtwin.gap.models.LINEAR_PARAMS` of the module, and ``u_offset`` when present).
     """
     linear = [k for k in (*LINEAR_PARAMS[name], "u_offset") if k in lin]
-    own = list(effect.params) if effect is not None and effect.name != PARAMETER_MISMATCH else []
+    own = list(effect.params) if effect is not None and not effect.refits_linear else []
     return linear, own
 
 
@@ -58,7 +58,7 @@ def _typical(data: ModuleData, lin, effect: Effect | None, names: Sequence[str])
     """Return each parameter's typical size (the step's scale), never 0."""
     scale_free = data.discretisation != EULER
     typical = dict(linear_typical(data.name, lin, data.scales, scale_free=scale_free))
-    if effect is not None and effect.name != PARAMETER_MISMATCH:
+    if effect is not None and not effect.refits_linear:
         typical.update(
             zip(effect.params, (abs(v) for v in effect.typical(data.scales)), strict=True)
         )

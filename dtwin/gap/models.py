@@ -36,11 +36,7 @@ from dtwin.gap.effects import (
     SCALAR_OPS,
     Effect,
     Scales,
-    bias_drift,
-    deadzone,
     fractional_delay,
-    smooth_quantize,
-    soft_saturation,
 )
 from dtwin.gap.noise import robust_std
 from dtwin.modules import (
@@ -233,15 +229,9 @@ def first_order_lag(u: np.ndarray, tau: float, dt: float, initial: float) -> np.
 
 
 def _effect_input(u: np.ndarray, effect: Effect | None, theta: Sequence[float], dt: float):
-    if effect is None:
+    if effect is None or effect.input_map is None:
         return u
-    if effect.name == "actuator_saturation":
-        return soft_saturation(u, theta[0], theta[1])
-    if effect.name == "actuator_deadzone":
-        return deadzone(u, theta[0])
-    if effect.stage == "delay":
-        return fractional_delay(u, theta[0] / dt)
-    return u
+    return effect.input_map(u, theta, dt)
 
 
 def _pieces(stop: int, restarts: Sequence[int]) -> list[tuple[int, int]]:
@@ -268,14 +258,9 @@ def _simulate_sensor(data, lin, effect, theta, stop):
     bias = lin["bias"]
     if effect is None or effect.stage != "output":
         return lag + bias
-    if effect.name == "sensor_scale_error":
-        return theta[0] * lag + bias
-    if effect.name == "sensor_bias_drift":
-        return lag + bias + bias_drift(data.t[:stop], theta[0], theta[1])
-    if effect.name == "sensor_quantization":
-        step, offset, before = theta
-        return offset + smooth_quantize(lag + bias - offset, step, before)
-    raise ValueError(f"effect {effect.name} cannot act on a sensor")
+    if effect.output_map is None:
+        raise ValueError(f"effect {effect.name} cannot act on a sensor")
+    return effect.output_map(lag, bias, data.t[:stop], theta)
 
 
 def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float, *, arrays: bool):
@@ -301,22 +286,15 @@ def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float, *
 def _known_law(effect: Effect, theta: Sequence[float], velocity_std: float):
     """Return the :class:`~dtwin._force_kernels.ForceLaw` of the effect's ``force_law``, or None.
 
-    The same law with the same parameters (:mod:`dtwin.gap.effects`), for the compiled loop.
+    The same law with the same parameters (the effect's ``compiled_law``), for the compiled
+    loop.
     """
     from dtwin._force_kernels import ForceLaw
 
+    if effect.compiled_law is None:
+        return None
     smooth = max(FRICTION_SMOOTHING * velocity_std, 1e-300)
-    values = [float(value) for value in theta]
-    if effect.name == "coulomb_friction":
-        return ForceLaw("tanh_friction", (values[0], smooth))
-    if effect.name == "stribeck_friction":
-        fc, fs, vs = values
-        return ForceLaw("stribeck_friction", (fc, max(fs - fc, 0.0), max(abs(vs), 1e-300), smooth))
-    if effect.name == "cubic_stiffness":
-        return ForceLaw("cubic_spring", (values[0], values[1]))
-    if effect.name == "quadratic_damping":
-        return ForceLaw("quadratic_damping", (values[0],))
-    return None
+    return ForceLaw(*effect.compiled_law([float(value) for value in theta], smooth))
 
 
 def plant_windows(

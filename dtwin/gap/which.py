@@ -77,7 +77,7 @@ def _finite(gap: float) -> float:
 
 
 def _effect_params(effect: Effect | None, fit: CandidateFit, nominal, tol) -> dict[str, float]:
-    if effect is not None and effect.name != PARAMETER_MISMATCH:
+    if effect is not None and not effect.refits_linear:
         return dict(zip(effect.params, fit.theta, strict=True))
     if nominal is None:
         return dict(fit.lin)
@@ -102,7 +102,7 @@ def fit_candidates(work: ModuleWork, split: Split) -> None:
     start = work.lin_base
     for effect in effects_for_module(work.name, include_mismatch=not work.calibrated):
         fitted = fit_candidate(work.data, effect, start, n_train=split.n_train)
-        if effect.name == PARAMETER_MISMATCH:
+        if effect.refits_linear:
             start = fitted.lin  # the effects start from the re-fitted linear twin
         predicted = simulate_module(work.data, fitted.lin, effect, fitted.theta)
         gaps = [
@@ -147,7 +147,7 @@ def linear_refit_gap(work: ModuleWork) -> float:
     freely on the training part (docs/gap.md §How far).
     """
     for fitted in work.candidates:
-        if fitted.effect.name == PARAMETER_MISMATCH:
+        if fitted.effect.refits_linear:
             return fitted.gap_score
     return work.gap_scored
 
@@ -187,7 +187,7 @@ def score_candidates(work: ModuleWork, split: Split, settings: GapSettings):
         effect, fit, gap = fitted.effect, fitted.fit, fitted.gap_choose
         floor_c = floor
         deviance = math.log(max(gap * gap, 1e-300))  # a Gaussian's, less log(2π) + 1
-        if effect.name == "sensor_quantization":
+        if effect.lattice:
             floor_c, deviance = _quantizer_floor_and_deviance(work, fit, split.choose)
         score = n_eff * deviance + fit.n_free * math.log(max(n_eff, 2.0))
         raw, own, excess, clipped = _three_shrinks(work, effect.name, fitted.gap_score, refit)
