@@ -12,12 +12,12 @@ from scipy.signal import savgol_filter
 
 from dtwin._validation import DtwinValueError
 from dtwin.gapbench.arms import (
+    ARM_CASE_EFFECTS,
     NEAR_CATALOGUE,
     NOISY_X_FRACTION,
     TWO_EFFECT_PAIRS,
     UNSEEN_FORMS,
     WRONG_NOISE_ERROR,
-    actuator_form,
     continuous_chain,
     hysteresis_offset,
     split_case_type,
@@ -128,7 +128,7 @@ def test_two_effects_are_answered_by_the_one_with_the_larger_snr(seed):
 
 def test_backlash_holds_its_output_until_the_input_crosses_the_play():
     u = np.r_[np.linspace(0, 1, 11), np.linspace(1, 0.85, 4), np.linspace(0.85, 0, 9)]
-    out = actuator_form(u, {"effect": "backlash", "b": 0.1}, 0.02)
+    out = ARM_CASE_EFFECTS["backlash"].actuator(u, {"effect": "backlash", "b": 0.1}, 0.02)
     assert out[10] == pytest.approx(0.9)
     assert np.allclose(out[10:15], 0.9)  # a reversal of 0.15 < 2b moves nothing
     assert out[-1] == pytest.approx(0.1)
@@ -136,7 +136,7 @@ def test_backlash_holds_its_output_until_the_input_crosses_the_play():
 
 def test_rate_limit_bounds_every_step():
     u = np.r_[np.zeros(5), np.ones(30)]
-    out = actuator_form(u, {"effect": "rate_limit", "rate": 2.0}, 0.02)
+    out = ARM_CASE_EFFECTS["rate_limit"].actuator(u, {"effect": "rate_limit", "rate": 2.0}, 0.02)
     assert np.max(np.abs(np.diff(out))) <= 2.0 * 0.02 + 1e-12
     assert out[-1] == pytest.approx(1.0)
 

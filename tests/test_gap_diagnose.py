@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -211,7 +212,8 @@ def test_a_long_run_shows_its_steps_on_stderr(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(dtwin.cli, "PROGRESS_EVERY", 0.001)
     assert main([*argv, "--out", str(tmp_path / "slow")]) == 0
     err = capsys.readouterr().err
-    assert "dtwin diagnose: 0 s: M1: fitting the candidate effects" in err
+    # the seconds depend on the machine's load (a loaded machine took over 1 s to get there)
+    assert re.search(r"^dtwin diagnose: \d+ s: M1: fitting the candidate effects$", err, re.M)
     assert "Traceback" not in err
 
 

@@ -172,3 +172,18 @@ def test_the_benchmark_draws_every_catalogue_effect_in_its_modules():
     assert [
         name for name, where in IN_LIST_EFFECTS.items() if not set(where) <= modules[name]
     ] == []
+
+
+def test_every_case_effect_acts_somewhere_in_the_asset():
+    """A benchmark effect with no hook would generate a clean recording under its name."""
+    from dataclasses import fields
+
+    from dtwin.gapbench.case_effects import CaseEffect
+    from dtwin.gapbench.generator import ARM_EFFECTS, CASE_EFFECTS
+
+    hooks = [f.name for f in fields(CaseEffect) if f.name not in ("name", "draw")]
+    idle = sorted(n for n, e in CASE_EFFECTS.items() if not any(getattr(e, h) for h in hooks))
+    assert idle == []
+    drawn = {e for effects in ARM_EFFECTS.values() for pair in effects for e in pair.split("+")}
+    assert sorted(drawn - {"none"} - set(CASE_EFFECTS)) == []
+    assert all(name == effect.name for name, effect in CASE_EFFECTS.items())

@@ -35,12 +35,13 @@ places them in the asset. Arrays are time-first, shape ``(n_samples,)``.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from scipy.signal import lfilter
 
+from dtwin.gapbench.case_effects import CaseEffect
 from dtwin.modules import lag_coefficient
 
 __all__ = [
@@ -56,10 +57,8 @@ __all__ = [
     "CONTINUOUS_SUBSTEPS",
     "split_case_type",
     "unseen_expected",
-    "actuator_form",
-    "sensor_input_form",
+    "ARM_CASE_EFFECTS",
     "hysteresis_offset",
-    "plant_form_force",
     "stiction_plant",
     "continuous_chain",
 ]
@@ -236,21 +235,6 @@ def _draw_stiction(module, level, rng, scale) -> dict[str, Any]:
     return {"form": "stick-slip", "Fs": fs, "Fc": fs * rng.uniform(0.2, 0.5)}
 
 
-#: The arms' effect draws, by effect name.
-ARM_DRAWS: dict[str, Callable[..., dict[str, Any]]] = {
-    "stribeck_friction": _draw_stribeck,
-    "smooth_saturation": _draw_smooth_saturation,
-    "asymmetric_deadzone": _draw_asymmetric_deadzone,
-    "quintic_stiffness": _draw_quintic,
-    "jittered_delay": _draw_jittered_delay,
-    "backlash": _draw_backlash,
-    "rate_limit": _draw_rate_limit,
-    "hysteresis": _draw_hysteresis,
-    "stiction": _draw_stiction,
-    "cogging": _draw_cogging,
-}
-
-
 # --- forms ---------------------------------------------------------------------------------
 
 
@@ -283,33 +267,26 @@ def _slew(u: np.ndarray, max_step: float) -> np.ndarray:
     return out
 
 
-def actuator_form(u: np.ndarray, spec: Mapping[str, Any], dt: float) -> np.ndarray:
-    """Return the command after an arm's actuator effect (before the lag), shape ``(n,)``.
-
-    Handles ``smooth_saturation``, ``asymmetric_deadzone``, ``jittered_delay``, ``backlash``
-    and ``rate_limit``; any other spec returns ``u`` unchanged.
-    """
-    effect = spec.get("effect")
-    if effect == "smooth_saturation":
-        level = np.where(u >= 0, spec["U_high"], spec["U_low"])
-        return level * np.tanh(u / level)
-    if effect == "asymmetric_deadzone":
-        high, low = spec["D_high"], spec["D_low"]
-        return np.where(u > high, u - high, np.where(u < -low, u + low, 0.0))
-    if effect == "jittered_delay":
-        return _jittered_delay(u, spec)
-    if effect == "backlash":
-        return _play(u, spec["b"])
-    if effect == "rate_limit":
-        return _slew(u, spec["rate"] * dt)
-    return u
+def _smooth_saturation(u: np.ndarray, spec: Mapping[str, Any], dt: float) -> np.ndarray:
+    level = np.where(u >= 0, spec["U_high"], spec["U_low"])
+    return level * np.tanh(u / level)
 
 
-def sensor_input_form(x: np.ndarray, spec: Mapping[str, Any]) -> np.ndarray:
-    """Return the position a sensor reads under an arm's effect (``jittered_delay``), ``(n,)``."""
-    if spec.get("effect") == "jittered_delay":
-        return _jittered_delay(x, spec)
-    return x
+def _asymmetric_deadzone(u: np.ndarray, spec: Mapping[str, Any], dt: float) -> np.ndarray:
+    high, low = spec["D_high"], spec["D_low"]
+    return np.where(u > high, u - high, np.where(u < -low, u + low, 0.0))
+
+
+def _jittered_command(u: np.ndarray, spec: Mapping[str, Any], dt: float) -> np.ndarray:
+    return _jittered_delay(u, spec)
+
+
+def _backlash(u: np.ndarray, spec: Mapping[str, Any], dt: float) -> np.ndarray:
+    return _play(u, spec["b"])
+
+
+def _rate_limit(u: np.ndarray, spec: Mapping[str, Any], dt: float) -> np.ndarray:
+    return _slew(u, spec["rate"] * dt)
 
 
 def hysteresis_offset(x: np.ndarray, spec: Mapping[str, Any]) -> np.ndarray:
@@ -329,29 +306,34 @@ def hysteresis_offset(x: np.ndarray, spec: Mapping[str, Any]) -> np.ndarray:
     return out
 
 
-def plant_form_force(spec: Mapping[str, Any], k: float, min_smoothing: float = 0.0):
-    """Return an arm's plant force hook ``F(x, v)`` (N), or None for other effects.
+def _stribeck_force(spec: Mapping[str, Any], c: float, k: float, min_smoothing: float = 0.0):
+    """Stribeck friction with a generalised exponent; its sign smoothed over ``10⁻³·vs`` or more."""
+    fc, fs, vs, delta = spec["Fc"], spec["Fs"], spec["vs"], spec["delta"]
+    viscous, smooth = spec["viscous"], max(1e-3 * spec["vs"], min_smoothing)
 
-    ``stribeck_friction`` (its sign smoothed over ``max(10⁻³·vs, min_smoothing)``),
-    ``quintic_stiffness`` and ``cogging``.
-    """
-    effect = spec.get("effect")
-    if effect == "stribeck_friction":
-        fc, fs, vs, delta = spec["Fc"], spec["Fs"], spec["vs"], spec["delta"]
-        viscous, smooth = spec["viscous"], max(1e-3 * spec["vs"], min_smoothing)
+    def friction(xp, vp):
+        level = fc + (fs - fc) * math.exp(-(abs(vp / vs) ** delta))
+        return level * math.tanh(vp / smooth) + viscous * vp
 
-        def friction(xp, vp):
-            level = fc + (fs - fc) * math.exp(-(abs(vp / vs) ** delta))
-            return level * math.tanh(vp / smooth) + viscous * vp
+    return friction
 
-        return friction
-    if effect == "quintic_stiffness":
-        ratio, ref = spec["ratio"], spec["x_ref"]
-        return lambda xp, vp: ratio * k * ref * (xp / ref) ** 5
-    if effect == "cogging":
-        amplitude, wavenumber, phase = spec["A"], 2 * math.pi / spec["period"], spec["phase"]
-        return lambda xp, vp: amplitude * math.sin(wavenumber * xp + phase)
-    return None
+
+def _quintic_force(spec: Mapping[str, Any], c: float, k: float, min_smoothing: float = 0.0):
+    ratio, ref = spec["ratio"], spec["x_ref"]
+    return lambda xp, vp: ratio * k * ref * (xp / ref) ** 5
+
+
+def _cogging_force(spec: Mapping[str, Any], c: float, k: float, min_smoothing: float = 0.0):
+    amplitude, wavenumber, phase = spec["A"], 2 * math.pi / spec["period"], spec["phase"]
+    return lambda xp, vp: amplitude * math.sin(wavenumber * xp + phase)
+
+
+def _hysteresis_reading(y, spec: Mapping[str, Any], t, x) -> np.ndarray:
+    return y + hysteresis_offset(x, spec)
+
+
+def _stiction(u, m, c, k, dt, noise, spec, n) -> tuple[np.ndarray, np.ndarray]:
+    return stiction_plant(u[:n], m, c, k, dt, noise[:n], spec)
 
 
 def stiction_plant(u, m, c, k, dt, noise, spec) -> tuple[np.ndarray, np.ndarray]:
@@ -377,6 +359,29 @@ def stiction_plant(u, m, c, k, dt, noise, spec) -> tuple[np.ndarray, np.ndarray]
         v = 0.0 if stuck else v_new
         xs[j], vs[j] = x, v
     return xs, vs
+
+
+#: The arms' effects (draws and real forms), by name.
+ARM_CASE_EFFECTS: dict[str, CaseEffect] = {
+    effect.name: effect
+    for effect in (
+        CaseEffect("stribeck_friction", _draw_stribeck, force=_stribeck_force),
+        CaseEffect("smooth_saturation", _draw_smooth_saturation, actuator=_smooth_saturation),
+        CaseEffect("asymmetric_deadzone", _draw_asymmetric_deadzone, actuator=_asymmetric_deadzone),
+        CaseEffect("quintic_stiffness", _draw_quintic, force=_quintic_force),
+        CaseEffect(
+            "jittered_delay",
+            _draw_jittered_delay,
+            actuator=_jittered_command,
+            sensor_input=_jittered_delay,
+        ),
+        CaseEffect("backlash", _draw_backlash, actuator=_backlash),
+        CaseEffect("rate_limit", _draw_rate_limit, actuator=_rate_limit),
+        CaseEffect("hysteresis", _draw_hysteresis, reading=_hysteresis_reading),
+        CaseEffect("stiction", _draw_stiction, plant=_stiction),
+        CaseEffect("cogging", _draw_cogging, force=_cogging_force),
+    )
+}
 
 
 # --- the continuous asset -------------------------------------------------------------------

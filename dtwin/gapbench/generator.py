@@ -41,7 +41,7 @@ from dtwin.command import make_command, time_axis
 from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED, fractional_delay
 from dtwin.gap.noise import plant_noise_gain
 from dtwin.gapbench.arms import (
-    ARM_DRAWS,
+    ARM_CASE_EFFECTS,
     CONTINUOUS_SUBSTEPS,
     DEFAULT_ARM,
     FRICTION_FAMILY,
@@ -50,15 +50,11 @@ from dtwin.gapbench.arms import (
     TWO_EFFECT_PAIRS,
     UNSEEN_FORMS,
     WRONG_NOISE_ERROR,
-    actuator_form,
     continuous_chain,
-    hysteresis_offset,
-    plant_form_force,
-    sensor_input_form,
     split_case_type,
-    stiction_plant,
     unseen_expected,
 )
+from dtwin.gapbench.case_effects import CaseEffect
 from dtwin.modules import CONTRACTS, fuse, kpi, lag_coefficient, lag_response, plant_response
 from dtwin.params import CommandParams
 
@@ -293,26 +289,8 @@ def _draw_mismatch(module, level, rng, scale) -> dict[str, Any]:
     return {"form": "factor", "section": section, "param": name, "factor": factor}
 
 
-_DRAWS = {
-    "actuator_saturation": _draw_saturation,
-    "actuator_deadzone": _draw_deadzone,
-    "actuator_delay": _draw_actuator_delay,
-    "sensor_delay": _draw_sensor_delay,
-    "coulomb_friction": _draw_friction,
-    "cubic_stiffness": _draw_stiffness,
-    "quadratic_damping": _draw_damping,
-    "sensor_quantization": _draw_quantization,
-    "sensor_scale_error": _draw_scale_error,
-    "sensor_bias_drift": _draw_bias_drift,
-    "sensor_interference": _draw_interference,
-    "stiffness_change": _draw_stiffness_change,
-    PARAMETER_MISMATCH: _draw_mismatch,
-    **ARM_DRAWS,
-}
-
-
 def _draw_effect(effect, module, level, rng, scale) -> dict[str, Any]:
-    """Return the real effect's form and parameters.
+    """Return the real effect's form and parameters (its :class:`CaseEffect`'s draw).
 
     Parameters
     ----------
@@ -326,30 +304,151 @@ def _draw_effect(effect, module, level, rng, scale) -> dict[str, Any]:
         Signal sizes of the clean run: ``u_max``, ``u_std``, ``x_max``, ``v_max``, ``v_std``,
         ``sigma`` (the sensor's noise standard deviation).
     """
-    if effect not in _DRAWS:
+    if effect not in CASE_EFFECTS:
         raise DtwinValueError(f"unknown case effect {effect!r}")
-    return _DRAWS[effect](module, level, rng, scale)
+    return CASE_EFFECTS[effect].draw(module, level, rng, scale)
+
+
+# --- the real forms of the generator's own effects (the arms' are in arms.py) ----------------
+
+
+def _saturation(u, spec, dt):
+    """``actuator_saturation``: tanh (``U``) or clip (``U_high``, ``U_low``), u units."""
+    if spec["form"] == "tanh":
+        return spec["U"] * np.tanh(u / spec["U"])
+    return np.clip(u, -spec["U_low"], spec["U_high"])
+
+
+def _deadzone(u, spec, dt):
+    """``actuator_deadzone``: half-widths ``D_high``, ``D_low``, or a smooth one (u units)."""
+    high, low = spec["D_high"], spec["D_low"]
+    if spec["form"] == "smooth":
+        return u - high * np.tanh(u / high)
+    return np.where(u > high, u - high, np.where(u < -low, u + low, 0.0))
+
+
+def _delayed(u, spec, dt=None):
+    """Return the signal delayed by ``delay_samples`` (fractional; actuator or sensor)."""
+    return fractional_delay(u, spec["delay_samples"])
+
+
+def _friction(spec, c, k, min_smoothing=0.0):
+    """Stribeck or Coulomb + viscous friction; its sign smoothed over ``10⁻³·vs`` or more."""
+    fc, fs, vs, extra = spec["Fc"], spec["Fs"], spec["vs"], spec["extra_c"]
+    smooth = max(1e-3 * vs, min_smoothing)
+
+    def friction(xp, vp):
+        level = fc + (fs - fc) * math.exp(-((vp / vs) ** 2))
+        return level * math.tanh(vp / smooth) + extra * vp
+
+    return friction
+
+
+def _stiffness(spec, c, k, min_smoothing=0.0):
+    ratio, ref, power = spec["ratio"], spec["x_ref"], spec["power"]
+    return lambda xp, vp: ratio * k * ref * math.copysign(abs(xp / ref) ** (power + 1), xp)
+
+
+def _damping(spec, c, k, min_smoothing=0.0):
+    ratio, ref, power = spec["ratio"], spec["v_ref"], spec["power"]
+    return lambda xp, vp: ratio * c * ref * math.copysign(abs(vp / ref) ** power, vp)
+
+
+def _stiffness_change(u, m, c, k, dt, noise, spec, n):
+    """Return the plant run in two parts, the second from the change on with ``k·factor``."""
+    at = int(spec["at_frac"] * n)
+    x, v = plant_response(u[:at], m, c, k, dt, accel_noise=noise[:at])
+    x2, v2 = plant_response(
+        u[at - 1 : n],
+        m,
+        c,
+        k * spec["factor"],
+        dt,
+        x0=x[-1],
+        v0=v[-1],
+        accel_noise=noise[at - 1 : n],
+    )
+    return np.concatenate([x, x2[1:]]), np.concatenate([v, v2[1:]])
+
+
+def _scale_error(lag, spec):
+    return spec["gain"] * lag
+
+
+def _bias_drift(y, spec, t, x):
+    """Return the reading plus a drift of ``total`` over the run, shaped by ``form``."""
+    s = t / t[-1]
+    if spec["form"] == "power":
+        shape = s ** spec["power"]
+    elif spec["form"] == "exponential":
+        shape = (1 - np.exp(-s / spec["tau_frac"])) / (1 - math.exp(-1 / spec["tau_frac"]))
+    else:
+        shape = 0.8 * s + 0.2 * np.sin(2 * np.pi * 0.7 * s) ** 2
+    return y + spec["total"] * shape
+
+
+def _interference(y, spec, t, x):
+    return y + spec["amplitude"] * np.sin(2 * np.pi * spec["freq_hz"] * t + spec["phase"])
+
+
+def _quantization(y, spec, t, x):
+    return spec["q"] * np.round(y / spec["q"])
+
+
+def _apply_mismatch(asset: dict, nominal, true_effect: dict) -> None:
+    """Change the asset's parameter named in a ``parameter_mismatch`` draw (in place).
+
+    Also records the parameter's new ``value`` and its ``nominal`` one in ``true_effect``.
+    """
+    section, name = true_effect["section"], true_effect["param"]
+    before = asset[section][name]
+    if "factor" in true_effect:
+        asset[section][name] = before * true_effect["factor"]
+    else:
+        asset[section][name] = before + true_effect["delta"]
+        if name == "alpha":
+            asset[section][name] = min(max(asset[section][name], 0.0), 1.0)
+    true_effect["value"] = asset[section][name]
+    true_effect["nominal"] = nominal[section][name]
+
+
+#: Every case effect (the generator's and the arms'), by name: its draw and real form.
+CASE_EFFECTS: dict[str, CaseEffect] = {
+    effect.name: effect
+    for effect in (
+        CaseEffect("actuator_saturation", _draw_saturation, actuator=_saturation),
+        CaseEffect("actuator_deadzone", _draw_deadzone, actuator=_deadzone),
+        CaseEffect("actuator_delay", _draw_actuator_delay, actuator=_delayed),
+        CaseEffect(
+            "sensor_delay",
+            _draw_sensor_delay,
+            sensor_input=_delayed,
+            continuous_delay=True,
+        ),
+        CaseEffect("coulomb_friction", _draw_friction, force=_friction),
+        CaseEffect("cubic_stiffness", _draw_stiffness, force=_stiffness),
+        CaseEffect("quadratic_damping", _draw_damping, force=_damping),
+        CaseEffect("sensor_quantization", _draw_quantization, reading=_quantization),
+        CaseEffect("sensor_scale_error", _draw_scale_error, sensor_gain=_scale_error),
+        CaseEffect("sensor_bias_drift", _draw_bias_drift, reading=_bias_drift),
+        CaseEffect("sensor_interference", _draw_interference, reading=_interference),
+        CaseEffect("stiffness_change", _draw_stiffness_change, plant=_stiffness_change),
+        CaseEffect(PARAMETER_MISMATCH, _draw_mismatch, asset=_apply_mismatch),
+        *ARM_CASE_EFFECTS.values(),
+    )
+}
+
+
+def _hook(spec: Mapping[str, Any], place: str):
+    """Return the hook ``place`` of the module's effect (a :class:`CaseEffect` field), or None."""
+    effect = CASE_EFFECTS.get(spec.get("effect"))
+    return None if effect is None else getattr(effect, place)
 
 
 def _actuator_input(u_cmd, spec, dt):
     """Return the command after the actuator's effect, before its lag, shape ``(n,)``."""
-    u = u_cmd
-    if spec.get("effect") == "actuator_saturation":
-        if spec["form"] == "tanh":
-            u = spec["U"] * np.tanh(u / spec["U"])
-        else:
-            u = np.clip(u, -spec["U_low"], spec["U_high"])
-    elif spec.get("effect") == "actuator_deadzone":
-        high, low = spec["D_high"], spec["D_low"]
-        if spec["form"] == "smooth":
-            u = u - high * np.tanh(u / high)
-        else:
-            u = np.where(u > high, u - high, np.where(u < -low, u + low, 0.0))
-    elif spec.get("effect") == "actuator_delay":
-        u = fractional_delay(u, spec["delay_samples"])
-    elif spec.get("effect") is not None:
-        u = actuator_form(u, spec, dt)
-    return u
+    form = _hook(spec, "actuator")
+    return u_cmd if form is None else form(u_cmd, spec, dt)
 
 
 def _actuator(u_cmd, tau, dt, noise, spec):
@@ -366,89 +465,40 @@ def _actuator(u_cmd, tau, dt, noise, spec):
 def _plant_force(spec, c, k, min_smoothing=0.0):
     """Return the real effect's force hook ``F(x, v)`` (N) of the plant, or None.
 
-    Friction's sign is smoothed over ``10⁻³·vs`` m/s, or ``min_smoothing`` if larger (the
-    continuous asset's Runge-Kutta step needs it).
+    A friction's sign is smoothed over its own velocity scale, or ``min_smoothing`` if larger
+    (the continuous asset's Runge-Kutta step needs it).
     """
-    effect = spec.get("effect")
-    if effect == "coulomb_friction":
-        fc, fs, vs, extra = spec["Fc"], spec["Fs"], spec["vs"], spec["extra_c"]
-        smooth = max(1e-3 * vs, min_smoothing)
-
-        def friction(xp, vp):
-            level = fc + (fs - fc) * math.exp(-((vp / vs) ** 2))
-            return level * math.tanh(vp / smooth) + extra * vp
-
-        return friction
-    if effect == "cubic_stiffness":
-        ratio, ref, power = spec["ratio"], spec["x_ref"], spec["power"]
-        return lambda xp, vp: ratio * k * ref * math.copysign(abs(xp / ref) ** (power + 1), xp)
-    if effect == "quadratic_damping":
-        ratio, ref, power = spec["ratio"], spec["v_ref"], spec["power"]
-        return lambda xp, vp: ratio * c * ref * math.copysign(abs(vp / ref) ** power, vp)
-    return plant_form_force(spec, k, min_smoothing)
+    force = _hook(spec, "force")
+    return None if force is None else force(spec, c, k, min_smoothing)
 
 
 def _plant(u, m, c, k, dt, noise, spec, n):
     """Return ``(x, v)`` of the asset's plant: the contract's Euler plant with the effect's hook.
 
-    ``stiffness_change`` runs the plant in two parts, the second from the state at the change
-    with ``k·factor``.
+    An effect with a ``plant`` hook (stick-slip friction, a change of ``k``) runs the plant
+    itself.
     """
-    if spec.get("effect") == "stiction":
-        return stiction_plant(u[:n], m, c, k, dt, noise[:n], spec)
+    plant = _hook(spec, "plant")
+    if plant is not None:
+        return plant(u, m, c, k, dt, noise, spec, n)
     force = _plant_force(spec, c, k)
-    if spec.get("effect") != "stiffness_change":
-        x, v = plant_response(u[:n], m, c, k, dt, force=force, accel_noise=noise[:n])
-        return x, v
-    at = int(spec["at_frac"] * n)
-    x, v = plant_response(u[:at], m, c, k, dt, accel_noise=noise[:at])
-    x2, v2 = plant_response(
-        u[at - 1 : n],
-        m,
-        c,
-        k * spec["factor"],
-        dt,
-        x0=x[-1],
-        v0=v[-1],
-        accel_noise=noise[at - 1 : n],
-    )
-    return np.concatenate([x, x2[1:]]), np.concatenate([v, v2[1:]])
+    x, v = plant_response(u[:n], m, c, k, dt, force=force, accel_noise=noise[:n])
+    return x, v
 
 
 def _sensor(x, tau, bias, dt, noise, spec, t):
-    effect = spec.get("effect")
-    read = x
-    if effect == "sensor_delay":
-        read = fractional_delay(x, spec["delay_samples"])
-    elif effect is not None:
-        read = sensor_input_form(x, spec)
-    lag = lag_response(read, lag_coefficient(tau, dt))
+    read = _hook(spec, "sensor_input")
+    lag = lag_response(x if read is None else read(x, spec), lag_coefficient(tau, dt))
     return _sensor_output(lag, bias, noise, spec, t, x)
 
 
 def _sensor_output(lag, bias, noise, spec, t, x):
     """Return the sensor's reading from its lag: gain, bias, noise and output effects."""
-    effect = spec.get("effect")
-    if effect == "sensor_scale_error":
-        lag = spec["gain"] * lag
+    gain, reading = _hook(spec, "sensor_gain"), _hook(spec, "reading")
+    if gain is not None:
+        lag = gain(lag, spec)
     y = lag + bias + noise
-    duration = t[-1]
-    if effect == "sensor_bias_drift":
-        s = t / duration
-        if spec["form"] == "power":
-            shape = s ** spec["power"]
-        elif spec["form"] == "exponential":
-            shape = (1 - np.exp(-s / spec["tau_frac"])) / (1 - math.exp(-1 / spec["tau_frac"]))
-        else:
-            shape = 0.8 * s + 0.2 * np.sin(2 * np.pi * 0.7 * s) ** 2
-        y = y + spec["total"] * shape
-    elif effect == "sensor_interference":
-        y = y + spec["amplitude"] * np.sin(2 * np.pi * spec["freq_hz"] * t + spec["phase"])
-    elif effect == "sensor_quantization":
-        y = spec["q"] * np.round(y / spec["q"])
-    elif effect == "hysteresis":
-        y = y + hysteresis_offset(x, spec)
-    return y
+    return y if reading is None else reading(y, spec, t, x)
 
 
 def _run_asset(asset, u_cmd, noises, specs, t):
@@ -490,7 +540,7 @@ def _run_continuous_asset(asset, u_cmd, noises, specs, t):
     force = _plant_force(specs["M1"], p["c"], p["k"], min_smoothing=2 * h * friction / p["m"])
     delays = {
         which: specs[module].get("delay_samples", 0.0) * dt
-        if specs[module].get("effect") == "sensor_delay"
+        if _hook(specs[module], "continuous_delay")
         else 0.0
         for which, module in (("A", "M2a"), ("B", "M2b"))
     }
@@ -669,8 +719,9 @@ def _draw_module(effect: str, rng: np.random.Generator, exclude: str | None = No
 
 def _place_effect(effect, module, params, asset, nominal, specs) -> None:
     """Put a drawn effect into the asset (a parameter) or the module's spec (in place)."""
-    if effect == PARAMETER_MISMATCH:
-        _apply_mismatch(asset, nominal, params)
+    change = CASE_EFFECTS[effect].asset
+    if change is not None:
+        change(asset, nominal, params)
     else:
         specs[module] = {"effect": effect, **params}
 
@@ -804,23 +855,6 @@ def _signal_scale(u_cmd, baseline, module, noise_true) -> dict[str, float]:
         "v_std": float(np.std(baseline["v"])),
         "sigma": sigma,
     }
-
-
-def _apply_mismatch(asset: dict, nominal, true_effect: dict) -> None:
-    """Change the asset's parameter named in a ``parameter_mismatch`` draw (in place).
-
-    Also records the parameter's new ``value`` and its ``nominal`` one in ``true_effect``.
-    """
-    section, name = true_effect["section"], true_effect["param"]
-    before = asset[section][name]
-    if "factor" in true_effect:
-        asset[section][name] = before * true_effect["factor"]
-    else:
-        asset[section][name] = before + true_effect["delta"]
-        if name == "alpha":
-            asset[section][name] = min(max(asset[section][name], 0.0), 1.0)
-    true_effect["value"] = asset[section][name]
-    true_effect["nominal"] = nominal[section][name]
 
 
 def _effect_snr(asset, nominal, u_cmd, noises, specs, signals, module, t, noise_true) -> float:

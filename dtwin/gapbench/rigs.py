@@ -148,29 +148,47 @@ def _multisine(rng: np.random.Generator, low: float, high: float, n_lines: int =
     return signal
 
 
+def _rig_coulomb(strength, rig, u_std, x_rms, v_rms):
+    fc = strength * u_std
+    smooth = 0.002 * v_rms
+    return (lambda x, v: fc * math.tanh(v / smooth)), {"Fc": fc}
+
+
+def _rig_cubic(strength, rig, u_std, x_rms, v_rms):
+    k3 = strength * rig["plant"]["k"] / x_rms**2
+    return (lambda x, v: k3 * x * x * x), {"k3": k3}
+
+
+def _rig_quadratic_damping(strength, rig, u_std, x_rms, v_rms):
+    c2 = strength * rig["plant"]["c"] / v_rms
+    return (lambda x, v: c2 * v * abs(v)), {"c2": c2}
+
+
+def _rig_stribeck(strength, rig, u_std, x_rms, v_rms):
+    fc = strength * u_std
+    fs, vs = fc * rig["breakaway"], rig["stribeck_velocity"] * v_rms
+    smooth = 0.002 * v_rms
+
+    def stribeck(x, v):
+        return (fc + (fs - fc) * math.exp(-((v / vs) ** 2))) * math.tanh(v / smooth)
+
+    return stribeck, {"Fc": fc, "Fs": fs, "vs": vs}
+
+
+#: The rig families' withheld forces, by effect: ``law(strength, rig, u_std, x_rms, v_rms) ->
+#: (F(x, v) in N, its parameters in physical units)``; ``none`` has no force.
+RIG_FORCES = {
+    "coulomb_friction": _rig_coulomb,
+    "cubic_stiffness": _rig_cubic,
+    "quadratic_damping": _rig_quadratic_damping,
+    "stribeck_friction": _rig_stribeck,
+}
+
+
 def _force_law(effect: str, strength: float, rig: dict, u_std: float, x_rms: float, v_rms: float):
     """Return the withheld force ``F(x, v)`` (N) and its parameters in physical units."""
-    plant = rig["plant"]
-    if effect == "coulomb_friction":
-        fc = strength * u_std
-        smooth = 0.002 * v_rms
-        return (lambda x, v: fc * math.tanh(v / smooth)), {"Fc": fc}
-    if effect == "cubic_stiffness":
-        k3 = strength * plant["k"] / x_rms**2
-        return (lambda x, v: k3 * x * x * x), {"k3": k3}
-    if effect == "quadratic_damping":
-        c2 = strength * plant["c"] / v_rms
-        return (lambda x, v: c2 * v * abs(v)), {"c2": c2}
-    if effect == "stribeck_friction":
-        fc = strength * u_std
-        fs, vs = fc * rig["breakaway"], rig["stribeck_velocity"] * v_rms
-        smooth = 0.002 * v_rms
-
-        def stribeck(x, v):
-            return (fc + (fs - fc) * math.exp(-((v / vs) ** 2))) * math.tanh(v / smooth)
-
-        return stribeck, {"Fc": fc, "Fs": fs, "vs": vs}
-    return None, {}
+    law = RIG_FORCES.get(effect)
+    return (None, {}) if law is None else law(strength, rig, u_std, x_rms, v_rms)
 
 
 def _integrate(rig: dict, drive: Callable, force, n: int, noise: np.ndarray) -> np.ndarray:
