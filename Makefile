@@ -14,15 +14,15 @@ PIP_TOOLS_VERSION := 7.6.2
 
 venv: $(STAMP)
 
-# The last step compiles the EM kernels once into numba's on-disk cache (dtwin/__pycache__),
-# so no job pays the compilation; it reruns when dtwin/_em_kernels.py changes.
-$(STAMP): requirements.lock requirements-dev.lock pyproject.toml dtwin/_em_kernels.py
+# The last step compiles the EM kernels and the gap diagnoser's force loop once into numba's
+# on-disk cache (dtwin/__pycache__), so no job pays the compilation; it reruns when they change.
+$(STAMP): requirements.lock requirements-dev.lock pyproject.toml dtwin/_em_kernels.py dtwin/_force_kernels.py
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found; install Python 3.11 or run 'make PYTHON=/path/to/python3.11'"; exit 1; }
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet "pip==$(PIP_VERSION)"
 	$(BIN)/python -m pip install --quiet -r requirements.lock -r requirements-dev.lock
 	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
-	$(BIN)/python -c "from dtwin._em_kernels import warm_up; warm_up()"
+	$(BIN)/python -c "from dtwin import _em_kernels, _force_kernels; _em_kernels.warm_up(); _force_kernels.warm_up()"
 	touch $(STAMP)
 
 figures: $(STAMP)

@@ -26,7 +26,8 @@ load average before and after it), medians where repeated. Sections (`python ben
   seconds per iteration are the whole fit's seconds over its EM iterations); then one EM
   iteration alone at T = 1e6 through dtwin's engine and hmmlearn's stock GaussianHMM
   (``em-dtwin``, ``em-hmmlearn``: median of 3 of ``(t(3 iterations) − t(1)) / 2``, the
-  iteration's tracemalloc peak and the process's peak RSS; benchmarks/hmm_fit.py);
+  iteration's tracemalloc peak and the process's peak RSS; benchmarks/hmm_fit.py), and the
+  same at T = 1000 for K = 4, 12, 20 (median of 7; the BIC sweeps' size);
 - ``gap``: `dtwin diagnose` on a 2,000-sample six-module recording and a 100,000-sample one,
   and `--calibrate` on a 130,000-sample plant-only rig (issue 10's target: ≤ 30 s).
 """
@@ -255,6 +256,9 @@ def hmm_benchmarks() -> list[dict]:
             measure(engine, str(n_steps), "10", max_iter)
     for engine in ("em-dtwin", "em-hmmlearn"):  # one EM iteration alone at T = 1e6 (issue 11)
         measure(engine, "1000000", "3")
+    for n_states in ("4", "12", "20"):  # and at the sweeps' size (issue 24: <= 0.5 ms at K = 20)
+        for engine in ("em-dtwin", "em-hmmlearn"):
+            measure(engine, "1000", "7", n_states)
     return rows
 
 

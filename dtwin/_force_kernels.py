@@ -27,7 +27,7 @@ import numpy as np
 
 from dtwin._jit import njit
 
-__all__ = ["LAWS", "ForceLaw", "force_windows"]
+__all__ = ["LAWS", "ForceLaw", "force_windows", "warm_up"]
 
 #: The laws the compiled loop knows, by name; the index is the law's code in the loop.
 LAWS: tuple[str, ...] = ("tanh_friction", "cubic_spring", "quadratic_damping", "stribeck_friction")
@@ -100,3 +100,15 @@ def force_windows(drive, x0, v0, steps, law: ForceLaw, inv_m: float) -> np.ndarr
         out,
     )
     return out
+
+
+def warm_up() -> None:
+    """Compile the force loop for the argument types :func:`force_windows` passes, or load it.
+
+    ``make venv`` runs this once (~0.7 s), so no diagnosis pays the compilation; one
+    specialisation serves every law (the law is an integer code).
+    """
+    steps = (1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)
+    force_windows(
+        np.zeros((1, 3, 2)), np.zeros(1), np.zeros(1), steps, ForceLaw(LAWS[0], (1.0, 1.0)), 1.0
+    )

@@ -204,3 +204,20 @@ def test_vectorised_exp_is_within_one_ulp_of_libm():
     finite = np.isfinite(libm)
     ulp = np.spacing(np.maximum(libm[finite], 5e-324))
     assert np.max(np.abs(ours[finite] - libm[finite]) / ulp) <= 1.0
+
+
+def test_only_the_best_start_keeps_its_posteriors(features):
+    """fit_starts drops every other start's posteriors (memory) and keeps the fit's best."""
+    from dtwin._multistart import fit_starts, restart_seeds
+
+    def initial(rng):
+        return _gaussian_initial(features, 3, int(rng.integers(1 << 30)))
+
+    restarts, runs = fit_starts(
+        _em_data(features), restart_seeds(5, 6), initial, "compiled", OPTIONS
+    )
+    usable = restarts[restarts["restart"].isin(runs)]
+    best = int(usable.loc[usable["log_likelihood"].idxmax(), "restart"])
+    assert len(runs) > 1
+    assert [number for number, run in runs.items() if run.posteriors is not None] == [best]
+    np.testing.assert_allclose(runs[best].posteriors.sum(axis=1), 1.0)
