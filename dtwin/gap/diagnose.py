@@ -26,6 +26,7 @@ from threadpoolctl import threadpool_limits
 
 from dtwin._validation import DtwinTypeError, DtwinValueError, require_in_range
 from dtwin.exact_plant import EXACT_HOLDS
+from dtwin.gap.closed_loop import causal_holds
 from dtwin.gap.how_far import (
     answer_intervals,
     chain_before_after,
@@ -215,16 +216,17 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
     )
     discretisation = discretisation or twin.discretisation
     holds = (EULER, *EXACT_HOLDS) if discretisation is None else (discretisation,)
-    layout = Layout(holds)
     names = diagnosable_modules(recording.signals)
     check_inputs_vary(recording, names, n_train)
+    holds, loop_notes = causal_holds(recording.signals, names, holds, n_train)
+    layout = Layout(holds)
     if heldout is not None:
         recording = join_heldout(recording, n_choose, heldout, names)
         layout = Layout(holds, (n_choose,))
     n = recording.n_samples
     split = Split(n_train, n_choose, n)
     t = recording.t - recording.t[0]
-    notes: list[str] = []
+    notes: list[str] = list(loop_notes)
     if recording.ignored:
         notes.append(f"ignored columns that are not module signals: {', '.join(recording.ignored)}")
 
