@@ -29,7 +29,7 @@ from dtwin.gap.effects import (
     quantization_variance,
     quantizer_log_density,
 )
-from dtwin.gap.fit import CandidateFit, fit_candidate
+from dtwin.gap.fit import CandidateFit, fit_candidate, refit_delay
 from dtwin.gap.localise import normalised_rms
 from dtwin.gap.models import simulate_module
 from dtwin.gap.results import CandidateReport, GapSettings
@@ -102,6 +102,8 @@ def fit_candidates(work: ModuleWork, split: Split) -> None:
     start = work.lin_base
     for effect in effects_for_module(work.name, include_mismatch=not work.calibrated):
         fitted = fit_candidate(work.data, effect, start, n_train=split.n_train)
+        if work.calibrated and work.name == "M1":  # its delay was chosen without the effect
+            fitted = refit_delay(work.data, effect, fitted, split.n_train)
         if effect.refits_linear:
             start = fitted.lin  # the effects start from the re-fitted linear twin
         predicted = simulate_module(work.data, fitted.lin, effect, fitted.theta)
