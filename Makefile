@@ -28,15 +28,21 @@ $(STAMP): requirements.lock requirements-dev.lock pyproject.toml dtwin/_em_kerne
 figures: $(STAMP)
 	$(BIN)/snakemake --cores 2
 
+# The tests run on PYTEST_WORKERS pytest-xdist workers, each file's tests on one worker in file order
+# (tests/conftest.py starts the longest file first); `make test PYTEST_WORKERS=0` runs them in one
+# process. By hand: `pytest -n 2 --dist loadfile --no-loadscope-reorder`.
+PYTEST_WORKERS ?= 2
+PARALLEL = -n $(PYTEST_WORKERS) --dist loadfile --no-loadscope-reorder
+
 # The full suite (CI runs this through .ci/run): `make lint`, then the unit tests, the
 # doctests of dtwin/ and the workflow tests that run Snakemake in a subprocess (marked slow).
 test: lint
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest $(PARALLEL)
 
 # For daily work (target: under a minute): `make lint` and the tests without the slow workflow
 # tests. `make check` is the same. CI runs `make test`.
 test-fast: lint
-	$(BIN)/python -m pytest -m "not slow"
+	$(BIN)/python -m pytest $(PARALLEL) -m "not slow"
 
 check: test-fast
 

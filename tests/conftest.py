@@ -4,6 +4,12 @@ Also the Hypothesis profiles. ``ci`` (the default) is derandomized: every run of
 tries the same examples, so CI cannot go red by chance; failures ever found are pinned as
 ``@example`` on the test. ``fuzz`` (``make fuzz``, or ``HYPOTHESIS_PROFILE=fuzz``) draws fresh
 random examples, ``FUZZ_FACTOR`` times as many, for exploration.
+
+And the order of a parallel run: `make test` runs on two pytest-xdist workers (``-n 2``,
+``--dist loadfile``: the tests of one file run on one worker, in file order, so the tests that
+share a module fixture such as tests/test_workflow.py's ``workflow_copy`` see it built once
+and changed in turn); the files go out in the order of their first test, and
+:func:`pytest_collection_modifyitems` puts the longest file first, then the other slow tests.
 """
 
 from __future__ import annotations
@@ -30,6 +36,26 @@ FUZZ_FACTOR = 25
 def n_examples(in_ci: int) -> int:
     """Return a property test's example budget: ``in_ci`` in CI, ``FUZZ_FACTOR``× under fuzz."""
     return in_ci * FUZZ_FACTOR if HYPOTHESIS_PROFILE == "fuzz" else in_ci
+
+
+#: The fixture of the suite's longest file (tests/test_workflow.py: a complete Snakemake run,
+#: then about 250 CPU s of tests on it), which a parallel run starts first.
+LONGEST_FIXTURE = "workflow_copy"
+
+
+def _start_rank(item: pytest.Item) -> int:
+    """0 for the tests on the longest file's fixture, 1 for other slow tests, 2 for the rest."""
+    if LONGEST_FIXTURE in item.fixturenames:
+        return 0
+    return 1 if item.get_closest_marker("slow") else 2
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Longest file first, then the other slow tests, so no long test ends a parallel run alone.
+
+    The sort is stable: tests keep their file order within each rank.
+    """
+    items.sort(key=_start_rank)
 
 
 REPO = Path(__file__).resolve().parents[1]

@@ -3,8 +3,9 @@
 Layers of ``dtwin/`` (who may import whom, directly or through any chain of dtwin imports):
 
 - concept modules (``dtwin/*.py``): one paper concept each; import only other concept modules
-  and the helpers (``_validation``, ``artifacts``); never a stage, figure, reference or gap
-  module, never ``yaml`` (no config files) and never Snakemake;
+  and the helpers (``_validation``, ``artifacts``); never a stage, figure, reference, gap or
+  gapbench module, never a front end (``cli``, ``_script``, ``claims``), never ``yaml`` (no
+  config files) and never Snakemake;
 - stages (``dtwin/stages/``): config section → concept calls; may import concepts and R's
   column maps and loaders, never figures, gap or the crosschecks;
 - figures (``dtwin/figures/``): draw and judge the paper's claims from tables they are given;
@@ -18,10 +19,13 @@ Layers of ``dtwin/`` (who may import whom, directly or through any chain of dtwi
 - gapbench (``dtwin/gapbench/``): the diagnoser's benchmark (generated cases, their scores);
   may import the diagnoser, never a stage, figure or reference module. No other layer imports it.
 
-Every forbidden name is checked against each file's imports and those of every dtwin module it
-reaches. A compute rule (a script that publishes no artifact) never reaches a figure module, so a
-label edit in a figure reruns that figure and ``claims`` only. The library carries no issue
-numbers and no dated measurements (history lives in commit messages).
+Every forbidden dtwin name is checked against each file's imports and those of every dtwin
+module it reaches; a forbidden third-party package (``yaml``, Snakemake, hmmlearn, scipy.signal)
+against the file's own imports, since one deeper down may be imported lazily (what a rule's
+script loads at run time is measured by tests/test_import_budget.py). A compute rule (a script
+that publishes no artifact) never reaches a figure module, so a label edit in a figure reruns
+that figure and ``claims`` only. The library carries no issue numbers and no dated
+measurements (history lives in commit messages).
 """
 
 from __future__ import annotations
@@ -58,7 +62,11 @@ FORBIDDEN = {
         "dtwin.reference",
         "dtwin.gap",
         "dtwin.gapbench",
+        "dtwin.claims",
+        "dtwin.cli",
+        "dtwin._script",
         "yaml",
+        "snakemake",
     ),
     "stages": (
         "dtwin.figures",
@@ -108,8 +116,12 @@ def layer_of(path: Path) -> str | None:
     return None if path.stem in HELPERS else "concept"
 
 
-def imported_modules(path: Path) -> set[str]:
-    """Every module a file imports, at any depth of the file (lazy imports included)."""
+@cache
+def imported_modules(path: Path) -> frozenset[str]:
+    """Every module a file imports, at any depth of the file (lazy imports included).
+
+    Cached: the layer checks walk the same files from every module that reaches them.
+    """
     names = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):
@@ -117,7 +129,7 @@ def imported_modules(path: Path) -> set[str]:
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             names.add(node.module)
             names.update(f"{node.module}.{alias.name}" for alias in node.names)
-    return names
+    return frozenset(names)
 
 
 LIBRARY_FILES = sorted(LIBRARY.rglob("*.py"))

@@ -136,8 +136,14 @@ def _rig(
     return pd.DataFrame({"t": np.round(t, 4), "u_act": u, "x": volts})
 
 
-def test_rig_in_volts_with_coulomb_friction_is_named():
-    result = diagnose(recording_from_frame(_rig(0.3)), twin_from_mapping({"dt": 0.002}))
+@pytest.fixture(scope="module")
+def rig_coulomb():
+    """The rig in volts with Coulomb friction 0.3, diagnosed with a twin file of ``dt`` only."""
+    return diagnose(recording_from_frame(_rig(0.3)), twin_from_mapping({"dt": 0.002}))
+
+
+def test_rig_in_volts_with_coulomb_friction_is_named(rig_coulomb):
+    result = rig_coulomb
     assert (result.module, result.effect) == ("M1", "coulomb_friction")
     assert result.params["Fc"] == pytest.approx(0.3, rel=0.2)
     assert result.excess_shrink_pct >= 80 and result.own_shrink_pct >= 70
@@ -158,10 +164,10 @@ def test_clean_rig_is_calibrated_to_its_physics_and_names_no_effect():
     assert plant.gap_before < 1.25 * plant.noise_floor  # the linear twin is exact up to noise
 
 
-def test_free_run_rms_is_in_the_recordings_units_and_falls_with_the_effect():
+def test_free_run_rms_is_in_the_recordings_units_and_falls_with_the_effect(rig_coulomb):
     """Issue 25 item 7: the scoring part simulated freely from its first sample."""
+    volts = rig_coulomb
     frame = _rig(0.3)
-    volts = diagnose(recording_from_frame(frame), twin_from_mapping({"dt": 0.002}))
     frame["x"] *= 1000.0  # millivolts
     millivolts = diagnose(recording_from_frame(frame), twin_from_mapping({"dt": 0.002}))
     assert volts.effect == millivolts.effect == "coulomb_friction"
@@ -374,8 +380,8 @@ def test_own_asset_with_each_effect_for_20_seeds_reads_as_well_silent_as_declare
 # --- 95 % intervals of the answer's parameters (issue 25 item 6) ------------------------------
 
 
-def test_rig_friction_interval_holds_the_true_level_and_is_in_the_json():
-    result = diagnose(recording_from_frame(_rig(0.3)), twin_from_mapping({"dt": 0.002}))
+def test_rig_friction_interval_holds_the_true_level_and_is_in_the_json(rig_coulomb):
+    result = rig_coulomb
     low, high = result.param_intervals["Fc"]
     assert low < result.params["Fc"] < high
     assert low <= 0.3 <= high and high - low < 0.2 * 0.3

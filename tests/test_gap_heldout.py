@@ -44,8 +44,14 @@ def test_a_bad_heldout_file_gets_one_line(tmp_path, capsys, kwargs, message):
     assert not (tmp_path / "out").exists()
 
 
-def test_heldout_scores_on_the_second_recording_only():
-    case = generate_rig_case("none", 3)
+@pytest.fixture(scope="module")
+def clean_rig():
+    """Rig case ``none``, seed 3 (6000 samples; about 3 CPU s to generate)."""
+    return generate_rig_case("none", 3)
+
+
+def test_heldout_scores_on_the_second_recording_only(clean_rig):
+    case = clean_rig
     frame = case.recording
     half = len(frame) // 2
     train = recording_from_frame(frame.iloc[:half].reset_index(drop=True))
@@ -56,8 +62,8 @@ def test_heldout_scores_on_the_second_recording_only():
     assert result.n_samples == len(frame)
 
 
-def test_heldout_needs_a_choosing_part():
-    case = generate_rig_case("none", 3)
+def test_heldout_needs_a_choosing_part(clean_rig):
+    case = clean_rig
     train = recording_from_frame(case.recording.iloc[:600].reset_index(drop=True))
     held = recording_from_frame(case.recording.iloc[600:].reset_index(drop=True))
     # 95 % of 600 samples train: 30 are left to choose on, fewer than 50

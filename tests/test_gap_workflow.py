@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import shutil
 
+import pytest
+
 from tests.test_workflow import IGNORED, REPO, job_counts, snakemake
+
+pytestmark = pytest.mark.slow  # Snakemake in a subprocess, as tests/test_workflow.py
 
 
 def test_full_gap_benchmark_override_plans_ten_cases_per_effect(tmp_path):
