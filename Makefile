@@ -78,4 +78,4 @@ clean-results:
 
 # Property tests with fresh randomness and FUZZ_FACTOR (tests/conftest.py) times the examples.
 fuzz: $(STAMP)
-	HYPOTHESIS_PROFILE=fuzz $(BIN)/python -m pytest -p no:cacheprovider --hypothesis-show-statistics tests/test_malformed_inputs.py tests/test_deep_fuzz.py
+	HYPOTHESIS_PROFILE=fuzz $(BIN)/python -m pytest -p no:cacheprovider --hypothesis-show-statistics tests/bad_input/test_malformed_inputs.py tests/bad_input/test_deep_fuzz.py

@@ -203,7 +203,7 @@ def figures_benchmark() -> dict:
     }
 
 
-#: Libraries whose import a light rule should not pay (see tests/test_import_budget.py).
+#: Libraries whose import a light rule should not pay (see tests/workflow/test_import_budget.py).
 HEAVY = ("sklearn", "hmmlearn", "scipy.signal", "scipy.stats", "statsmodels", "matplotlib.pyplot")
 
 

@@ -1,7 +1,8 @@
 """Write docs/config.md: one table per config section, from the schema and config/config.yaml.
 
-Run ``python docs/make_config_doc.py`` after editing either file; tests/test_config_schema.py
-checks that the committed docs/config.md is what this script writes.
+Run ``python docs/make_config_doc.py`` after editing either file;
+tests/workflow/test_config_schema.py checks that the committed docs/config.md is what this
+script writes.
 """
 
 from __future__ import annotations

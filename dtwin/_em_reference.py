@@ -48,7 +48,7 @@ class _MatmulGaussianHMM(GaussianHMM):
     in memory: the densities are exponentiated in place and freed after the ξ-sum, and the
     posteriors overwrite the forward lattice instead of being a fifth T×K copy (T = 1e6,
     K = 4, D = 10: ~110 MB per iteration instead of ~210 MB, benchmarks/hmm_fit.py).
-    These are the places dtwin goes below hmmlearn's public methods; ``tests/test_hmm.py``
+    These are the places dtwin goes below hmmlearn's public methods; ``tests/concepts/test_hmm.py``
     checks both against hmmlearn's own density and E-step (the latter bit for bit) on every
     run, so a release that changes the hooks fails loudly (hmmlearn is pinned
     ``>=0.3.3,<0.4``).

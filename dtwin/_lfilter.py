@@ -7,8 +7,8 @@ sweep chunk filter ~1,000-sample signals with first- and second-order filters. F
 ``filt``: the coefficients divided by ``a[0]``, then per sample ``y = z₀ + b₀·x``,
 ``zᵢ = (zᵢ₊₁ + x·bᵢ₊₁) − y·aᵢ₊₁``, ``z_last = x·b_last − y·a_last``) in Python floats, the same
 IEEE operations in the same order, so the result is bit-identical to scipy's (checked in
-tests/test_lfilter.py). Long signals, other dtypes, a one-coefficient denominator (scipy's
-convolution path) or a process that has scipy.signal loaded anyway go to scipy itself.
+tests/concepts/test_lfilter.py). Long signals, other dtypes, a one-coefficient denominator
+(scipy's convolution path) or a process that has scipy.signal loaded anyway go to scipy itself.
 Arrays are time-first where the caller says so (``axis``).
 """
 

@@ -47,8 +47,9 @@ _FALLBACK_WARNED: list[bool] = []  # the fallback is logged once per process
 def available_engine(engine: str) -> str:
     """Return ``engine``, or ``"hmmlearn"`` for ``"compiled"`` when numba is not installed.
 
-    The two engines give the same iterations and statuses (tests/test_hmm_engine.py), so the
-    reference engine is the documented fallback of the compiled one.
+    The two engines give the same iterations and statuses
+    (tests/concepts/test_hmm_engine.py), so the reference engine is the documented fallback of
+    the compiled one.
     """
     if engine == "compiled" and not HAVE_NUMBA:
         if not _FALLBACK_WARNED:

@@ -6,9 +6,9 @@ features, arrays time-first ``(T, D)``. EM runs hmmlearn 0.3.3's equations and s
 recursions compiled with numba, one call per start (:mod:`dtwin._em_kernels`; the starts,
 statuses and fallback in :mod:`dtwin._multistart`); hmmlearn itself is the reference engine
 (``engine="hmmlearn"``, config ``hmm.engine``; :mod:`dtwin._em_reference`) and the fallback
-when the scaled recursions underflow, and is imported only then. ``tests/test_hmm_engine.py``
-holds the two engines to the same iterations, statuses and numbers. dtwin adds what depmixS4
-did and hmmlearn does not:
+when the scaled recursions underflow, and is imported only then.
+``tests/concepts/test_hmm_engine.py`` holds the two engines to the same iterations, statuses
+and numbers. dtwin adds what depmixS4 did and hmmlearn does not:
 
 - z-scoring with the sample standard deviation (R's ``scale``), :func:`zscore`;
 - depmixS4's random start: per-sample state weights drawn from Dirichlet(0.01) (almost a hard

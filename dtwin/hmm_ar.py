@@ -25,7 +25,7 @@ own model classes implement (:mod:`dtwin._em_reference`). The M-step is per stat
 a weighted least-squares regression of ``x_t`` on ``(1, x_t−1)`` with weights γ_t(k), and its
 residual variance floored at ``var_floor`` (the exact constrained maximiser, so EM stays
 monotone). Random starts, the stopping rule and the start table follow :func:`dtwin.hmm.fit_hmm`
-(depmixS4's Dirichlet(0.01) start, relative tolerance). ``tests/test_hmm_ar.py`` checks the
+(depmixS4's Dirichlet(0.01) start, relative tolerance). ``tests/concepts/test_hmm_ar.py`` checks the
 log-likelihood against a forward recursion written out by hand, and recovery of known AR
 coefficients and states.
 """

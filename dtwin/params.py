@@ -146,7 +146,8 @@ def _section_fields() -> dict[str, tuple[type, tuple[str, ...]]]:
 
     Derived from the module contract (:data:`dtwin.modules.CONTRACTS`: a module's section and
     linear parameters, the noise channels) and the field types of :class:`TwinParams`, so the
-    modules are listed once (``tests/test_params.py`` checks each dataclass has those fields).
+    modules are listed once (``tests/concepts/test_params.py`` checks each dataclass has those
+    fields).
     """
     hints = get_type_hints(TwinParams)
     keys = {contract.section: contract.params for contract in CONTRACTS.values()}

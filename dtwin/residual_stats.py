@@ -3,7 +3,8 @@
 Tables with one column per residual channel and the white-noise band ``±1.96/√n`` the paper
 draws. The sample ACF and the Ljung–Box statistic are statsmodels' (``acf(x, fft=False)``,
 ``acorr_ljungbox``) written out in numpy with the same operations, so a figure job does not load
-statsmodels (~1 s per process); tests/test_residual_stats.py holds them equal to statsmodels'.
+statsmodels (~1 s per process); tests/concepts/test_residual_stats.py holds them equal to
+statsmodels'.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ random examples, ``FUZZ_FACTOR`` times as many, for exploration.
 
 And the order of a parallel run: `make test` runs on two pytest-xdist workers (``-n 2``,
 ``--dist loadfile``: the tests of one file run on one worker, in file order, so the tests that
-share a module fixture such as tests/test_workflow.py's ``workflow_copy`` see it built once
+share a module fixture such as tests/workflow/test_workflow.py's ``workflow_copy`` see it built once
 and changed in turn); the files go out in the order of their first test, and
 :func:`pytest_collection_modifyitems` puts the longest file first, then the other slow tests.
 """
@@ -38,8 +38,8 @@ def n_examples(in_ci: int) -> int:
     return in_ci * FUZZ_FACTOR if HYPOTHESIS_PROFILE == "fuzz" else in_ci
 
 
-#: The fixture of the suite's longest file (tests/test_workflow.py: a complete Snakemake run,
-#: then about 250 CPU s of tests on it), which a parallel run starts first.
+#: The fixture of the suite's longest file (tests/workflow/test_workflow.py: a complete
+#: Snakemake run, then about 250 CPU s of tests on it), which a parallel run starts first.
 LONGEST_FIXTURE = "workflow_copy"
 
 

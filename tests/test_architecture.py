@@ -22,10 +22,10 @@ Layers of ``dtwin/`` (who may import whom, directly or through any chain of dtwi
 Every forbidden dtwin name is checked against each file's imports and those of every dtwin
 module it reaches; a forbidden third-party package (``yaml``, Snakemake, hmmlearn, scipy.signal)
 against the file's own imports, since one deeper down may be imported lazily (what a rule's
-script loads at run time is measured by tests/test_import_budget.py). A compute rule (a script
-that publishes no artifact) never reaches a figure module, so a label edit in a figure reruns
-that figure and ``claims`` only. The library carries no issue numbers and no dated
-measurements (history lives in commit messages).
+script loads at run time is measured by tests/workflow/test_import_budget.py). A compute rule
+(a script that publishes no artifact) never reaches a figure module, so a label edit in a
+figure reruns that figure and ``claims`` only. The library carries no issue numbers and no
+dated measurements (history lives in commit messages).
 """
 
 from __future__ import annotations
@@ -171,7 +171,8 @@ def _forbidden_imports(path: Path, layer: str) -> list[str]:
     """Forbidden names ``path`` imports, and forbidden dtwin names of any module it reaches.
 
     Beyond the file itself only dtwin modules count: a third-party import deeper down may be
-    lazy (``scipy.signal`` on first use), which tests/test_import_budget.py measures at run time.
+    lazy (``scipy.signal`` on first use), which tests/workflow/test_import_budget.py measures at
+    run time.
     """
     return sorted(
         f"{name} (in {found.relative_to(REPO).as_posix()})"

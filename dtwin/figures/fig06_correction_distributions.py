@@ -59,7 +59,7 @@ def kde_curve(values: np.ndarray, grid: np.ndarray) -> np.ndarray:
     The sum is scipy's ``gaussian_kde(values, bw_method=bw_nrd0(values) / sd)(grid)`` written
     out in numpy in the same order (whitening, normalisation, kernels summed over the samples
     one after another), so a figure job does not load scipy.stats; the values agree to
-    ~1e-15 relative (numpy's ``exp`` is not the C library's; tests/test_fig06_kde.py).
+    ~1e-15 relative (numpy's ``exp`` is not the C library's; tests/figures/test_fig06_kde.py).
 
     Examples
     --------

@@ -6,7 +6,7 @@ Each :class:`Effect` is the one place of its effect in the diagnoser: the module
 to, its parameters with units, bounds and starting points (scaled from the data, so the
 catalogue works in any units), and the form the twin takes with it (its ``input_map``,
 ``force_law`` or ``output_map``). No code branches on an effect's name
-(tests/test_gap_effects.py walks the catalogue). How it enters the module's twin, its ``stage``:
+(tests/gap/test_gap_effects.py walks the catalogue). How it enters the module's twin, its ``stage``:
 
 ``input``
     a static map on the module input before its linear dynamics (Hammerstein form):

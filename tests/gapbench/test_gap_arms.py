@@ -400,7 +400,7 @@ def test_a_second_module_with_its_own_gap_is_said_to_need_a_second_effect():
     assert result.modules["M2a"].status == "gap"
     payload = diagnosis_to_dict(result)
     assert payload["also_needed"] == [other]
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     schema = json.loads((root / "workflow/schemas/diagnosis.schema.json").read_text())
     jsonschema.validate(payload, schema)
     assert "A second effect is needed**: M2a: sensor_bias_drift" in render_markdown(result)

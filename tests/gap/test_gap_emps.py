@@ -15,7 +15,7 @@ import pytest
 
 from dtwin.gap import diagnose, read_recording, twin_discretisation, twin_from_mapping
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EMPS = Path(os.environ.get("DTWIN_EMPS_DIR", ROOT.parent / "shared" / "realdata" / "emps"))
 PUBLISHED_FC = 20.39  # N, Janot et al. 2019
 

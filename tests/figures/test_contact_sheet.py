@@ -1,6 +1,7 @@
 """The report's landing page (dtwin/figures/_contact_sheet.py), fast, on small inputs.
 
-The workflow test (tests/test_workflow.py, slow) renders the real page in headless Chromium.
+The workflow test (tests/workflow/test_workflow.py, slow) renders the real page in headless
+Chromium.
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ from dtwin.reference.loaders import (
 from dtwin.reference.mcda_crosscheck import crosscheck_mcda_legacy
 from tests.conftest import REFERENCE
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PIPELINE = REFERENCE / "faulted_pipeline_seed11_rerun.csv"
 
 #: R column names that may be written only in dtwin/reference/columns.py.

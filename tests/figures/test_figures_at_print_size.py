@@ -5,8 +5,8 @@ pipeline table) is fed a small table with the columns the pipeline writes, then 
 reader checks the pipeline itself applies (:func:`dtwin.figures._print_check.reader_checks`):
 print width and height, no text under 7 pt, no text over text or off the page, every numeric
 axis labelled with its unit (or declared unitless), every legend entry drawn. The workflow test
-(tests/test_workflow.py, slow) asserts the same checks on the pipeline's own figures through
-each artifact's JSON. The inputs are random but seeded; the values are not results.
+(tests/workflow/test_workflow.py, slow) asserts the same checks on the pipeline's own figures
+through each artifact's JSON. The inputs are random but seeded; the values are not results.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from dtwin.figures.fig13_ar_hmm import plot_ar_hmm
 from dtwin.figures.gap_benchmark import gap_benchmark
 from dtwin.wiring import MODULES
 from tests.conftest import REPO
-from tests.test_figure_style import benchmark_metrics_of, benchmark_table
+from tests.figures.test_figure_style import benchmark_metrics_of, benchmark_table
 
 DT = 0.05
 T = np.arange(400) * DT

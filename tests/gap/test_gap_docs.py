@@ -3,7 +3,7 @@
 import re
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SPEC = ROOT / "docs" / "gap.md"
 CITING = ("dtwin", "scripts", "config", "workflow")
 

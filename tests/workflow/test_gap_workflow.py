@@ -6,9 +6,9 @@ import shutil
 
 import pytest
 
-from tests.test_workflow import IGNORED, REPO, job_counts, snakemake
+from tests.workflow.test_workflow import IGNORED, REPO, job_counts, snakemake
 
-pytestmark = pytest.mark.slow  # Snakemake in a subprocess, as tests/test_workflow.py
+pytestmark = pytest.mark.slow  # Snakemake in a subprocess, as tests/workflow/test_workflow.py
 
 
 def test_full_gap_benchmark_override_plans_ten_cases_per_effect(tmp_path):

@@ -1,6 +1,6 @@
 """The figure style of the set: print size, fonts, overlaps, 300-dpi PNG, one entry point.
 
-The workflow test (tests/test_workflow.py) checks every produced artifact's files and its
+The workflow test (tests/workflow/test_workflow.py) checks every produced artifact's files and its
 ``print_size_and_text`` validity check; these tests check the rules themselves, fast.
 """
 

@@ -261,7 +261,7 @@ def test_every_artifact_is_produced_with_passing_validity_checks(workflow_copy):
 
 def test_every_figure_is_print_ready_with_its_caption(workflow_copy):
     """300-dpi PNG at print width beside a vector PDF; caption and print check in the JSON."""
-    from tests.test_figure_style import png_size_and_dpi
+    from tests.figures.test_figure_style import png_size_and_dpi
 
     for artifact in ARTIFACTS:
         folder = workflow_copy / "paper_figures"

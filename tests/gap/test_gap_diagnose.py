@@ -27,7 +27,7 @@ from dtwin.gap.effects import EFFECT_NAMES
 from dtwin.gapbench import generate_case
 from dtwin.gapbench.generator import IN_LIST_EFFECTS
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCHEMA = json.loads((ROOT / "workflow/schemas/diagnosis.schema.json").read_text())
 
 # (case effect, module, seed): moderately strong effects, fixed seeds, 1500 samples
