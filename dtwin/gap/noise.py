@@ -316,6 +316,22 @@ def spectral_noise_floor(residual: np.ndarray, dt: float, bandwidth_hz: float) -
     return NoiseFloor(sigma, "data", pole ** np.arange(n_lags), identified=False)
 
 
+def window_gain_pole(floor: NoiseFloor) -> float:
+    """Return the AR(1) pole a window's noise gain may count for ``floor`` (0: white).
+
+    A pole fitted at the top of the grid :data:`NOISE_POLES` is not an estimate: the residual's
+    spectrum above the plant falls at least as steeply as the steepest noise admitted, as the
+    sign changes of a friction force do (the EMPS axis reads 0.98 there), so its colour is not
+    counted (docs/gap.md §Noise floors): the window gain of such a floor is white noise's,
+    whereas a coloured noise inside the grid (a rig's anti-aliasing filter, poles 0.5-0.95) keeps
+    the larger gain its correlation carries forward.
+    """
+    if len(floor.acf) < 2:
+        return 0.0
+    pole = float(floor.acf[1])
+    return 0.0 if pole >= NOISE_POLES[-1] - 1e-12 else pole
+
+
 def _noise_pole(cycles: np.ndarray, density: np.ndarray) -> float:
     """Return the AR(1) pole whose spectrum shape fits ``density`` at ``cycles`` (f·dt) best."""
     positive = density > 0

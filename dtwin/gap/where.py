@@ -46,6 +46,7 @@ from dtwin.gap.noise import (
     reconcile_noise_floor,
     spectral_noise_floor,
     twin_noise_floor,
+    window_gain_pole,
 )
 from dtwin.gap.oe_reference import output_error_reference
 from dtwin.gap.recording import Recording
@@ -269,7 +270,7 @@ def _exact_plant_floor(data: ModuleData, simulated, lin: dict, n_train: int) -> 
 
     docs/gap.md §Noise floors: over windows the initial state estimated from the warm-up samples
     carries part of the measurement noise forward (:func:`~dtwin.gap.models.window_noise_gain`,
-    with the noise's AR(1) pole).
+    with the noise's AR(1) pole unless it sits at the top of its grid: :func:`window_gain_pole`).
     """
     residual = (data.output - simulated)[:n_train]
     # the scored samples only: the windows' unscored warm-ups (a fifth of every window) read
@@ -277,7 +278,7 @@ def _exact_plant_floor(data: ModuleData, simulated, lin: dict, n_train: int) -> 
     floor = spectral_noise_floor(residual[np.isfinite(residual)], data.dt, plant_bandwidth_hz(lin))
     if data.horizon is None:
         return floor
-    pole = float(floor.acf[1]) if len(floor.acf) > 1 else 0.0
+    pole = window_gain_pole(floor)
     gain = window_noise_gain(lin, data.dt, data.discretisation, data.horizon, pole)
     return replace(floor, rms=floor.rms * math.sqrt(gain))
 

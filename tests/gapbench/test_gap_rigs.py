@@ -105,6 +105,27 @@ def test_the_spectral_floor_reads_coloured_noise_from_the_band_above_the_plant(p
     assert memory == pytest.approx(pole, abs=0.05)
 
 
+def test_a_window_gain_counts_a_noise_pole_but_not_one_at_the_grid_top():
+    """An AR(1) noise (pole 0.7) keeps its colour in the window gain; a residual of sign changes
+    (a friction force's square wave, as on the EMPS axis) fits the top of the pole grid, which is
+    no estimate, and counts as white: with its colour EMPS's floor rose to 0.034 above its gap
+    0.028 and the measured Coulomb friction read ``none``."""
+    from scipy.signal import lfilter
+
+    from dtwin.gap.noise import NOISE_POLES, spectral_noise_floor, window_gain_pole
+
+    white = np.random.default_rng(2).standard_normal(6000)
+    coloured = lfilter([math.sqrt(1 - 0.7**2)], [1.0, -0.7], white)
+    assert window_gain_pole(spectral_noise_floor(coloured, 0.001, 0.5)) == pytest.approx(
+        0.7, abs=0.05
+    )
+    time = np.arange(6000) * 0.001
+    square = np.sign(np.sin(2 * math.pi * 0.7 * time)) + 0.001 * white
+    floor = spectral_noise_floor(square, 0.001, 0.5)
+    assert floor.acf[1] == pytest.approx(NOISE_POLES[-1])
+    assert window_gain_pole(floor) == 0.0
+
+
 def test_a_band_near_the_nyquist_frequency_keeps_white_noise():
     """At 4 samples per period the band cannot tell a pole from a level: white, as before."""
     from dtwin.gap.noise import spectral_noise_floor
