@@ -453,15 +453,33 @@ def window_noise_gain(
     step = hold_matrices(c / m, k / m, dt, hold)
     warmup = warmup_samples(horizon)
     basis = free_response_basis(step, int(horizon))
-    solve = np.linalg.pinv(basis[:warmup])  # (2, warmup)
-    carried = basis[warmup:] @ solve  # (scored, warmup): each scored error's warm-up weights
+    solve = np.linalg.pinv(basis[:warmup])  # (2, warmup): warm-up noise -> initial state
+    scored = basis[warmup:]  # (scored, 2): free response at each scored sample
     if pole == 0.0:
-        return float(1.0 + np.mean(np.sum(carried * carried, axis=1)))
-    lags = np.abs(np.arange(int(horizon))[:, None] - np.arange(warmup)[None, :])
-    correlation = float(pole) ** lags  # (horizon, warmup)
-    within = np.einsum("ij,jl,il->i", carried, correlation[:warmup], carried)
-    cross = np.sum(carried * correlation[warmup:], axis=1)
+        # φ_k·P·Pᵀ·φ_kᵀ with P·Pᵀ a 2×2 matrix: memory linear in the window
+        return float(1.0 + np.mean(np.einsum("ij,jk,ik->i", scored, solve @ solve.T, scored)))
+    a = float(pole)
+    # P·R_ww·Pᵀ (2×2): the Toeplitz product R·x = Σ_j a^|i−j| x_j as two AR(1) recursions
+    correlated = np.array([_ar1_toeplitz_product(row, a) for row in solve])  # (2, warmup)
+    within = np.einsum("ij,jk,ik->i", scored, solve @ correlated.T, scored)
+    # φ_k·P·r_wk with r_wk[j] = a^(warmup + k − j) = a^(k + 1)·a^(warmup − 1 − j)
+    to_last = a ** np.arange(warmup - 1, -1, -1, dtype=float)  # (warmup,)
+    ahead = a ** np.arange(1, scored.shape[0] + 1, dtype=float)  # (scored,)
+    cross = (scored @ (solve @ to_last)) * ahead
     return float(1.0 + np.mean(within - 2.0 * cross))
+
+
+def _ar1_toeplitz_product(values: np.ndarray, pole: float) -> np.ndarray:
+    """Return ``R·values`` with ``R[i, j] = pole^|i−j|`` without forming ``R`` (O(n) memory).
+
+    ``Σ_{j≤i} pole^(i−j) x_j + Σ_{j≥i} pole^(j−i) x_j − x_i``: a forward and a backward
+    first-order recursion.
+    """
+    from scipy.signal import lfilter
+
+    forward = lfilter([1.0], [1.0, -pole], values)
+    backward = lfilter([1.0], [1.0, -pole], values[::-1])[::-1]
+    return forward + backward - values
 
 
 def _exact_plant(data, lin, u, force, stop, segments):
