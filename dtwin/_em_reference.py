@@ -139,7 +139,33 @@ def diag_variances(model: GaussianHMM) -> np.ndarray:
     return np.diagonal(model.covars_, axis1=1, axis2=2).copy()
 
 
-class _DepmixMonitor(ConvergenceMonitor):
+class _RelativeMonitor(ConvergenceMonitor):
+    """depmixS4's stopping rule ``(LL − LL_old)/|LL_old| < tol``; records the history."""
+
+    def __init__(self, tol: float, n_iter: int):
+        super().__init__(tol, n_iter, verbose=False)
+        self.log_likelihoods: list[float] = []
+        self.stopped_by_tol = False
+        self.non_finite = False
+
+    def report(self, log_prob: float) -> None:
+        super().report(log_prob)
+        self.log_likelihoods.append(float(log_prob))
+        if not np.isfinite(log_prob):
+            self.non_finite = True
+
+    @property
+    def converged(self) -> bool:
+        history = self.log_likelihoods
+        if self.non_finite or self.iter >= self.n_iter:
+            return True
+        if len(history) >= 2 and (history[-1] - history[-2]) < self.tol * abs(history[-2]):
+            self.stopped_by_tol = True
+            return True
+        return False
+
+
+class _DepmixMonitor(_RelativeMonitor):
     """hmmlearn convergence monitor with depmixS4's rule and a variance floor.
 
     hmmlearn documents subclassing :class:`~hmmlearn.base.ConvergenceMonitor` to change the
@@ -150,16 +176,12 @@ class _DepmixMonitor(ConvergenceMonitor):
     """
 
     def __init__(self, model: GaussianHMM, tol: float, n_iter: int, var_floor: float):
-        super().__init__(tol, n_iter, verbose=False)
+        super().__init__(tol, n_iter)
         self.model = model
         self.var_floor = var_floor
-        self.log_likelihoods: list[float] = []
-        self.stopped_by_tol = False
-        self.non_finite = False
 
     def report(self, log_prob: float) -> None:
         super().report(log_prob)
-        self.log_likelihoods.append(float(log_prob))
         model = self.model
         variances = diag_variances(model)
         finite = (
@@ -173,16 +195,6 @@ class _DepmixMonitor(ConvergenceMonitor):
             self.non_finite = True
             return
         model.covars_ = np.maximum(variances, self.var_floor)
-
-    @property
-    def converged(self) -> bool:
-        history = self.log_likelihoods
-        if self.non_finite or self.iter >= self.n_iter:
-            return True
-        if len(history) >= 2 and (history[-1] - history[-2]) < self.tol * abs(history[-2]):
-            self.stopped_by_tol = True
-            return True
-        return False
 
 
 def _gaussian_em(
@@ -301,32 +313,6 @@ def new_ar_model(
     model.transmat_ = np.array(transmat, dtype=float)
     model.intercepts_, model.coefs_, model.variances_ = (np.array(a, dtype=float) for a in emission)
     return model
-
-
-class _RelativeMonitor(ConvergenceMonitor):
-    """depmixS4's stopping rule ``(LL − LL_old)/|LL_old| < tol``; records the history."""
-
-    def __init__(self, tol: float, n_iter: int):
-        super().__init__(tol, n_iter, verbose=False)
-        self.log_likelihoods: list[float] = []
-        self.stopped_by_tol = False
-        self.non_finite = False
-
-    def report(self, log_prob: float) -> None:
-        super().report(log_prob)
-        self.log_likelihoods.append(float(log_prob))
-        if not np.isfinite(log_prob):
-            self.non_finite = True
-
-    @property
-    def converged(self) -> bool:
-        history = self.log_likelihoods
-        if self.non_finite or self.iter >= self.n_iter:
-            return True
-        if len(history) >= 2 and (history[-1] - history[-2]) < self.tol * abs(history[-2]):
-            self.stopped_by_tol = True
-            return True
-        return False
 
 
 def _ar_em(

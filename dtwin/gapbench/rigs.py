@@ -84,9 +84,7 @@ def _draw_rig(rng: np.random.Generator, effect: str, samples_per_period: float |
         samples_per_period = max(_log_uniform(rng, 15.0, 1000.0), samples_per_period)
         omega = 2 * math.pi / (samples_per_period * dt)
     zeta = _log_uniform(rng, 0.005, 1.0)
-    plant = {"m": 1.0, "c": 2 * zeta * omega, "k": 0.0 if integrating else omega**2}
-    if integrating:  # no period: a velocity time constant of 30–3000 samples
-        plant["c"] = 1.0 / (_log_uniform(rng, 30.0, 3000.0) * dt)
+    plant = _draw_plant(rng, zeta, omega, dt, integrating)
     return {
         "dt": dt,
         "omega": omega,
@@ -100,6 +98,20 @@ def _draw_rig(rng: np.random.Generator, effect: str, samples_per_period: float |
     }
 
 
+def _draw_plant(
+    rng: np.random.Generator, zeta: float, omega: float, dt: float, integrating: bool
+) -> dict:
+    """Return the plant ``m, c, k`` of damping ratio ``zeta`` at ``omega`` (rad/s).
+
+    An integrating plant has no period (k = 0): its damping is a velocity time constant of
+    30–3000 samples, drawn from ``rng`` (the only draw here).
+    """
+    plant = {"m": 1.0, "c": 2 * zeta * omega, "k": 0.0 if integrating else omega**2}
+    if integrating:
+        plant["c"] = 1.0 / (_log_uniform(rng, 30.0, 3000.0) * dt)
+    return plant
+
+
 def _draw_hard_rig(rng: np.random.Generator, effect: str, samples_per_period: float | None) -> dict:
     """Draw the harder family's rig: lightly damped, a few periods, held input, coloured noise."""
     drawn = _log_uniform(rng, 3.0, 1000.0)
@@ -111,9 +123,7 @@ def _draw_hard_rig(rng: np.random.Generator, effect: str, samples_per_period: fl
     dt = 1.0 / _log_uniform(rng, 20.0, 20000.0)
     omega = 2 * math.pi / (samples_per_period * dt)
     zeta = _log_uniform(rng, 0.01, 0.3)
-    plant = {"m": 1.0, "c": 2 * zeta * omega, "k": 0.0 if integrating else omega**2}
-    if integrating:
-        plant["c"] = 1.0 / (_log_uniform(rng, 30.0, 3000.0) * dt)
+    plant = _draw_plant(rng, zeta, omega, dt, integrating)
     low, high = HARD_RIG_SAMPLES
     periods = _log_uniform(rng, 3.0, 30.0)
     return {
