@@ -27,7 +27,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import savgol_filter
+from scipy.signal import lfilter, savgol_filter
 
 from dtwin.exact_plant import exact_plant_response, free_response_basis, hold_matrices
 from dtwin.gap.effects import (
@@ -475,8 +475,6 @@ def _ar1_toeplitz_product(values: np.ndarray, pole: float) -> np.ndarray:
     ``Σ_{j≤i} pole^(i−j) x_j + Σ_{j≥i} pole^(j−i) x_j − x_i``: a forward and a backward
     first-order recursion.
     """
-    from scipy.signal import lfilter
-
     forward = lfilter([1.0], [1.0, -pole], values)
     backward = lfilter([1.0], [1.0, -pole], values[::-1])[::-1]
     return forward + backward - values
