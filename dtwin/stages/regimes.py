@@ -24,10 +24,9 @@ import numpy as np
 import pandas as pd
 
 from dtwin._validation import DtwinValueError
-from dtwin.config_sections import BicSettings
+from dtwin.config_sections import BicSettings, EmSettings, HmmSettings
 from dtwin.fault_injection import regime_features
 from dtwin.hmm import HmmFit, ZScored, bic_by_k, bic_row, fit_hmm, zscore
-from dtwin.stages.settings import EmSettings, HmmSettings
 from dtwin.state_tables import posterior_matrix, state_labels
 from dtwin.wiring import RESIDUALS
 

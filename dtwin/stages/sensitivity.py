@@ -24,7 +24,7 @@ from dtwin._validation import (
     require_seed,
 )
 from dtwin.bias_correction import correct_bias, correct_plant_bias_viterbi
-from dtwin.config_sections import CorrectionSettings, SimulationSettings
+from dtwin.config_sections import CorrectionSettings, HmmSettings, SimulationSettings
 from dtwin.hmm import fit_hmm, zscore
 from dtwin.params import TwinParams, twin_params_from_mapping
 from dtwin.physics import fuse, sensor_first_order
@@ -36,7 +36,6 @@ from dtwin.sensitivity_sweep import (
     replicate_seed,
     scale_twin,
 )
-from dtwin.stages.settings import HmmSettings
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
 from dtwin.wiring import RESIDUALS
 
@@ -195,7 +194,7 @@ def sweep_point(
         overridden by the point, :func:`scale_twin`).
     sensitivity : mapping
         ``seed`` (EM seed of replicate 0), ``hmm`` (``n_states``, ``n_restarts``,
-        ``max_iter``, ``tol``, ``var_floor``: :class:`dtwin.stages.settings.HmmSettings`) and
+        ``max_iter``, ``tol``, ``var_floor``: :class:`dtwin.config_sections.HmmSettings`) and
         ``correction`` (``code`` and ``paper``, each ``kappa``, ``ema_alpha``, ``rate_max``).
 
     Returns

@@ -348,13 +348,13 @@ def parse_with_the_library(config: dict) -> None:
     from dtwin.arx import arx_orders_from_mapping
     from dtwin.bias_correction import exponential_moving_average, rate_limit
     from dtwin.command import n_steps_for
+    from dtwin.config_sections import HmmSettings
     from dtwin.fault_injection import fault_schedule
     from dtwin.gap import GapSettings
     from dtwin.residual_stats import white_noise_band
     from dtwin.sensitivity_sweep import sweep_grid
     from dtwin.stages.decisions import mcda_settings_from_mapping
     from dtwin.stages.faults import fault_magnitudes
-    from dtwin.stages.settings import HmmSettings
 
     twin = twin_params_from_mapping(config["twin"])
     n_steps_for(config["simulation"]["T"], twin.dt)

@@ -18,9 +18,9 @@ import dtwin.hmm
 import dtwin.stages.regimes
 import dtwin.stages.sensitivity
 from dtwin._validation import DtwinValueError
+from dtwin.config_sections import EmSettings, HmmSettings
 from dtwin.hmm import fit_hmm
 from dtwin.sensitivity_sweep import SweepPoint
-from dtwin.stages.settings import HmmSettings
 from dtwin.wiring import RESIDUALS
 from tests.conftest import REPO
 
@@ -57,6 +57,12 @@ def test_settings_defaults_are_the_library_defaults():
     defaults = inspect.signature(fit_hmm).parameters
     for key, value in HmmSettings(n_states=4).fit_options().items():
         assert defaults[key].default == value, key
+
+
+def test_parsed_settings_pass_through(config):
+    settings = HmmSettings.from_mapping(config["hmm"])
+    assert HmmSettings.from_mapping(settings) is settings
+    assert EmSettings.from_mapping(settings.em) is settings.em
 
 
 def test_settings_name_the_config_key():
