@@ -201,35 +201,42 @@ def _force_law(effect: str, strength: float, rig: dict, u_std: float, x_rms: flo
     return (None, {}) if law is None else law(strength, rig, u_std, x_rms, v_rms)
 
 
-def _integrate(rig: dict, drive: Callable, force, n: int, noise: np.ndarray) -> np.ndarray:
-    """Runge-Kutta integration; ``drive(j, t, x_meas)`` gives the force over sample ``j``."""
+def _integrate(rig: dict, drive: _Drive, force, n: int, noise: np.ndarray) -> np.ndarray:
+    """Runge-Kutta integration; return the states ``(x, v)`` at the sample instants, ``(n, 2)``.
+
+    ``drive.measure(j, x_meas)`` closes the loop at sample ``j`` and ``drive.over_sample(j)``
+    gives the force at each sub-step's three Runge-Kutta instants (``t``, ``t + h/2``, ``t + h``).
+    """
     m, c, k = rig["plant"]["m"], rig["plant"]["c"], rig["plant"]["k"]
-    dt = rig["dt"]
-    h = dt / _SUBSTEPS
+    h = rig["dt"] / _SUBSTEPS
+    half = h / 2
+    sixth = h / 6
     extra = force or (lambda x, v: 0.0)
-
-    def accel(t, x, v, j):
-        return (drive(j, t) - c * v - k * x - extra(x, v)) / m
-
     x, v = 0.0, 0.0
     states = np.zeros((n, 2))
     for j in range(n):
         states[j] = x, v
         drive.measure(j, x + noise[j])
-        t0 = j * dt
-        for s in range(_SUBSTEPS):
-            t = t0 + s * h
-            a1 = accel(t, x, v, j)
-            a2 = accel(t + h / 2, x + h / 2 * v, v + h / 2 * a1, j)
-            a3 = accel(t + h / 2, x + h / 2 * (v + h / 2 * a1), v + h / 2 * a2, j)
-            a4 = accel(t + h, x + h * (v + h / 2 * a2), v + h * a3, j)
-            x += h * (v + h / 6 * (a1 + a2 + a3))
-            v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+        for f0, f_half, f1 in drive.over_sample(j):
+            a1 = (f0 - c * v - k * x - extra(x, v)) / m
+            x2, v2 = x + half * v, v + half * a1
+            a2 = (f_half - c * v2 - k * x2 - extra(x2, v2)) / m
+            x3, v3 = x + half * (v + half * a1), v + half * a2
+            a3 = (f_half - c * v3 - k * x3 - extra(x3, v3)) / m
+            x4, v4 = x + h * (v + half * a2), v + h * a3
+            a4 = (f1 - c * v4 - k * x4 - extra(x4, v4)) / m
+            x += h * (v + sixth * (a1 + a2 + a3))
+            v += sixth * (a1 + 2 * a2 + 2 * a3 + a4)
     return states
 
 
 class _Drive:
-    """The force on the plant: an open-loop multisine, or a digital PD loop (held per sample)."""
+    """The force on the plant: an open-loop multisine, or a digital PD loop (held per sample).
+
+    Every signal is evaluated once for all instants it is needed at (arrays, not one point at a
+    time): the continuous multisine at each Runge-Kutta instant, the loop's reference at each
+    sample.
+    """
 
     def __init__(self, rig: dict, rng: np.random.Generator, n: int):
         omega, dt = rig["omega"], rig["dt"]
@@ -237,41 +244,68 @@ class _Drive:
         self.closed = rig["closed_loop"]
         self.held_input = False
         self.dt = dt
-        self.held = np.zeros(n)
+        self.held = [0.0] * n
+        self.continuous = None
         band_high = min(3.0 * omega / (2 * math.pi), 0.4 * nyquist)
         if not self.closed:
             self.excite = _multisine(rng, 0.1 * omega / (2 * math.pi), band_high)
             self.held_input = rig.get("hold", False)
             if self.held_input:  # a DAC: the force held over each sample
-                self.held = self.excite(np.arange(n) * dt)
+                self.held = self.excite(np.arange(n) * dt).tolist()
+            else:
+                self.continuous = _runge_kutta_values(self.excite, dt, n)
             return
         m, c = rig["plant"]["m"], rig["plant"]["c"]
         loop = omega * _log_uniform(rng, 0.5, 1.5)
         self.kp = m * loop**2
         self.kd = max(2 * 0.7 * m * loop - c, 0.0)
-        self.reference = _multisine(rng, 0.05 * loop / (2 * math.pi), 0.7 * loop / (2 * math.pi))
-        self.dither = rng.standard_normal(n) * 0.1
+        reference = _multisine(rng, 0.05 * loop / (2 * math.pi), 0.7 * loop / (2 * math.pi))
+        self.reference = reference(np.arange(n) * dt).tolist()
+        self.dither = (rng.standard_normal(n) * 0.1).tolist()
         self.previous = 0.0
 
     def measure(self, j: int, x_measured: float) -> None:
         """Compute the force held over sample ``j`` from the measured position (closed loop)."""
         if not self.closed:
             return
+        x_measured = float(x_measured)
         velocity = (x_measured - self.previous) / self.dt if j else 0.0
         self.previous = x_measured
-        error = float(self.reference(j * self.dt)) - x_measured
+        error = self.reference[j] - x_measured
         self.held[j] = self.kp * (error + self.dither[j]) - self.kd * velocity
 
-    def __call__(self, j: int, t: float) -> float:
-        if self.closed or self.held_input:
-            return self.held[j]
-        return float(self.excite(t))
+    def over_sample(self, j: int) -> list:
+        """Return the force (N) at each sub-step of sample ``j``: ``(t, t + h/2, t + h)``."""
+        if self.continuous is not None:
+            return self.continuous[j].tolist()
+        force = self.held[j]
+        return [(force, force, force)] * _SUBSTEPS
 
     def recorded(self, n: int) -> np.ndarray:
         """Return the force at the sample instants, shape ``(n,)``."""
         if self.closed or self.held_input:
-            return self.held[:n].copy()
+            return np.array(self.held[:n])
         return self.excite(np.arange(n) * self.dt)
+
+
+#: Samples whose Runge-Kutta instants one multisine evaluation covers (bounds its memory).
+_CHUNK = 2048
+
+
+def _runge_kutta_values(signal: Callable, dt: float, n: int) -> np.ndarray:
+    """Return ``signal`` at every Runge-Kutta instant of ``n`` samples, ``(n, _SUBSTEPS, 3)``.
+
+    Sub-step ``s`` of sample ``j`` starts at ``t = j·dt + s·h`` (``h = dt / _SUBSTEPS``); its
+    instants are ``t``, ``t + h/2`` and ``t + h``, each rounded as a scalar loop would round it.
+    """
+    h = dt / _SUBSTEPS
+    values = np.empty((n, _SUBSTEPS, 3))
+    offsets = np.arange(_SUBSTEPS) * h
+    for start in range(0, n, _CHUNK):
+        t = (np.arange(start, min(start + _CHUNK, n)) * dt)[:, None] + offsets
+        instants = np.stack([t, t + h / 2, t + h], axis=-1)
+        values[start : start + len(t)] = signal(instants)
+    return values
 
 
 def _measurement_noise(rig: dict, rng: np.random.Generator, n: int) -> tuple[float, np.ndarray]:

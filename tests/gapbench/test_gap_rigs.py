@@ -63,12 +63,43 @@ def test_the_harder_family_holds_its_force_and_colours_its_noise():
     rig = _draw_hard_rig(rng, "none", 40.0)
     rig["closed_loop"] = False
     drive = _Drive(rig, np.random.default_rng(1), 500)
-    inside = [drive(7, (7 + f) * rig["dt"]) for f in (0.0, 0.3, 0.9)]
-    assert inside[0] == inside[1] == inside[2] == drive.recorded(500)[7]
+    inside = np.array(drive.over_sample(7))
+    assert inside.shape == (10, 3) and np.all(inside == drive.recorded(500)[7])
+    assert drive.recorded(500)[8] != drive.recorded(500)[7]
     rig["noise_pole"] = 0.9
     _, shape = _measurement_noise(rig, np.random.default_rng(2), 50_000)
     assert np.corrcoef(shape[1:], shape[:-1])[0, 1] == pytest.approx(0.9, abs=0.02)
     assert np.std(shape) == pytest.approx(1.0, rel=0.05)
+
+
+def test_the_continuous_multisine_is_the_scalar_signal_at_every_runge_kutta_instant(monkeypatch):
+    from dtwin.gapbench import rigs
+
+    rng = np.random.default_rng(5)
+    rig = rigs._draw_rig(rng, "none", 37.0)
+    rig["closed_loop"] = False
+    n = 300
+    drive = rigs._Drive(rig, np.random.default_rng(8), n)
+    dt, h = rig["dt"], rig["dt"] / 10
+    for j in (0, 1, 151, n - 1):
+        for s, (f0, f_half, f1) in enumerate(drive.over_sample(j)):
+            t = j * dt + s * h
+            # the instants and sums a point-at-a-time evaluation rounds: equal to the last bit
+            assert [f0, f_half, f1] == [float(drive.excite(u)) for u in (t, t + h / 2, t + h)]
+    assert np.array_equal(drive.recorded(n), [float(drive.excite(j * dt)) for j in range(n)])
+    monkeypatch.setattr(rigs, "_CHUNK", 7)  # chunks of instants do not change a value
+    chunked = rigs._Drive(rig, np.random.default_rng(8), n)
+    assert np.array_equal(chunked.continuous, drive.continuous)
+
+
+def test_a_rig_recording_does_not_depend_on_the_chunks_of_its_signal(monkeypatch):
+    from dtwin.gapbench import rigs
+
+    first = rigs.generate_rig_case("cubic_stiffness", 2, n_samples=500)
+    monkeypatch.setattr(rigs, "_CHUNK", 64)
+    again = rigs.generate_rig_case("cubic_stiffness", 2, n_samples=500)
+    assert not first.key["closed_loop"]
+    assert first.recording.equals(again.recording) and first.key == again.key
 
 
 def test_unknown_hard_rig_effects_are_refused_and_the_prefix_dispatches():
