@@ -36,6 +36,7 @@ __all__ = [
     "AcfSettings",
     "CorrectionSettings",
     "BicSettings",
+    "ArHmmSettings",
     "section_keys",
 ]
 
@@ -56,6 +57,13 @@ def _integer(name: str, value: Any, minimum: int) -> int:
 
 def _optional_integer(name: str, value: Any, minimum: int) -> int | None:
     return None if value is None else _integer(name, value, minimum)
+
+
+def _integers(section: str, key: str, value: Any) -> tuple[int, ...]:
+    """Return list ``value`` of key ``section.key`` as a tuple of ints >= 1 (non-empty)."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)) or not value:
+        raise DtwinValueError(f"{section}.{key} must be a non-empty list (got {value!r})")
+    return tuple(_integer(f"{section}.{key}", item, 1) for item in value)
 
 
 @dataclass(frozen=True)
@@ -269,11 +277,6 @@ class AcfSettings:
         if isinstance(raw, cls):
             return raw
         raw = section_keys(cls, raw, section)
-        lags = raw["ljungbox_lags"]
-        if isinstance(lags, (str, bytes)) or not isinstance(lags, (list, tuple)) or not lags:
-            raise DtwinValueError(
-                f"{section}.ljungbox_lags must be a non-empty list (got {lags!r})"
-            )
         significance = require_number(f"{section}.significance", raw["significance"])
         if not 0 < significance < 1:
             raise DtwinValueError(f"{section}.significance must be in (0, 1) (got {significance})")
@@ -281,7 +284,7 @@ class AcfSettings:
             nlags=_integer(f"{section}.nlags", raw["nlags"], 1),
             white_noise_n=_integer(f"{section}.white_noise_n", raw["white_noise_n"], 10),
             white_noise_seed=require_seed(f"{section}.white_noise_seed", raw["white_noise_seed"]),
-            ljungbox_lags=tuple(_integer(f"{section}.ljungbox_lags", lag, 1) for lag in lags),
+            ljungbox_lags=_integers(section, "ljungbox_lags", raw["ljungbox_lags"]),
             significance=significance,
             strong_lag1=require_in_range(f"{section}.strong_lag1", raw["strong_lag1"], -1, 1),
         )
@@ -382,14 +385,11 @@ class BicSettings:
         if isinstance(raw, cls):
             return raw
         raw = section_keys(cls, raw, section)
-        ks = raw["ks"]
-        if isinstance(ks, (str, bytes)) or not isinstance(ks, (list, tuple)) or not ks:
-            raise DtwinValueError(f"{section}.ks must be a non-empty list (got {ks!r})")
         split = raw.get("split_starts", False)
         if not isinstance(split, bool):
             raise DtwinValueError(f"{section}.split_starts must be true or false (got {split!r})")
         return cls(
-            ks=tuple(_integer(f"{section}.ks", k, 1) for k in ks),
+            ks=_integers(section, "ks", raw["ks"]),
             n_restarts=_integer(f"{section}.n_restarts", raw["n_restarts"], 1),
             k_max=_optional_integer(f"{section}.k_max", raw.get("k_max"), 1),
             stop_after_rises=_integer(
@@ -398,3 +398,88 @@ class BicSettings:
             split_starts=split,
             max_restarts=_optional_integer(f"{section}.max_restarts", raw.get("max_restarts"), 1),
         )
+
+
+@dataclass(frozen=True)
+class ArHmmSettings:
+    """The ``ar_hmm`` section: the AR(1)-emission HMM's BIC sweep (paper §5 future work, Fig. 13).
+
+    Attributes
+    ----------
+    seed : int
+        Entropy of the EM starts: K's starts use ``SeedSequence([seed, K])``.
+    ks : tuple of int
+        The K always fitted (each >= 1; ``hmm.n_states`` is added by the stage).
+    k_max : int
+        Past ``max(ks)`` K grows until the BIC rose ``stop_after_rises`` times in a row, at
+        most to ``k_max`` (>= 1).
+    stop_after_rises : int
+        Rises in a row that bracket the minimum (>= 1).
+    n_restarts : int
+        EM starts per K (>= 1).
+    max_iter : int
+        EM iteration cap per start (>= 1).
+    tol : float
+        Relative stopping tolerance of EM (> 0).
+    var_floor : float
+        Lower bound on every innovation variance, z-units² (> 0).
+    engine : str, default "compiled"
+        EM engine, ``compiled`` or ``hmmlearn`` (the rule passes ``hmm.engine``); it does not
+        change the settings of the fit, so :meth:`summary` leaves it out.
+    """
+
+    seed: int
+    ks: tuple[int, ...]
+    k_max: int
+    stop_after_rises: int
+    n_restarts: int
+    max_iter: int
+    tol: float
+    var_floor: float
+    engine: str = "compiled"
+
+    @classmethod
+    def from_mapping(cls, raw: Any, section: str = "ar_hmm") -> ArHmmSettings:
+        """Return the validated settings of config section ``section``.
+
+        Examples
+        --------
+        >>> raw = {"seed": 1, "ks": [2, 3], "k_max": 5, "stop_after_rises": 2,
+        ...        "n_restarts": 2, "max_iter": 50, "tol": 1e-6, "var_floor": 1e-6}
+        >>> ArHmmSettings.from_mapping(raw).ks
+        (2, 3)
+        >>> ArHmmSettings.from_mapping({**raw, "tol": 0})
+        Traceback (most recent call last):
+        ...
+        dtwin._validation.DtwinValueError: ar_hmm.tol must be > 0 (got 0.0)
+        """
+        if isinstance(raw, cls):
+            return raw
+        raw = section_keys(cls, raw, section)
+        engine = raw.get("engine", "compiled")
+        if engine not in _ENGINES:
+            raise DtwinValueError(
+                f"{section}.engine must be one of {', '.join(_ENGINES)} (got {engine!r})"
+            )
+        counts = {
+            key: _integer(f"{section}.{key}", raw[key], 1)
+            for key in ("k_max", "stop_after_rises", "n_restarts", "max_iter")
+        }
+        return cls(
+            seed=require_seed(f"{section}.seed", raw["seed"]),
+            ks=_integers(section, "ks", raw["ks"]),
+            **counts,
+            tol=require_positive(f"{section}.tol", raw["tol"]),
+            var_floor=require_positive(f"{section}.var_floor", raw["var_floor"]),
+            engine=engine,
+        )
+
+    def summary(self) -> dict[str, Any]:
+        """Return the settings as the sweep's ``summary.json`` records them (``engine`` left out).
+
+        Keys ``seed``, ``ks`` (a list), ``k_max``, ``stop_after_rises``, ``n_restarts``,
+        ``max_iter``, ``tol``, ``var_floor``.
+        """
+        values = asdict(self)
+        del values["engine"]
+        return {**values, "ks": list(self.ks)}

@@ -20,62 +20,16 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dtwin._validation import DtwinValueError, require_mapping, require_positive, require_seed
+from dtwin._validation import DtwinValueError
+from dtwin.config_sections import ArHmmSettings
 from dtwin.fault_injection import REGIMES, regime_features
-from dtwin.hmm import ENGINES, zscore
+from dtwin.hmm import zscore
 from dtwin.hmm_ar import ArHmmFit, ar_bic_by_k
 from dtwin.regime_matching import classification_scores, hungarian_map
 
-__all__ = ["AR_HMM_KEYS", "ar_hmm_options", "score_ar_fit", "ar_regime_sweep"]
+__all__ = ["score_ar_fit", "ar_regime_sweep"]
 
 logger = logging.getLogger(__name__)
-
-#: Keys of the ``ar_hmm`` config section.
-AR_HMM_KEYS: tuple[str, ...] = (
-    "seed",
-    "ks",
-    "k_max",
-    "stop_after_rises",
-    "n_restarts",
-    "max_iter",
-    "tol",
-    "var_floor",
-)
-
-
-def ar_hmm_options(ar_hmm: Any) -> dict[str, Any]:
-    """Return the ``ar_hmm`` section checked: every key of :data:`AR_HMM_KEYS`, typed.
-
-    An ``engine`` key (the rule passes ``hmm.engine``) chooses the EM engine; default
-    ``compiled``. It is not part of the returned settings, since it does not change them.
-
-    Examples
-    --------
-    >>> ar_hmm_options({"seed": 1, "ks": [2, 3], "k_max": 5, "stop_after_rises": 2,
-    ...                 "n_restarts": 2, "max_iter": 50, "tol": 1e-6, "var_floor": 1e-6})["ks"]
-    [2, 3]
-    """
-    section = require_mapping("ar_hmm", ar_hmm)
-    missing = [key for key in AR_HMM_KEYS if key not in section]
-    if missing:
-        raise DtwinValueError(f"ar_hmm is missing {', '.join(missing)}")
-    return {
-        "seed": require_seed("ar_hmm.seed", section["seed"]),
-        "ks": [int(k) for k in section["ks"]],
-        "k_max": int(section["k_max"]),
-        "stop_after_rises": int(section["stop_after_rises"]),
-        "n_restarts": int(section["n_restarts"]),
-        "max_iter": int(section["max_iter"]),
-        "tol": require_positive("ar_hmm.tol", section["tol"]),
-        "var_floor": require_positive("ar_hmm.var_floor", section["var_floor"]),
-    }
-
-
-def _ar_engine(ar_hmm: Any) -> str:
-    engine = ar_hmm.get("engine", "compiled")
-    if engine not in ENGINES:
-        raise DtwinValueError(f"ar_hmm.engine must be one of {', '.join(ENGINES)} (got {engine!r})")
-    return engine
 
 
 def score_ar_fit(fit: ArHmmFit, regimes: Any) -> dict[str, Any]:
@@ -112,7 +66,7 @@ def _state_dynamics(fit: ArHmmFit, mapping: Mapping[str, str], columns: list[str
 
 
 def ar_regime_sweep(
-    residuals: pd.DataFrame, ar_hmm: Mapping[str, Any], n_states: int
+    residuals: pd.DataFrame, ar_hmm: ArHmmSettings | Mapping[str, Any], n_states: int
 ) -> tuple[pd.DataFrame, dict[str, Any]]:
     """Fit the AR(1)-HMM for every K of the sweep to the fault features; score every K.
 
@@ -121,8 +75,8 @@ def ar_regime_sweep(
     residuals : DataFrame
         The fault scenario's residuals: ``regime`` and ``e0 … e4`` (``results/faults/
         residuals.csv``).
-    ar_hmm : mapping
-        The ``ar_hmm`` config section (:data:`AR_HMM_KEYS`).
+    ar_hmm : ArHmmSettings or mapping
+        The ``ar_hmm`` config section (:class:`dtwin.config_sections.ArHmmSettings`).
     n_states : int
         The paper's K (``hmm.n_states``, 4): the number of injected regimes, whose fit is
         described state by state.
@@ -135,7 +89,7 @@ def ar_regime_sweep(
         Viterbi path. ``summary``: settings, data size, ``k_star`` (BIC minimum),
         ``bracketed``, and at ``n_states`` the scores, mapping and per-state dynamics.
     """
-    options = ar_hmm_options(ar_hmm)
+    settings = ArHmmSettings.from_mapping(ar_hmm)
     if "regime" not in residuals:
         raise DtwinValueError(
             "residuals must have a 'regime' column (results/faults/residuals.csv)"
@@ -144,18 +98,18 @@ def ar_regime_sweep(
     regimes = residuals["regime"].to_numpy(dtype=str)
     X = zscore(features).values
     start = time.perf_counter()
-    ks = sorted(set(options["ks"]) | {int(n_states)})
+    ks = sorted(set(settings.ks) | {int(n_states)})
     sweep = ar_bic_by_k(
         X,
         ks,
-        n_restarts=options["n_restarts"],
-        seed=options["seed"],
-        k_max=options["k_max"],
-        stop_after_rises=options["stop_after_rises"],
-        max_iter=options["max_iter"],
-        tol=options["tol"],
-        var_floor=options["var_floor"],
-        engine=_ar_engine(ar_hmm),
+        n_restarts=settings.n_restarts,
+        seed=settings.seed,
+        k_max=settings.k_max,
+        stop_after_rises=settings.stop_after_rises,
+        max_iter=settings.max_iter,
+        tol=settings.tol,
+        var_floor=settings.var_floor,
+        engine=settings.engine,
     )
     scores = {k: score_ar_fit(fit, regimes) for k, fit in sweep.fits.items()}
     table = sweep.table.copy()
@@ -170,7 +124,7 @@ def ar_regime_sweep(
     )
     fit = sweep.fits[int(n_states)]
     summary = {
-        "settings": options,
+        "settings": settings.summary(),
         "dataset": "fault_features",
         "features": list(features.columns),
         "n_samples": len(X),

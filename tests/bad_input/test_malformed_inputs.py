@@ -348,7 +348,7 @@ def parse_with_the_library(config: dict) -> None:
     from dtwin.arx import arx_orders_from_mapping
     from dtwin.bias_correction import exponential_moving_average, rate_limit
     from dtwin.command import n_steps_for
-    from dtwin.config_sections import HmmSettings
+    from dtwin.config_sections import ArHmmSettings, HmmSettings
     from dtwin.fault_injection import fault_schedule
     from dtwin.gap import GapSettings
     from dtwin.residual_stats import white_noise_band
@@ -364,6 +364,7 @@ def parse_with_the_library(config: dict) -> None:
     arx_orders_from_mapping(config["arx"])
     white_noise_band(config["acf"]["white_noise_n"])
     HmmSettings.from_mapping(config["hmm"])
+    ArHmmSettings.from_mapping({**config["ar_hmm"], "engine": config["hmm"]["engine"]})
     HmmSettings.from_mapping(
         {**config["hmm"], **config["bic"], "n_states": max(config["bic"]["ks"])}, "bic"
     )

@@ -6,10 +6,20 @@ from __future__ import annotations
 import pytest
 
 from dtwin._validation import DtwinTypeError, DtwinValueError
-from dtwin.config_sections import AcfSettings, CorrectionSettings, SimulationSettings
+from dtwin.config_sections import (
+    AcfSettings,
+    ArHmmSettings,
+    CorrectionSettings,
+    SimulationSettings,
+)
 from dtwin.params import ALGEBRAIC_SECTIONS, twin_params_from_mapping
 
-SECTIONS = {"simulation": SimulationSettings, "acf": AcfSettings, "correction": CorrectionSettings}
+SECTIONS = {
+    "simulation": SimulationSettings,
+    "acf": AcfSettings,
+    "correction": CorrectionSettings,
+    "ar_hmm": ArHmmSettings,
+}
 
 
 @pytest.mark.parametrize("section", sorted(SECTIONS))
@@ -47,6 +57,10 @@ def test_the_sweep_shapings_parse_as_correction_settings(config):
             r"correction.ema_alpha must be in \(0, 1\]",
         ),
         ("correction", "rate_max", -0.1, DtwinValueError, "correction.rate_max must be >= 0"),
+        ("ar_hmm", "ks", [2, 0], DtwinValueError, "ar_hmm.ks must be an integer >= 1"),
+        ("ar_hmm", "k_max", 2.5, DtwinValueError, "ar_hmm.k_max must be an integer >= 1"),
+        ("ar_hmm", "var_floor", 0, DtwinValueError, "ar_hmm.var_floor must be > 0"),
+        ("ar_hmm", "engine", "r", DtwinValueError, "ar_hmm.engine must be one of compiled"),
     ],
 )
 def test_a_bad_value_names_its_key(config, section, key, value, error, message):

@@ -49,7 +49,7 @@ def test_the_sweep_scores_every_k_and_counts_three_parameters_per_state_and_feat
 
 
 def test_a_missing_key_or_regime_column_is_one_clear_error():
-    with pytest.raises(DtwinValueError, match="ar_hmm is missing seed"):
+    with pytest.raises(DtwinValueError, match=r"ar_hmm is missing key\(s\): seed"):
         ar_regime_sweep(_residuals(), {k: v for k, v in SETTINGS.items() if k != "seed"}, 4)
     with pytest.raises(DtwinValueError, match="'regime' column"):
         ar_regime_sweep(_residuals().drop(columns="regime"), SETTINGS, 4)
