@@ -15,7 +15,7 @@ the key (``correction.ema_alpha must be in (0, 1] (got 1.3)``). The bounds are t
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import MISSING, asdict, dataclass, fields
 from typing import Any
 
@@ -28,6 +28,7 @@ from dtwin._validation import (
     require_positive,
     require_seed,
 )
+from dtwin.sensitivity_sweep import CORRECTION_METHODS, SweepPoint, sweep_grid
 
 __all__ = [
     "EmSettings",
@@ -37,6 +38,11 @@ __all__ = [
     "CorrectionSettings",
     "BicSettings",
     "ArHmmSettings",
+    "SweepPointSettings",
+    "SensitivitySettings",
+    "DrawBicSettings",
+    "DrawsSettings",
+    "require_keys",
     "section_keys",
 ]
 
@@ -57,6 +63,14 @@ def _integer(name: str, value: Any, minimum: int) -> int:
 
 def _optional_integer(name: str, value: Any, minimum: int) -> int | None:
     return None if value is None else _integer(name, value, minimum)
+
+
+def _open_unit(name: str, value: Any) -> float:
+    """Return ``value`` as a float in (0, 1), else raise naming config key ``name``."""
+    number = require_number(name, value)
+    if not 0 < number < 1:
+        raise DtwinValueError(f"{name} must be in (0, 1) (got {number})")
+    return number
 
 
 def _integers(section: str, key: str, value: Any) -> tuple[int, ...]:
@@ -174,29 +188,61 @@ class HmmSettings:
         """Return the keyword arguments of :func:`dtwin.hmm.fit_hmm` but ``seed``."""
         return {"n_restarts": self.n_restarts, **self.em.options()}
 
+    def summary(self) -> dict[str, Any]:
+        """Return the settings as a figure's JSON records them, in the config's key order.
 
-def section_keys(cls: type, raw: Any, section: str) -> Mapping[str, Any]:
-    """Return ``raw`` once it is a mapping holding the fields of dataclass ``cls`` and no other.
+        ``n_states``, ``n_restarts``, ``max_iter``, ``tol``, ``var_floor``, ``start``; the
+        engine is left out (both engines fit the same equations).
+        """
+        options = {k: v for k, v in self.em.options().items() if k != "engine"}
+        return {"n_states": self.n_states, "n_restarts": self.n_restarts, **options}
 
-    Fields with a default may be left out.
+
+def require_keys(
+    section: str,
+    raw: Any,
+    required: Sequence[str],
+    optional: Sequence[str] = (),
+    *,
+    others: bool = False,
+) -> Mapping[str, Any]:
+    """Return ``raw`` once it is a mapping holding every key of ``required``.
+
+    Keys of ``optional`` may be left out; any other key is an error unless ``others``.
 
     Raises
     ------
     DtwinTypeError
         If ``raw`` is not a mapping.
     DtwinValueError
-        If a field is missing or a key is not a field (both named with ``section``).
+        If a key is missing or unknown (both named with ``section``).
+
+    Examples
+    --------
+    >>> require_keys("bic", {"ks": [2], "typo": 1}, ("ks",))
+    Traceback (most recent call last):
+    ...
+    dtwin._validation.DtwinValueError: bic has unknown key(s): typo
     """
     raw = require_mapping(section, raw)
-    names = [field.name for field in fields(cls)]
-    required = [f.name for f in fields(cls) if f.default is MISSING]
     missing = [name for name in required if name not in raw]
     if missing:
         raise DtwinValueError(f"{section} is missing key(s): {', '.join(missing)}")
-    unknown = sorted(str(key) for key in raw if key not in names)
-    if unknown:
+    known = {*required, *optional}
+    unknown = sorted(str(key) for key in raw if key not in known)
+    if unknown and not others:
         raise DtwinValueError(f"{section} has unknown key(s): {', '.join(unknown)}")
     return raw
+
+
+def section_keys(cls: type, raw: Any, section: str) -> Mapping[str, Any]:
+    """Return ``raw`` once it is a mapping holding the fields of dataclass ``cls`` and no other.
+
+    Fields with a default may be left out (:func:`require_keys`).
+    """
+    required = [f.name for f in fields(cls) if f.default is MISSING]
+    optional = [f.name for f in fields(cls) if f.default is not MISSING]
+    return require_keys(section, raw, required, optional)
 
 
 @dataclass(frozen=True)
@@ -277,15 +323,12 @@ class AcfSettings:
         if isinstance(raw, cls):
             return raw
         raw = section_keys(cls, raw, section)
-        significance = require_number(f"{section}.significance", raw["significance"])
-        if not 0 < significance < 1:
-            raise DtwinValueError(f"{section}.significance must be in (0, 1) (got {significance})")
         return cls(
             nlags=_integer(f"{section}.nlags", raw["nlags"], 1),
             white_noise_n=_integer(f"{section}.white_noise_n", raw["white_noise_n"], 10),
             white_noise_seed=require_seed(f"{section}.white_noise_seed", raw["white_noise_seed"]),
             ljungbox_lags=_integers(section, "ljungbox_lags", raw["ljungbox_lags"]),
-            significance=significance,
+            significance=_open_unit(f"{section}.significance", raw["significance"]),
             strong_lag1=require_in_range(f"{section}.strong_lag1", raw["strong_lag1"], -1, 1),
         )
 
@@ -483,3 +526,243 @@ class ArHmmSettings:
         values = asdict(self)
         del values["engine"]
         return {**values, "ks": list(self.ks)}
+
+
+def _flag(name: str, value: Any) -> bool:
+    """Return ``value`` if it is a bool, else raise naming config key ``name``."""
+    if not isinstance(value, bool):
+        raise DtwinValueError(f"{name} must be true or false (got {value!r})")
+    return value
+
+
+@dataclass(frozen=True)
+class SweepPointSettings:
+    """What one point of the sensitivity sweep reads of section ``sensitivity`` (paper §5).
+
+    The rule of a sweep chunk passes these keys only (a change of the grid, the figure's
+    method or its interval reruns no point); the whole section parses as well (its other keys
+    are ignored here: :class:`SensitivitySettings` checks them).
+
+    Attributes
+    ----------
+    seed : int
+        Seed of the EM starts of replicate 0 (``sensitivity.seed``).
+    hmm : HmmSettings
+        The HMM of every sweep fit (``sensitivity.hmm``).
+    code, paper : CorrectionSettings
+        The two shapings of the correction (``sensitivity.correction.code``, ``.paper``).
+    r_signals : bool
+        Also run each point on R's seed-11 signals (``sensitivity.r_signals``).
+    """
+
+    seed: int
+    hmm: HmmSettings
+    code: CorrectionSettings
+    paper: CorrectionSettings
+    r_signals: bool
+
+    @classmethod
+    def from_mapping(cls, raw: Any, section: str = "sensitivity") -> SweepPointSettings:
+        """Return the validated settings of a sweep point from config section ``section``.
+
+        Examples
+        --------
+        >>> shaping = {"kappa": 0.6, "ema_alpha": 0.15, "rate_max": 5e-4}
+        >>> raw = {"seed": 11, "hmm": {"n_states": 4}, "r_signals": False,
+        ...        "correction": {"code": shaping, "paper": shaping}}
+        >>> SweepPointSettings.from_mapping(raw).hmm.n_states
+        4
+        >>> SweepPointSettings.from_mapping({**raw, "correction": {"code": shaping}})
+        Traceback (most recent call last):
+        ...
+        dtwin._validation.DtwinValueError: sensitivity.correction is missing key(s): paper
+        """
+        if isinstance(raw, cls):
+            return raw
+        raw = require_keys(section, raw, _POINT_KEYS, others=True)
+        correction = require_keys(
+            f"{section}.correction", raw["correction"], CORRECTION_METHODS, others=True
+        )
+        code, paper = (
+            CorrectionSettings.from_mapping(correction[m], f"{section}.correction.{m}")
+            for m in CORRECTION_METHODS
+        )
+        return cls(
+            seed=require_seed(f"{section}.seed", raw["seed"]),
+            hmm=HmmSettings.from_mapping(raw["hmm"], f"{section}.hmm"),
+            code=code,
+            paper=paper,
+            r_signals=_flag(f"{section}.r_signals", raw["r_signals"]),
+        )
+
+
+#: Keys of section ``sensitivity`` that one point of the sweep reads, and those of its grid.
+_POINT_KEYS = ("seed", "hmm", "correction", "r_signals")
+_GRID_KEYS = ("alphas", "sensor_A_mults", "sensor_B_mults", "n_replicates")
+
+
+@dataclass(frozen=True)
+class SensitivitySettings:
+    """The ``sensitivity`` section: the sweep of Fig. 11 (paper §5).
+
+    Attributes
+    ----------
+    alphas : tuple of float
+        Fusion weights on sensor A, each in [0, 1].
+    sensor_A_mults, sensor_B_mults : tuple of float
+        Multipliers (>= 0) of the sensors' noise standard deviations.
+    n_replicates : int
+        Replicates of every configuration (>= 1).
+    method : str
+        The correction the figure's first panel and the claims show: ``code`` or ``paper``.
+    interval : float
+        Probability mass of the central interval over replicates drawn, in (0, 1).
+    point : SweepPointSettings
+        What every point of the sweep reads (seed, HMM, both shapings, ``r_signals``).
+    """
+
+    alphas: tuple[float, ...]
+    sensor_A_mults: tuple[float, ...]
+    sensor_B_mults: tuple[float, ...]
+    n_replicates: int
+    method: str
+    interval: float
+    point: SweepPointSettings
+
+    @classmethod
+    def from_mapping(cls, raw: Any, section: str = "sensitivity") -> SensitivitySettings:
+        """Return the validated settings of config section ``section``.
+
+        The grid is checked as :func:`dtwin.sensitivity_sweep.sweep_grid` checks it.
+
+        Examples
+        --------
+        >>> shaping = {"kappa": 0.6, "ema_alpha": 0.15, "rate_max": 5e-4}
+        >>> raw = {"alphas": [0.2, 0.8], "sensor_A_mults": [1.0], "sensor_B_mults": [1.0],
+        ...        "n_replicates": 1, "seed": 11, "hmm": {"n_states": 4}, "interval": 0.9,
+        ...        "r_signals": False,
+        ...        "correction": {"method": "code", "code": shaping, "paper": shaping}}
+        >>> SensitivitySettings.from_mapping(raw).alphas
+        (0.2, 0.8)
+        >>> SensitivitySettings.from_mapping({**raw, "alphas": [0.2, 1.2]})
+        Traceback (most recent call last):
+        ...
+        dtwin._validation.DtwinValueError: sensitivity.alphas[1] must be in [0, 1] (got 1.2)
+        """
+        if isinstance(raw, cls):
+            return raw
+        raw = require_keys(section, raw, (*_GRID_KEYS, "interval", *_POINT_KEYS))
+        correction = require_keys(
+            f"{section}.correction", raw["correction"], ("method", *CORRECTION_METHODS)
+        )
+        method = correction["method"]
+        if method not in CORRECTION_METHODS:
+            raise DtwinValueError(
+                f"{section}.correction.method must be one of {', '.join(CORRECTION_METHODS)} "
+                f"(got {method!r})"
+            )
+        sweep_grid(*(raw[key] for key in _GRID_KEYS))  # checks the grid, naming the key
+        return cls(
+            alphas=tuple(float(value) for value in raw["alphas"]),
+            sensor_A_mults=tuple(float(value) for value in raw["sensor_A_mults"]),
+            sensor_B_mults=tuple(float(value) for value in raw["sensor_B_mults"]),
+            n_replicates=int(raw["n_replicates"]),
+            method=method,
+            interval=_open_unit(f"{section}.interval", raw["interval"]),
+            point=SweepPointSettings.from_mapping(raw, section),
+        )
+
+    def grid(self) -> list[SweepPoint]:
+        """Return every point of the sweep (:func:`dtwin.sensitivity_sweep.sweep_grid`)."""
+        return sweep_grid(self.alphas, self.sensor_A_mults, self.sensor_B_mults, self.n_replicates)
+
+
+@dataclass(frozen=True)
+class DrawBicSettings:
+    """Section ``draws.bic``: K* on the first draws (Fig. 12, Fig. 9's claims across draws).
+
+    Attributes
+    ----------
+    n_draws : int
+        Draws ``0 … n_draws − 1`` get a BIC sweep (>= 0; at most ``draws.n_draws``).
+    n_restarts : int
+        EM starts per K of each draw's sweep (>= 1).
+    max_restarts : int
+        Starts of a K are doubled while unstable, up to this (>= 1), as ``bic.max_restarts``.
+    chunk_size : int
+        Draws per job of the BIC sweeps (>= 1).
+    """
+
+    n_draws: int
+    n_restarts: int
+    max_restarts: int
+    chunk_size: int
+
+    @classmethod
+    def from_mapping(cls, raw: Any, section: str = "draws.bic") -> DrawBicSettings:
+        """Return the validated settings of config section ``section``.
+
+        Examples
+        --------
+        >>> DrawBicSettings.from_mapping(
+        ...     {"n_draws": 10, "n_restarts": 4, "max_restarts": 32, "chunk_size": 5}
+        ... ).n_draws
+        10
+        """
+        if isinstance(raw, cls):
+            return raw
+        raw = section_keys(cls, raw, section)
+        return cls(
+            n_draws=_integer(f"{section}.n_draws", raw["n_draws"], 0),
+            **{
+                key: _integer(f"{section}.{key}", raw[key], 1)
+                for key in ("n_restarts", "max_restarts", "chunk_size")
+            },
+        )
+
+
+@dataclass(frozen=True)
+class DrawsSettings:
+    """The ``draws`` section: the paper's single-draw claims on N random draws (Fig. 12).
+
+    Attributes
+    ----------
+    n_draws : int
+        Random draws (>= 1); draw 0 uses the configured seeds.
+    chunk_size : int
+        Draws per job (>= 1).
+    interval : float
+        Level of the Wilson interval of each claim's share of draws, in (0, 1).
+    bic : DrawBicSettings
+        K* on the first draws (``draws.bic``).
+    """
+
+    n_draws: int
+    chunk_size: int
+    interval: float
+    bic: DrawBicSettings
+
+    @classmethod
+    def from_mapping(cls, raw: Any, section: str = "draws") -> DrawsSettings:
+        """Return the validated settings of config section ``section``.
+
+        Examples
+        --------
+        >>> bic = {"n_draws": 10, "n_restarts": 4, "max_restarts": 32, "chunk_size": 5}
+        >>> raw = {"n_draws": 20, "chunk_size": 10, "interval": 0.95, "bic": bic}
+        >>> DrawsSettings.from_mapping(raw).bic.n_restarts
+        4
+        >>> DrawsSettings.from_mapping({**raw, "interval": 95})
+        Traceback (most recent call last):
+        ...
+        dtwin._validation.DtwinValueError: draws.interval must be in (0, 1) (got 95.0)
+        """
+        if isinstance(raw, cls):
+            return raw
+        raw = section_keys(cls, raw, section)
+        return cls(
+            n_draws=_integer(f"{section}.n_draws", raw["n_draws"], 1),
+            chunk_size=_integer(f"{section}.chunk_size", raw["chunk_size"], 1),
+            interval=_open_unit(f"{section}.interval", raw["interval"]),
+            bic=DrawBicSettings.from_mapping(raw["bic"], f"{section}.bic"),
+        )

@@ -4,7 +4,7 @@ Input   results/bic_sweep.csv, results/bic/r_signals.csv (the sweep on R's own s
         config/reference/{bic_vs_K_6ch_nofault_singlefit_rerun,
         bic_vs_K_10feat_faulted_multistart5}.csv, r_numbers.yaml
 Output  paper_figures/fig09_bic.{png,pdf,json}
-Params  bic (ks, n_restarts)
+Params  bic (the section: n_restarts is reported, k_max named in a note)
 """
 
 from dtwin._script import start_rule
@@ -14,6 +14,7 @@ start_rule(snakemake)
 import pandas as pd
 
 from dtwin.artifacts import load_yaml
+from dtwin.config_sections import BicSettings
 from dtwin.figures._style import publish_artifact
 from dtwin.figures.fig09_bic import fig09_bic
 from dtwin.reference.bic_crosscheck import crosscheck_bic_formula
@@ -26,7 +27,7 @@ artifact = fig09_bic(
     pd.read_csv(inputs.table),
     r_tables,
     crosscheck_bic_formula(r_tables, r_log_likelihood),
-    snakemake.params.bic,
+    BicSettings.from_mapping(snakemake.params.bic),
     pd.read_csv(inputs.r_signals),
 )
 publish_artifact(artifact, [snakemake.output.png, snakemake.output.pdf], snakemake.output.json)

@@ -13,15 +13,15 @@ from dtwin._script import start_rule
 start_rule(snakemake)
 
 from dtwin.artifacts import write_csv
+from dtwin.config_sections import SensitivitySettings
 from dtwin.figures._style import publish_artifact
 from dtwin.figures.fig11_sensitivity import fig11_sensitivity
 from dtwin.reference.loaders import load_r_sweep
-from dtwin.sensitivity_sweep import read_sweep_rows, summarize_sweep, sweep_grid, sweep_table
+from dtwin.sensitivity_sweep import read_sweep_rows, summarize_sweep, sweep_table
 
-s = snakemake.params.sensitivity
-grid = sweep_grid(s["alphas"], s["sensor_A_mults"], s["sensor_B_mults"], s["n_replicates"])
-table = sweep_table(read_sweep_rows(snakemake.input.runs), grid)
-summary = summarize_sweep(table, s["interval"])
+s = SensitivitySettings.from_mapping(snakemake.params.sensitivity)
+table = sweep_table(read_sweep_rows(snakemake.input.runs), s.grid())
+summary = summarize_sweep(table, s.interval)
 write_csv(table, snakemake.output.runs)
 write_csv(summary, snakemake.output.summary)
 artifact = fig11_sensitivity(table, summary, load_r_sweep(snakemake.input.r_sweep), s)

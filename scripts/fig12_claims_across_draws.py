@@ -22,6 +22,7 @@ from pathlib import Path
 import pandas as pd
 
 from dtwin.artifacts import load_yaml, write_csv
+from dtwin.config_sections import DrawsSettings
 from dtwin.figures._style import publish_artifact
 from dtwin.figures.fig12_claims_across_draws import (
     BicDraws,
@@ -35,7 +36,7 @@ from dtwin.reference.loaders import (
     load_r_fault_scenario,
 )
 
-inputs, draws = snakemake.input, snakemake.params.draws
+inputs, draws = snakemake.input, DrawsSettings.from_mapping(snakemake.params.draws)
 r_physics, _, _ = load_r_faulted_twin(inputs.r_pipeline)
 r_residuals, _ = load_r_fault_scenario(inputs.r_pipeline)
 r_values = r_draw_values(
@@ -53,8 +54,8 @@ bic = BicDraws(
 )
 artifact, table, k_star = fig12_claims_across_draws(
     [json.loads(Path(p).read_text()) for p in inputs.chunks],
-    draws["n_draws"],
-    draws["interval"],
+    draws.n_draws,
+    draws.interval,
     r_values,
     bic,
 )

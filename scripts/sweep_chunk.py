@@ -16,13 +16,15 @@ from dtwin._script import start_rule
 start_rule(snakemake)
 
 from dtwin.artifacts import write_json
+from dtwin.config_sections import SweepPointSettings
 from dtwin.reference.loaders import load_r_physics
 from dtwin.sensitivity_sweep import SweepPoint
 from dtwin.stages.sensitivity import sweep_point, sweep_point_on_r_signals
 
 p = snakemake.params
-sections = {"twin": p.twin, "arx": p.arx, "sensitivity": p.sensitivity}
-r_physics = load_r_physics(snakemake.input.r_pipeline)[0] if p.sensitivity["r_signals"] else None
+sweep = SweepPointSettings.from_mapping(p.sensitivity)
+sections = {"twin": p.twin, "arx": p.arx, "sensitivity": sweep}
+r_physics = load_r_physics(snakemake.input.r_pipeline)[0] if sweep.r_signals else None
 points, rows = [SweepPoint(**values) for values in p.points], []
 for point in points:
     runs = [sweep_point(point, simulation=p.simulation, command=p.command, **sections)]

@@ -11,6 +11,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
+from dtwin.config_sections import BicSettings
 from dtwin.figures._style import OURS_COLOR, R_COLOR, new_figure, panel_title, unitless
 from dtwin.reference.crosscheck_result import CrosscheckResult
 
@@ -214,7 +215,7 @@ def fig09_bic(
     table: pd.DataFrame,
     r_tables: Mapping[str, pd.DataFrame],
     crosscheck: CrosscheckResult,
-    bic: Mapping[str, Any],
+    bic: BicSettings,
     r_signals: pd.DataFrame | None = None,
 ) -> FigureArtifact:
     """Paper Fig. 9 with the BIC minima beside the paper's K = 8 and a formula crosscheck.
@@ -227,8 +228,8 @@ def fig09_bic(
         R's BIC by K per data set (:func:`dtwin.reference.loaders.load_r_bic`).
     crosscheck : CrosscheckResult
         :func:`dtwin.reference.bic_crosscheck.crosscheck_bic_formula`.
-    bic : mapping
-        The ``bic`` config section (``n_restarts`` is reported).
+    bic : BicSettings
+        The ``bic`` config section (``n_restarts`` is reported, ``k_max`` named in a note).
     r_signals : DataFrame, optional
         ``results/bic/r_signals.csv``: the same sweep on R's own seed-11 signals
         (:func:`dtwin.stages.regimes.bic_r_signals`); where its minimum is not at
@@ -277,7 +278,7 @@ def fig09_bic(
         )
     metrics = {
         "ks": sorted(set(table["K"].tolist())),
-        "n_restarts": bic["n_restarts"],
+        "n_restarts": bic.n_restarts,
         "bic_minimum_k": minima,
         "r_bic_minimum_k": r_minima,
         "r_bic_minimum": r_min_values,
@@ -296,7 +297,7 @@ def fig09_bic(
     }
     falling, max_k = metrics["still_decreasing_at_max_k"], max(metrics["ks"])
     checks = _with_causes(checks, falling, max_k, r_minima, bic, metrics["r_signals"])
-    figure = plot_bic(table, r_tables, bic["n_restarts"], _figure_causes(checks))
+    figure = plot_bic(table, r_tables, bic.n_restarts, _figure_causes(checks))
     return FigureArtifact(
         "fig09_bic",
         figure,
@@ -339,7 +340,7 @@ def _with_causes(
     falling: Mapping[str, bool],
     max_k: int,
     r_minima: Mapping[str, int],
-    bic: Mapping[str, Any],
+    bic: BicSettings,
     on_r_signals: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> list[Check]:
     """Give every failed claim and target of the sweep its cause (edge, interior, targets)."""
@@ -469,7 +470,7 @@ def _interior_caption(checks: Sequence[Check]) -> str:
     return f"Minimum at {where}, not the paper's K = {PAPER_K_MIN}: {', '.join(causes)}. "
 
 
-def _with_target_note(check: Check, bic: Mapping[str, Any]) -> Check:
+def _with_target_note(check: Check, bic: BicSettings) -> Check:
     """Give the sweep's failed project targets (bracket, start stability) their cause."""
     if check.passed or check.note is not None or not isinstance(check.observed, Mapping):
         return check
@@ -478,7 +479,7 @@ def _with_target_note(check: Check, bic: Mapping[str, Any]) -> Check:
         where = ", ".join(f"{n.replace('_', ' ')} K = {o['k_min']}" for n, o in edge.items())
         note = (
             f"sweep range: the minimum ({where}) sits at the last two K fitted, so the BIC "
-            f"could not rise twice after it before bic.k_max = {bic.get('k_max')}"
+            f"could not rise twice after it before bic.k_max = {bic.k_max}"
         )
     elif check.id == "best_loglik_stable_in_starts":
         worst = max(check.observed.items(), key=lambda item: item[1]["max_gain"])

@@ -19,6 +19,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
+from dtwin.config_sections import SensitivitySettings
 from dtwin.figures._fig11_claims import (
     GRID,
     PAPER_RANGE_PCT,
@@ -268,7 +269,7 @@ def fig11_sensitivity(
     table: pd.DataFrame,
     summary: pd.DataFrame,
     r_sweep: pd.DataFrame,
-    sensitivity: Mapping[str, Any],
+    sensitivity: SensitivitySettings,
 ) -> FigureArtifact:
     """Paper Fig. 11 with every configuration beside R's, the §5 claims and the R crosscheck.
 
@@ -280,8 +281,8 @@ def fig11_sensitivity(
         :func:`dtwin.sensitivity_sweep.summarize_sweep` of ``table``.
     r_sweep : DataFrame
         R's re-run (:func:`dtwin.reference.loaders.load_r_sweep`).
-    sensitivity : mapping
-        The ``sensitivity`` config section (grid, ``correction.method``, ``interval``, ...).
+    sensitivity : SensitivitySettings
+        The ``sensitivity`` config section (grid, correction ``method``, ``interval``, ...).
 
     Notes
     -----
@@ -289,16 +290,16 @@ def fig11_sensitivity(
     judge them again on each replicate alone (:func:`claims_across_replicates`), which the
     claims rule reports as "holds in k of R replicates".
     """
-    method = sensitivity["correction"]["method"]
+    method = sensitivity.method
     methods = [method, *(m for m in ("code", "paper") if m != method)]
-    interval = sensitivity["interval"]
+    interval = sensitivity.interval
     figure = plot_sensitivity(summary, r_sweep, methods, interval)
     trends = alpha_trends(table)
     numbers = _claim_numbers(summary, trends, r_sweep, methods)
     grid = {
-        "alpha": list(sensitivity["alphas"]),
-        "m_A": list(sensitivity["sensor_A_mults"]),
-        "m_B": list(sensitivity["sensor_B_mults"]),
+        "alpha": list(sensitivity.alphas),
+        "m_A": list(sensitivity.sensor_A_mults),
+        "m_B": list(sensitivity.sensor_B_mults),
     }
     ours_runs = table[table["source"] == "ours"]
     e1_spread = ours_runs.groupby("replicate")["rmse_e1_before"].agg(
@@ -328,9 +329,13 @@ def fig11_sensitivity(
         checks += crosscheck.checks
         crosscheck_metrics = crosscheck.metrics
     metrics = {
-        "grid": {**grid, "n_replicates": int(sensitivity["n_replicates"])},
-        "hmm": dict(sensitivity["hmm"]),
-        "correction": dict(sensitivity["correction"]),
+        "grid": {**grid, "n_replicates": sensitivity.n_replicates},
+        "hmm": sensitivity.point.hmm.summary(),
+        "correction": {
+            "method": method,
+            "code": sensitivity.point.code.options(),
+            "paper": sensitivity.point.paper.options(),
+        },
         "interval": interval,
         "n_runs": int(len(ours_runs) // len(methods)),
         "hmm_converged_frac": float(ours_runs["converged"].mean()),
@@ -341,16 +346,15 @@ def fig11_sensitivity(
         REPLICATES_METRIC: claims_across_replicates(table, method, grid["alpha"], grid),
     }
     mode = _modes(summary[(summary["source"] == "ours") & (summary["method"] == method)])
-    checks = _with_notes(
-        checks, mode, int(sensitivity["hmm"]["n_restarts"]), sensitivity["hmm"].get("start")
-    )
+    hmm = sensitivity.point.hmm
+    checks = _with_notes(checks, mode, hmm.n_restarts, hmm.em.start)
     return FigureArtifact(
         "fig11_sensitivity",
         figure,
         metrics,
         checks,
         paper_figure="Fig. 11",
-        caption=_caption(mode, int(sensitivity["n_replicates"])),
+        caption=_caption(mode, sensitivity.n_replicates),
         provenance=PROVENANCE,
     )
 

@@ -11,25 +11,21 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import replace
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from dtwin._validation import (
-    DtwinValueError,
     require_in_range,
-    require_mapping,
     require_nonnegative,
-    require_seed,
 )
 from dtwin.bias_correction import correct_bias, correct_plant_bias_viterbi
-from dtwin.config_sections import CorrectionSettings, HmmSettings, SimulationSettings
+from dtwin.config_sections import SimulationSettings, SweepPointSettings
 from dtwin.hmm import fit_hmm, zscore
 from dtwin.params import TwinParams, twin_params_from_mapping
 from dtwin.physics import fuse, sensor_first_order
 from dtwin.sensitivity_sweep import (
-    CORRECTION_METHODS,
     CorrectionScore,
     SweepPoint,
     SweepRun,
@@ -103,15 +99,6 @@ def _score(method: str, residuals: np.ndarray, e1_after: np.ndarray) -> Correcti
     )
 
 
-class _SweepSettings(NamedTuple):
-    """What one point reads of the ``sensitivity`` section: EM seed, HMM, both shapings."""
-
-    seed: int
-    hmm: HmmSettings
-    code: CorrectionSettings
-    paper: CorrectionSettings
-
-
 def _evaluate(
     physics: pd.DataFrame,
     point: SweepPoint,
@@ -120,7 +107,7 @@ def _evaluate(
     hmm_seed: int,
     twin: TwinParams,
     arx: Mapping[str, Any],
-    sweep: _SweepSettings,
+    sweep: SweepPointSettings,
 ) -> SweepRun:
     """Refit the surrogates and the HMM on ``physics`` and score both corrections."""
     surrogate, residual_table = roll_out_twin(
@@ -160,21 +147,6 @@ def _evaluate(
     )
 
 
-def _require_sections(sensitivity: Mapping[str, Any]) -> _SweepSettings:
-    sensitivity = require_mapping("sensitivity", sensitivity)
-    hmm = HmmSettings.from_mapping(sensitivity["hmm"], "sensitivity.hmm")
-    correction = require_mapping("sensitivity.correction", sensitivity["correction"])
-    missing = [m for m in CORRECTION_METHODS if m not in correction]
-    if missing:
-        raise DtwinValueError(f"sensitivity.correction is missing method(s) {', '.join(missing)}")
-    code, paper = (
-        CorrectionSettings.from_mapping(correction[m], f"sensitivity.correction.{m}")
-        for m in CORRECTION_METHODS
-    )
-    seed = require_seed("sensitivity.seed", sensitivity["seed"])
-    return _SweepSettings(seed, hmm, code, paper)
-
-
 def sweep_point(
     point: SweepPoint,
     *,
@@ -182,7 +154,7 @@ def sweep_point(
     command: Mapping[str, Any],
     twin: TwinParams | Mapping[str, Any],
     arx: Mapping[str, Any],
-    sensitivity: Mapping[str, Any],
+    sensitivity: SweepPointSettings | Mapping[str, Any],
 ) -> SweepRun:
     """Run one configuration and replicate of the sweep on our own simulation.
 
@@ -192,10 +164,9 @@ def sweep_point(
     simulation, command, twin, arx : mapping
         The config sections of the same names (the twin's fusion weight and sensor noise are
         overridden by the point, :func:`scale_twin`).
-    sensitivity : mapping
-        ``seed`` (EM seed of replicate 0), ``hmm`` (``n_states``, ``n_restarts``,
-        ``max_iter``, ``tol``, ``var_floor``: :class:`dtwin.config_sections.HmmSettings`) and
-        ``correction`` (``code`` and ``paper``, each ``kappa``, ``ema_alpha``, ``rate_max``).
+    sensitivity : SweepPointSettings or mapping
+        The ``sensitivity`` section's ``seed`` (EM seed of replicate 0), ``hmm`` and
+        ``correction`` (``code`` and ``paper``): :class:`dtwin.config_sections.SweepPointSettings`.
 
     Returns
     -------
@@ -209,7 +180,7 @@ def sweep_point(
     the training window, roll the chain out, z-score ``e0 … e4``, fit the HMM (best of
     ``n_restarts`` EM starts) and score both corrections of ``e1`` (Eq. (27)).
     """
-    sweep = _require_sections(sensitivity)
+    sweep = SweepPointSettings.from_mapping(sensitivity)
     simulation = SimulationSettings.from_mapping(simulation)
     physics_seed = replicate_seed(simulation.seed, point.replicate)
     hmm_seed = replicate_seed(sweep.seed, point.replicate)
@@ -224,7 +195,7 @@ def sweep_point_on_r_signals(
     *,
     twin: TwinParams | Mapping[str, Any],
     arx: Mapping[str, Any],
-    sensitivity: Mapping[str, Any],
+    sensitivity: SweepPointSettings | Mapping[str, Any],
 ) -> SweepRun:
     """Run one configuration on R's own seed-11 signals (:func:`r_sweep_physics`).
 
@@ -233,7 +204,7 @@ def sweep_point_on_r_signals(
     replicates on R's signals differ in the EM starts alone. Returns ``source =
     "r_signals"``, ``physics_seed = None``.
     """
-    sweep = _require_sections(sensitivity)
+    sweep = SweepPointSettings.from_mapping(sensitivity)
     hmm_seed = replicate_seed(sweep.seed, point.replicate)
     scaled = scale_twin(twin, point.alpha, point.m_A, point.m_B)
     physics = r_sweep_physics(r_physics, scaled, point.alpha, point.m_A, point.m_B)

@@ -339,46 +339,33 @@ def leaf_paths(node, prefix=()):
 
 
 def parse_with_the_library(config: dict) -> None:
-    """Parse every config section with the library's own checks, as the stage scripts do.
-
-    ``acf`` and ``bic`` have no parser of their own (their values go straight into
-    statsmodels and the K sweep); their numbers are checked through the functions they feed.
-    """
+    """Parse every config section with the library's own checks, as the stage scripts do."""
+    from dtwin import config_sections as sections
     from dtwin._validation import require_seed
     from dtwin.arx import arx_orders_from_mapping
-    from dtwin.bias_correction import exponential_moving_average, rate_limit
     from dtwin.command import n_steps_for
-    from dtwin.config_sections import ArHmmSettings, HmmSettings
     from dtwin.fault_injection import fault_schedule
     from dtwin.gap import GapSettings
     from dtwin.residual_stats import white_noise_band
-    from dtwin.sensitivity_sweep import sweep_grid
     from dtwin.stages.decisions import mcda_settings_from_mapping
     from dtwin.stages.faults import fault_magnitudes
 
     twin = twin_params_from_mapping(config["twin"])
-    n_steps_for(config["simulation"]["T"], twin.dt)
-    require_seed("simulation.seed", config["simulation"]["seed"])
+    simulation = sections.SimulationSettings.from_mapping(config["simulation"])
+    n_steps_for(simulation.T, twin.dt)
     require_seed("faults.seed", config["faults"]["seed"])
     command_params_from_mapping(config["command"])
     arx_orders_from_mapping(config["arx"])
-    white_noise_band(config["acf"]["white_noise_n"])
-    HmmSettings.from_mapping(config["hmm"])
-    ArHmmSettings.from_mapping({**config["ar_hmm"], "engine": config["hmm"]["engine"]})
-    HmmSettings.from_mapping(
-        {**config["hmm"], **config["bic"], "n_states": max(config["bic"]["ks"])}, "bic"
-    )
-    signal = np.linspace(0.0, 1.0, 10)
-    exponential_moving_average(signal, config["correction"]["ema_alpha"])
-    rate_limit(signal, config["correction"]["rate_max"])
+    white_noise_band(sections.AcfSettings.from_mapping(config["acf"]).white_noise_n)
+    sections.HmmSettings.from_mapping(config["hmm"])
+    sections.CorrectionSettings.from_mapping(config["correction"])
+    sections.BicSettings.from_mapping(config["bic"])
+    sections.ArHmmSettings.from_mapping({**config["ar_hmm"], "engine": config["hmm"]["engine"]})
+    sections.DrawsSettings.from_mapping(config["draws"])
+    sections.SensitivitySettings.from_mapping(config["sensitivity"])
     fault_schedule(config["faults"]["schedule"])
     fault_magnitudes(config["faults"])
     mcda_settings_from_mapping(config["mcda"])
-    sweep = config["sensitivity"]
-    sweep_grid(
-        sweep["alphas"], sweep["sensor_A_mults"], sweep["sensor_B_mults"], sweep["n_replicates"]
-    )
-    HmmSettings.from_mapping(sweep["hmm"], "sensitivity.hmm")
     settings = dict(config["gap"]["diagnose"])  # as scripts/gap_diagnose.py splits them
     settings.pop("train_frac", None), settings.pop("calibrate", None)
     GapSettings.from_mapping(settings)

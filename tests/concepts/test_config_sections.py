@@ -110,3 +110,62 @@ def test_the_bic_section_parses_with_the_library_defaults(config):
         BicSettings.from_mapping({"ks": [2]})
     with pytest.raises(DtwinValueError, match=r"draws\.bic\.k_max must be an integer >= 1"):
         BicSettings.from_mapping({**config["bic"], "k_max": 0}, "draws.bic")
+
+
+def test_the_sensitivity_section_parses_and_keeps_what_fig11_records(config):
+    from dtwin.config_sections import SensitivitySettings, SweepPointSettings
+
+    raw = config["sensitivity"]
+    settings = SensitivitySettings.from_mapping(raw)
+    assert SensitivitySettings.from_mapping(settings) is settings
+    assert len(settings.grid()) == len(raw["alphas"]) * 9 * raw["n_replicates"]
+    # Fig. 11's JSON records the sweep's HMM and shapings as the config has them
+    assert settings.point.hmm.summary() == raw["hmm"]
+    assert settings.point.code.options() == raw["correction"]["code"]
+    assert settings.point.paper.options() == raw["correction"]["paper"]
+    # a sweep chunk gets the point's keys only (and the engine)
+    part = {k: raw[k] for k in ("seed", "correction", "r_signals")}
+    point = SweepPointSettings.from_mapping({**part, "hmm": {**raw["hmm"], "engine": "hmmlearn"}})
+    assert point.hmm.em.engine == "hmmlearn" and point.seed == raw["seed"]
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        ({"alphas": [0.2, 1.2]}, r"sensitivity\.alphas\[1\] must be in \[0, 1\]"),
+        ({"sensor_B_mults": [0.5, 0.5]}, r"sensitivity\.sensor_B_mults must not repeat"),
+        ({"interval": 1.0}, r"sensitivity\.interval must be in \(0, 1\)"),
+        ({"r_signals": "yes"}, r"sensitivity\.r_signals must be true or false"),
+        ({"seed": -1}, r"sensitivity\.seed must be an integer >= 0"),
+        ({"typo": 1}, r"sensitivity has unknown key\(s\): typo"),
+        ({"hmm": {"n_states": 4, "tol": 0}}, r"sensitivity\.hmm\.tol must be > 0"),
+        ({"correction": {"method": "code"}}, r"sensitivity\.correction is missing key\(s\): code"),
+    ],
+)
+def test_a_bad_sensitivity_value_names_its_key(config, edit, message):
+    from dtwin.config_sections import SensitivitySettings
+
+    with pytest.raises(DtwinValueError, match=message):
+        SensitivitySettings.from_mapping({**config["sensitivity"], **edit})
+
+
+def test_a_bad_correction_method_names_its_key(config):
+    from dtwin.config_sections import SensitivitySettings
+
+    raw = config["sensitivity"]
+    correction = {**raw["correction"], "method": "both"}
+    with pytest.raises(DtwinValueError, match=r"sensitivity\.correction\.method must be one of"):
+        SensitivitySettings.from_mapping({**raw, "correction": correction})
+
+
+def test_the_draws_section_parses_and_names_a_bad_key(config):
+    from dtwin.config_sections import DrawsSettings
+
+    settings = DrawsSettings.from_mapping(config["draws"])
+    assert DrawsSettings.from_mapping(settings) is settings
+    assert settings.bic.n_restarts == config["draws"]["bic"]["n_restarts"]
+    bic = {**config["draws"]["bic"], "chunk_size": 0}
+    with pytest.raises(DtwinValueError, match=r"draws\.bic\.chunk_size must be an integer >= 1"):
+        DrawsSettings.from_mapping({**config["draws"], "bic": bic})
+    with pytest.raises(DtwinValueError, match=r"draws has unknown key\(s\): typo"):
+        DrawsSettings.from_mapping({**config["draws"], "typo": 1})

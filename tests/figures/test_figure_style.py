@@ -372,12 +372,15 @@ def test_the_sweeps_failed_targets_and_fig11_balanced_claim_get_causes():
     def failed(check_id, observed, kind="claim"):
         return Check(check_id, kind, "s", None, observed, False)
 
+    from dtwin.config_sections import BicSettings
+
+    bic = BicSettings(ks=(2, 3), n_restarts=4, k_max=16)
     bracket = failed("bic_minimum_bracketed", {"fault_features": {"k_min": 15, "k_last": 16}})
-    assert _with_target_note(bracket, {"k_max": 16}).note.startswith(
+    assert _with_target_note(bracket, bic).note.startswith(
         "sweep range: the minimum (fault features K = 15) sits at the last two K fitted"
     )
     gains = {"a": {"max_gain": 3.0, "at_k": 5}, "b": {"max_gain": 836.0, "at_k": 2}}
-    stable = _with_target_note(failed("best_loglik_stable_in_starts", gains), {})
+    stable = _with_target_note(failed("best_loglik_stable_in_starts", gains), bic)
     assert "still gains 836.0 log-likelihood (b, K = 2)" in stable.note
     balanced = failed(
         "balanced_noise_mid_to_high_20s", {"ours": 36.4, "r_signals": 39.7, "r_rerun": 24.9}
