@@ -103,6 +103,8 @@ def draw_seeds(draw: int, simulation_seed: int, faults_seed: int, hmm_seed: int)
 class DrawRegimes:
     """One draw up to its fault HMM: what K* across draws reads (:func:`run_draw_regimes`).
 
+    The tables of a draw (the same columns as the main run's ``results/`` files).
+
     Attributes
     ----------
     seeds : DrawSeeds
@@ -132,38 +134,17 @@ class DrawRegimes:
 
 
 @dataclass(frozen=True)
-class DrawTables:
-    """The tables of one draw (the same columns as the main run's ``results/`` files).
+class DrawTables(DrawRegimes):
+    """The tables of a whole draw: :class:`DrawRegimes` and the correction and decisions.
 
     Attributes
     ----------
-    seeds : DrawSeeds
-    physics, surrogate, residuals : DataFrame
-        ``results/physics.csv``, ``surrogate.csv``, ``residuals.csv`` of the draw.
-    theta : DataFrame
-        ``results/arx_theta.csv`` (``n_train``: the training window, samples).
-    nominal_model : dict
-        The nominal fit's summary (``results/regimes/nominal_model.json``).
-    fault_residuals, fault_surrogate, fault_posteriors : DataFrame
-        ``results/faults/residuals.csv``, ``surrogate.csv``, ``posteriors.csv``.
-    fault_summary : dict
-        ``results/faults/summary.json`` (the configured drift origin only).
     correction_residuals, correction_metrics : DataFrame
         ``results/correction/residuals.csv`` and ``metrics.csv``.
     mcda_timeline : DataFrame
         ``results/mcda/actions.csv``.
     """
 
-    seeds: DrawSeeds
-    physics: pd.DataFrame
-    surrogate: pd.DataFrame
-    residuals: pd.DataFrame
-    theta: pd.DataFrame
-    nominal_model: dict[str, Any]
-    fault_residuals: pd.DataFrame
-    fault_surrogate: pd.DataFrame
-    fault_posteriors: pd.DataFrame
-    fault_summary: dict[str, Any]
     correction_residuals: pd.DataFrame
     correction_metrics: pd.DataFrame
     mcda_timeline: pd.DataFrame
@@ -254,9 +235,11 @@ def run_draw(draw: int, sections: Mapping[str, Mapping[str, Any]]) -> DrawTables
     mcda = select_mcda_actions(
         regimes.fault_residuals, regimes.fault_posteriors, sections["mcda"], twin.dt
     ).timeline
-    kept = {k: v for k, v in vars(regimes).items() if k != "fault_states"}
     return DrawTables(
-        **kept, correction_residuals=corrected, correction_metrics=metrics, mcda_timeline=mcda
+        **vars(regimes),
+        correction_residuals=corrected,
+        correction_metrics=metrics,
+        mcda_timeline=mcda,
     )
 
 
