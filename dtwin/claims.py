@@ -200,39 +200,28 @@ def _replicate_entries(payload: Mapping[str, Any], level: float) -> dict[str, di
     return entries
 
 
-def _gap_denominators(table: Any) -> dict[str, tuple[int, int]]:
-    """(k, n) of each gap accuracy target, from ``results/gap/benchmark.csv``.
+def _target_counts(metrics: Mapping[str, Any], name: str) -> tuple[int, int]:
+    """Return (k, n) of gap target ``name`` as the benchmark counted them, (0, 0) if none.
 
-    The denominators of :func:`dtwin.gapbench.scores.benchmark_metrics`: cases with an effect
-    (module), in-list cases (effect), ``none`` cases, out-of-list cases (``unexplained``).
+    From the ``gap_benchmark`` metrics' ``intervals`` (:func:`dtwin.gapbench.scores.
+    benchmark_metrics`); a ``rig_`` target's from the rig family's (``metrics["rig"]``).
     """
-    expected = table["expected_effect"].astype(str)
-    subsets = {
-        "module_accuracy": (expected != "none", "module_ok"),
-        "effect_accuracy": (table["in_list"].astype(bool), "effect_ok"),
-        "none_accuracy": (expected == "none", "effect_ok"),
-        "unexplained_accuracy": (expected == "unexplained", "effect_ok"),
-    }
-    return {
-        name: (int(table.loc[mask, column].astype(bool).sum()), int(mask.sum()))
-        for name, (mask, column) in subsets.items()
-    }
+    if name.startswith("rig_"):
+        metrics, name = metrics.get("rig") or {}, name.removeprefix("rig_")
+    interval = (metrics.get("intervals") or {}).get(name) or {}
+    return int(interval.get("k", 0)), int(interval.get("n", 0))
 
 
-def _attach_gap_cases(
-    rows: list[dict[str, Any]], metrics: Mapping[str, Any], table: Any, level: float
-) -> None:
+def _attach_gap_cases(rows: list[dict[str, Any]], metrics: Mapping[str, Any], level: float) -> None:
     """Give the gap targets the number of cases per effect, an interval and 'indicative'."""
     per_effect = metrics.get("cases_per_effect") or {}
     fewest = min(per_effect.values()) if per_effect else 0
-    denominators = _gap_denominators(table) if table is not None else {}
     for row in rows:
         if row["artifact"] != "gap_benchmark" or row["kind"] != "target":
             continue
-        name = row["id"].removeprefix("target_")
         cases = {"cases_per_effect": fewest}
-        k, n = denominators.get(name, (0, 0))
-        if n and row["observed"] is not None and abs(k / n - row["observed"]) < 1e-9:
+        k, n = _target_counts(metrics, row["id"].removeprefix("target_"))
+        if n:
             cases.update(k=k, n=n)
             cases["low"], cases["high"] = wilson_interval(k, n, level)
         row["cases"] = cases
@@ -246,7 +235,6 @@ def _attach_gap_cases(
 def summarise_claims(
     payloads: Sequence[Mapping[str, Any]],
     project: Sequence[str] = (),
-    gap_table: Any = None,
     level: float = 0.95,
 ) -> ClaimsSummary:
     """Gather the checks of artifact payloads (parsed JSON) into a :class:`ClaimsSummary`.
@@ -260,8 +248,6 @@ def summarise_claims(
         are targets. The :data:`DRAWS_ARTIFACT` payload, if given, adds the draws column; a
         payload with ``metrics[REPLICATES_METRIC]`` (Fig. 11) adds its claims' verdicts
         across its replicates to the same column.
-    gap_table : DataFrame, optional
-        ``results/gap/benchmark.csv``, for the (k, n) and interval of each gap target.
     level : float, default 0.95
         Level of the Wilson intervals of the gap targets and of the claims across replicates
         (those across draws come with their own, ``draws.interval``).
@@ -288,7 +274,7 @@ def summarise_claims(
     if has_draws or draws:
         rows += _attach_draws(rows, draws)
     if gap_metrics:
-        _attach_gap_cases(rows, gap_metrics, gap_table, level)
+        _attach_gap_cases(rows, gap_metrics, level)
     rows.append(_cause_check(rows))
     counts: dict[str, dict[str, int]] = {}
     for row in rows:

@@ -1,8 +1,8 @@
 """Rule claims: paper_figures/CLAIMS.md and claims.json from every artifact's JSON.
 
 Input   paper_figures/<artifact>.json and .png for every artifact (paper and project; Fig. 12
-        adds the column "holds in k of N draws"), results/gap/benchmark.csv (cases behind each
-        gap target)
+        adds the column "holds in k of N draws"; gap_benchmark's metrics give the cases behind
+        each gap target)
 Output  paper_figures/CLAIMS.md (the paper's claims, the project's targets, crosschecks,
         validity checks), paper_figures/claims.json, paper_figures/contact_sheet.html (the
         report's landing page: every figure as a thumbnail with its finding)
@@ -16,8 +16,6 @@ start_rule(snakemake)
 import json
 from pathlib import Path
 
-import pandas as pd
-
 from dtwin.artifacts import atomic_write, write_json
 from dtwin.claims import claims_markdown, summarise_claims
 from dtwin.figures._contact_sheet import contact_sheet_html, thumbnail_png
@@ -26,7 +24,6 @@ payloads = [json.loads(Path(p).read_text()) for p in snakemake.input.artifacts]
 summary = summarise_claims(
     payloads,
     project=snakemake.params.project,
-    gap_table=pd.read_csv(snakemake.input.gap_table),
     level=snakemake.params.interval,
 )
 write_json(summary.to_json(), snakemake.output.json)

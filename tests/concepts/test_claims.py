@@ -160,27 +160,28 @@ def test_a_draw0_with_fewer_em_starts_is_not_compared_and_its_detail_is_shown():
 
 
 def test_gap_targets_below_ten_cases_per_effect_are_marked_indicative():
-    pd = pytest.importorskip("pandas")
-    table = pd.DataFrame(
-        {
-            "expected_effect": ["none", "none", "friction", "friction"],
-            "in_list": [False, False, True, True],
-            "module_ok": [True, True, True, False],
-            "effect_ok": [True, False, True, False],
-        }
-    )
+    """The (k, n) of a gap target are those the benchmark counted (its metrics' intervals)."""
+    rate = {"k": 1, "n": 2, "rate": 0.5, "low": 0.09, "high": 0.91}
+    metrics = {
+        "cases_per_effect": {"none": 2, "friction": 2},
+        "intervals": {"none_accuracy": rate},
+        "rig": {"intervals": {"module_accuracy": {**rate, "k": 3, "n": 4}}},
+    }
     payload = _claim(
         "gap_benchmark",
         "target_none_accuracy",
         "docs/gap.md target: none_accuracy >= 0.9",
         False,
-        metrics={"cases_per_effect": {"none": 2, "friction": 2}},
+        metrics=metrics,
     )
+    rig = _claim("gap_benchmark", "target_rig_module_accuracy", "rig target", False)["checks"]
+    payload["checks"] += rig
     payload["checks"][0]["observed"] = 0.5
-    summary = summarise_claims([payload], project=["gap_benchmark"], gap_table=table)
-    row = summary.rows[0]
-    assert row["cases"]["k"] == 1 and row["cases"]["n"] == 2
-    assert "indicative: 2 cases per effect" in row["note"]
+    summary = summarise_claims([payload], project=["gap_benchmark"])
+    paper, rig_row = summary.rows[:2]
+    assert paper["cases"]["k"] == 1 and paper["cases"]["n"] == 2
+    assert rig_row["cases"]["k"] == 3 and rig_row["cases"]["n"] == 4
+    assert "indicative: 2 cases per effect" in paper["note"]
 
 
 def test_a_log_likelihood_prints_with_the_decimals_its_threshold_uses():

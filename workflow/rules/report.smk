@@ -7,7 +7,6 @@ rule claims:
     input:
         lib=dtwin_sources("scripts/claims.py"),
         artifacts=[f"paper_figures/{a}.json" for a in (*PAPER_ARTIFACTS, *ARTIFACTS["project"])],
-        gap_table="results/gap/benchmark.csv",
         pngs=[f"paper_figures/{a}.png" for a in (*PAPER_ARTIFACTS, *ARTIFACTS["project"])],
     output:
         markdown="paper_figures/CLAIMS.md",
