@@ -288,33 +288,19 @@ def save_figure(
     plt.close(figure)
 
 
-def _save_png_checked(figure: Figure, path: str | os.PathLike) -> list:
-    """Save the print-size PNG with one draw; return the reader checks of that draw.
+def _lay_out_once(figure: Figure) -> None:
+    """Lay ``figure`` out at :data:`PNG_DPI` and detach its layout engine.
 
-    ``savefig`` would lay the figure out in a draw of its own before the draw it writes, and the
-    reader checks drew it once more at the figure's dpi. Here the layout engine runs at the
-    figure's dpi and then at :data:`PNG_DPI` without drawing (constrained layout starts from the
-    current positions and moves with the dpi, so this reaches the positions of that sequence:
-    the same bytes), is switched off for the one draw that writes the file, and the texts that
-    draw puts on the page are the reader checks' input, so the checks see the saved PNG.
+    Without an engine ``savefig`` neither lays the figure out again at the file's dpi (72 for
+    a PDF) nor draws it once without rendering to do so: every later save is one draw at
+    these positions.
     """
-    from dtwin.figures._print_check import agg_canvas, drawn_texts, reader_checks, recording_texts
-
-    engine, canvas, dpi = figure.get_layout_engine(), agg_canvas(figure), figure.dpi
-    try:
-        if engine is not None:
-            engine.execute(figure)
-        figure.dpi = PNG_DPI
-        if engine is not None:
-            engine.execute(figure)
-            figure.set_layout_engine("none")
-        with recording_texts(canvas.get_renderer()) as texts:
-            _save_file(figure, path, tight=False, dpi=PNG_DPI)
-        return reader_checks(figure, texts or drawn_texts(figure))
-    finally:
-        if engine is not None:
-            figure.set_layout_engine(engine)
-        figure.dpi = dpi
+    figure.dpi = PNG_DPI
+    engine = figure.get_layout_engine()
+    if engine is not None:
+        engine.execute(figure)
+    with plt.rc_context({"figure.autolayout": False, "figure.constrained_layout.use": False}):
+        figure.set_layout_engine(None)
 
 
 def publish_artifact(
@@ -322,20 +308,26 @@ def publish_artifact(
 ):
     """Save the figure at print size to ``paths``, check what a reader relies on, write its JSON.
 
-    The first PNG is laid out and drawn once (:func:`_save_png_checked`) and its drawn texts
-    feed the reader checks (:func:`dtwin.figures._print_check.reader_checks`: size, smallest
-    font, text overlaps, text inside the page; every numeric axis labelled with its unit; every
-    legend entry drawn), which are appended to the artifact's checks; other formats (the PDF)
-    are saved as :func:`save_figure` does. The figure's caption and paper number are written
-    under ``"figure"``. Raises :class:`dtwin.artifacts.ArtifactValidityError` (after writing
-    the JSON) when a validity check failed, so the rule fails and Snakemake removes its outputs.
+    The figure is laid out once, at :data:`PNG_DPI`, and every file is drawn from that one
+    layout (the layout engine is detached before they are saved, so neither the PNG nor the PDF
+    lays the figure out again at its own dpi): each file is one draw. The texts the first
+    PNG's draw puts on the page feed the reader checks
+    (:func:`dtwin.figures._print_check.reader_checks`: size, smallest font, text overlaps,
+    text inside the page; every numeric axis labelled with its unit; every legend entry
+    drawn), which are appended to the artifact's checks. The figure's caption and paper
+    number are written under ``"figure"``. Raises
+    :class:`dtwin.artifacts.ArtifactValidityError` (after writing the JSON) when a validity
+    check failed, so the rule fails and Snakemake removes its outputs.
     """
-    from dtwin.figures._print_check import reader_checks
+    from dtwin.figures._print_check import agg_canvas, reader_checks, recording_texts
 
     figure, checks = artifact.figure, None
+    _lay_out_once(figure)
     for path in paths:
         if checks is None and str(path).lower().endswith(".png"):
-            checks = _save_png_checked(figure, path)
+            with recording_texts(agg_canvas(figure).get_renderer()) as texts:
+                _save_file(figure, path, tight=False, dpi=PNG_DPI)
+            checks = reader_checks(figure, texts)
         else:
             _save_file(figure, path, tight=False, dpi=PNG_DPI)
     checks = reader_checks(figure) if checks is None else checks

@@ -21,6 +21,7 @@ import yaml
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from dtwin.artifacts import FigureArtifact
 from dtwin.figures._print_check import (
     axes_and_legends_check,
     drawn_texts,
@@ -36,6 +37,7 @@ from dtwin.figures._style import (
     PNG_DPI,
     new_figure,
     panel_title,
+    publish_artifact,
     save_figure,
     tex,
     unitless,
@@ -210,6 +212,14 @@ def test_png_is_300_dpi_at_print_size_and_reruns_byte_identical(tmp_path):
     assert round(dpi) == PNG_DPI
     assert (width, height) == (round(FULL_WIDTH * PNG_DPI), round(2.5 * PNG_DPI))
     assert b"/MediaBox [ 0 0 518.4 180 ]" in first[1]  # vector PDF at 7.2 x 2.5 in
+
+
+def test_a_published_figure_reruns_byte_identical(tmp_path):
+    paths = [tmp_path / "a.png", tmp_path / "a.pdf"]
+    publish_artifact(FigureArtifact("a", clean_figure(), {}), paths, tmp_path / "a.json")
+    first = [p.read_bytes() for p in paths]
+    publish_artifact(FigureArtifact("a", clean_figure(), {}), paths, tmp_path / "a.json")
+    assert [p.read_bytes() for p in paths] == first
 
 
 def test_fig01_is_drawn_at_print_size_without_collisions():
