@@ -31,7 +31,7 @@ injects its real effects there; the diagnoser's candidates use the same points.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -51,6 +51,8 @@ __all__ = [
     "ModuleContract",
     "CONTRACTS",
     "LINEAR_PARAMS",
+    "Step",
+    "run_modules",
     "lag_coefficient",
     "lag_response",
     "PlantMatrices",
@@ -140,6 +142,60 @@ CONTRACTS: dict[str, ModuleContract] = {module.name: _contract(module) for modul
 
 #: The linear parameters of each module (a view of :data:`CONTRACTS`).
 LINEAR_PARAMS: dict[str, tuple[str, ...]] = {name: c.params for name, c in CONTRACTS.items()}
+
+
+#: One module's step in a chain: the signals so far (by name, each ``(n_steps,)``) → the
+#: module's outputs (some of its :attr:`dtwin.wiring.Module.outputs`), or None when it cannot
+#: run (an input is missing).
+Step = Callable[[Mapping[str, np.ndarray]], Mapping[str, np.ndarray] | None]
+
+
+def run_modules(
+    steps: Mapping[str, Step], given: Mapping[str, np.ndarray]
+) -> dict[str, np.ndarray]:
+    """Run the modules that have a step, in the wiring's order; return the signals they wrote.
+
+    The one chain runner: the paper simulator (:func:`dtwin.physics.simulate_physics`), every
+    generated asset (:mod:`dtwin.gapbench.generator`) and the diagnoser's chain
+    (:func:`dtwin.gap.localise.run_chain`) differ only in their steps.
+
+    Parameters
+    ----------
+    steps : mapping of module name to Step
+        What each module does; a module without a step is not run.
+    given : mapping of str to array
+        The signals known before the chain runs (a command, a recording).
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        Every signal a step wrote, in module order. Each step sees ``given`` overlaid by the
+        signals written before it.
+
+    Raises
+    ------
+    ValueError
+        If a step writes a signal that is not one of its module's outputs.
+
+    Examples
+    --------
+    >>> steps = {"M3": lambda s: {"y_fused": fuse(s["y_A"], s["y_B"], 0.5)}}
+    >>> run_modules(steps, {"y_A": np.ones(2), "y_B": np.zeros(2)})["y_fused"].tolist()
+    [0.5, 0.5]
+    """
+    written: dict[str, np.ndarray] = {}
+    for module in MODULES:
+        step = steps.get(module.name)
+        if step is None:
+            continue
+        outputs = step({**given, **written})
+        if outputs is None:
+            continue
+        stray = sorted(set(outputs) - set(module.outputs))
+        if stray:
+            raise ValueError(f"module {module.name} may write {module.outputs}, not {stray}")
+        written.update(outputs)
+    return written
 
 
 def require_discretisation(discretisation: str, allowed: tuple[str, ...] = DISCRETISATIONS) -> None:

@@ -2,7 +2,8 @@
 
 The modules' laws are the contract of :mod:`dtwin.modules` (recursions, parameters, signals),
 run with the paper's explicit-Euler discretisation; this module adds the noise and the start at
-rest, and :func:`simulate_physics` runs them in the order of the wiring table.
+rest, and :func:`simulate_physics` runs them with the contract's chain runner
+(:func:`dtwin.modules.run_modules`, the order of the wiring table).
 
 Every module applies its input with a one-sample delay (``u[k-1]`` drives step ``k``), as the
 paper's equations and the authors' R code do. Arrays are time-first, shape ``(n_steps,)``.
@@ -16,6 +17,7 @@ R's stream itself).
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 
 import numpy as np
 import pandas as pd
@@ -31,6 +33,7 @@ from dtwin.modules import (
     lag_coefficient,
     lag_response,
     plant_response,
+    run_modules,
 )
 from dtwin.params import TwinParams
 from dtwin.wiring import MODULES, SIGNALS
@@ -151,7 +154,7 @@ def backward_velocity(x: np.ndarray, dt: float) -> np.ndarray:
     return velocity
 
 
-# --- the simulator: one step function per module, dispatched through the wiring table ------
+# --- the simulator: one step function per module, run by the contract's chain runner -------
 
 Signals = dict[str, np.ndarray]
 _Step = Callable[[Signals, TwinParams, np.random.Generator], Signals]
@@ -227,9 +230,8 @@ def simulate_physics(twin: TwinParams, u_cmd: np.ndarray, rng: np.random.Generat
             "twin.discretisation must be euler for the paper's simulator "
             f"(got {twin.discretisation!r})"
         )
-    signals: Signals = {"u_cmd": u_cmd}
-    for module in MODULES:
-        signals.update(PHYSICS_STEPS[module.name](signals, twin, rng))
+    steps = {name: partial(step, twin=twin, rng=rng) for name, step in PHYSICS_STEPS.items()}
+    signals = {"u_cmd": u_cmd, **run_modules(steps, {"u_cmd": u_cmd})}
     table = pd.DataFrame({"t": time_axis(len(u_cmd), twin.dt)})
     for name in SIGNALS:
         table[name] = signals[name]

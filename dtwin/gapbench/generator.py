@@ -55,7 +55,16 @@ from dtwin.gapbench.arms import (
     unseen_expected,
 )
 from dtwin.gapbench.case_effects import CaseEffect
-from dtwin.modules import CONTRACTS, fuse, kpi, lag_coefficient, lag_response, plant_response
+from dtwin.modules import (
+    CONTRACTS,
+    Step,
+    fuse,
+    kpi,
+    lag_coefficient,
+    lag_response,
+    plant_response,
+    run_modules,
+)
 from dtwin.params import CommandParams
 
 __all__ = [
@@ -501,28 +510,49 @@ def _sensor_output(lag, bias, noise, spec, t, x):
     return y if reading is None else reading(y, spec, t, x)
 
 
-def _run_asset(asset, u_cmd, noises, specs, t):
-    dt = asset["dt"]
-    n = len(u_cmd)
-    u_act = _actuator(u_cmd, asset["actuator"]["tau"], dt, noises["actuator"], specs["M0"])
-    p = asset["plant"]
-    x, v = _plant(u_act, p["m"], p["c"], p["k"], dt, noises["plant"], specs["M1"], n)
-    y = {}
-    for which, module in (("A", "M2a"), ("B", "M2b")):
-        s = asset[f"sensor_{which}"]
-        y[which] = _sensor(x, s["tau"], s["bias"], dt, noises[which], specs[module], t)
-    alpha = asset["fusion"]["alpha"]
-    weights = asset["kpi"]
+def _algebraic_steps(asset) -> dict[str, Step]:
+    """Return the steps of the fusion (M3) and the KPI (M4) of ``asset``."""
+    alpha, weights = asset["fusion"]["alpha"], asset["kpi"]
     return {
-        "u_cmd": u_cmd,
-        "u_act": u_act,
-        "x": x,
-        "v": v,
-        "y_A": y["A"],
-        "y_B": y["B"],
-        "y_fused": fuse(y["A"], y["B"], alpha),
-        "z": kpi(x, v, weights["w1"], weights["w2"]),
+        "M3": lambda s: {"y_fused": fuse(s["y_A"], s["y_B"], alpha)},
+        "M4": lambda s: {"z": kpi(s["x"], s["v"], weights["w1"], weights["w2"])},
     }
+
+
+def _run(u_cmd, steps: Mapping[str, Step]) -> dict[str, np.ndarray]:
+    """Return every signal of the asset, in :data:`dtwin.wiring.SIGNALS` order, each ``(n,)``."""
+    return {"u_cmd": u_cmd, **run_modules(steps, {"u_cmd": u_cmd})}
+
+
+def _run_asset(asset, u_cmd, noises, specs, t):
+    """Return the signals of the sampled asset (the paper's Euler twin with the effects' hooks)."""
+    dt = asset["dt"]
+    p = asset["plant"]
+
+    def sensor(which: str, module: str) -> Step:
+        s = asset[f"sensor_{which}"]
+        return lambda sig: {
+            f"y_{which}": _sensor(
+                sig["x"], s["tau"], s["bias"], dt, noises[which], specs[module], t
+            )
+        }
+
+    def plant(sig):
+        n = len(sig["u_cmd"])
+        x, v = _plant(sig["u_act"], p["m"], p["c"], p["k"], dt, noises["plant"], specs["M1"], n)
+        return {"x": x, "v": v}
+
+    tau = asset["actuator"]["tau"]
+    steps = {
+        "M0": lambda sig: {
+            "u_act": _actuator(sig["u_cmd"], tau, dt, noises["actuator"], specs["M0"])
+        },
+        "M1": plant,
+        "M2a": sensor("A", "M2a"),
+        "M2b": sensor("B", "M2b"),
+        **_algebraic_steps(asset),
+    }
+    return _run(u_cmd, steps)
 
 
 def _run_continuous_asset(asset, u_cmd, noises, specs, t):
@@ -545,23 +575,23 @@ def _run_continuous_asset(asset, u_cmd, noises, specs, t):
         for which, module in (("A", "M2a"), ("B", "M2b"))
     }
     chain = continuous_chain(u_in, asset, force, noises["actuator"], noises["plant"], delays)
-    y = {}
-    for which, module in (("A", "M2a"), ("B", "M2b")):
+
+    def sensor(which: str, module: str) -> Step:
         bias = asset[f"sensor_{which}"]["bias"]
-        y[which] = _sensor_output(
-            chain[f"lag_{which}"], bias, noises[which], specs[module], t, chain["x"]
-        )
-    weights = asset["kpi"]
-    return {
-        "u_cmd": u_cmd,
-        "u_act": chain["u_act"],
-        "x": chain["x"],
-        "v": chain["v"],
-        "y_A": y["A"],
-        "y_B": y["B"],
-        "y_fused": fuse(y["A"], y["B"], asset["fusion"]["alpha"]),
-        "z": kpi(chain["x"], chain["v"], weights["w1"], weights["w2"]),
+        return lambda sig: {
+            f"y_{which}": _sensor_output(
+                chain[f"lag_{which}"], bias, noises[which], specs[module], t, sig["x"]
+            )
+        }
+
+    steps = {
+        "M0": lambda sig: {"u_act": chain["u_act"]},
+        "M1": lambda sig: {"x": chain["x"], "v": chain["v"]},
+        "M2a": sensor("A", "M2a"),
+        "M2b": sensor("B", "M2b"),
+        **_algebraic_steps(asset),
     }
+    return _run(u_cmd, steps)
 
 
 #: The asset's parameters that are miscalibrated against the twin: the contract's parameters

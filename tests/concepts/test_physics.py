@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from dtwin.command import make_command, n_steps_for
-from dtwin.modules import lag_coefficient
+from dtwin.modules import lag_coefficient, run_modules
 from dtwin.params import command_params_from_mapping
 from dtwin.physics import (
     actuator_lpf,
@@ -158,3 +158,29 @@ def test_lag_coefficient_of_the_paper_time_constants_equals_numpy_exp():
     """The one lag pole (math.exp) gives the paper simulator the bits of its former numpy.exp."""
     for tau in (0.15, 0.08, 0.25):
         assert lag_coefficient(tau, 0.02) == float(np.exp(-0.02 / tau))
+
+
+def test_the_chain_runner_runs_the_wiring_in_order_and_keeps_each_module_to_its_outputs():
+    """physics, every generated asset and the diagnoser's chain run through run_modules."""
+    seen = []
+
+    def step(name, outputs):
+        def run(signals):
+            seen.append((name, sorted(signals)))
+            return outputs
+
+        return run
+
+    written = run_modules(
+        {
+            "M3": step("M3", {"y_fused": np.zeros(2)}),  # listed first, runs after the sensors
+            "M2a": step("M2a", {"y_A": np.ones(2)}),
+            "M2b": step("M2b", None),  # cannot run: skipped
+        },
+        {"x": np.zeros(2), "y_B": np.zeros(2)},
+    )
+    assert [name for name, _ in seen] == ["M2a", "M2b", "M3"]
+    assert "y_A" in seen[-1][1]  # a later module sees what an earlier one wrote
+    assert list(written) == ["y_A", "y_fused"]
+    with pytest.raises(ValueError, match="module M2a may write"):
+        run_modules({"M2a": step("M2a", {"x": np.ones(2)})}, {"x": np.zeros(2)})
