@@ -9,7 +9,8 @@ The **gap** of a signal is a normalised RMS error over the held-out samples::
 A module's **local** gap drives its twin with the module's *recorded* input, so nothing
 upstream can leak into it. Its **chain** gap runs the whole twin from the most upstream
 recorded signal (``u_cmd`` when present), every module fed by its simulated predecessor, as the
-deployed twin runs; a chain gap well above the local gap is inherited from upstream.
+deployed twin runs (the contract's chain runner, :func:`dtwin.modules.run_modules`); a chain
+gap well above the local gap is inherited from upstream.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ import numpy as np
 
 from dtwin.gap.effects import Effect, Scales
 from dtwin.gap.models import ModuleData, simulate_module, velocity_from_position
-from dtwin.wiring import MODULES, module_by_name
+from dtwin.modules import CONTRACTS, Step, run_modules
+from dtwin.wiring import MODULES, Module, module_by_name
 
 __all__ = [
     "normalised_rms",
@@ -122,28 +124,41 @@ def run_chain(
         Simulated signals; a module whose inputs are neither simulated nor recorded is skipped.
         The plant also returns ``v = (x[k+1] − x[k])/dt``, the Euler plant's own velocity.
     """
+    steps = {
+        name: _chain_step(module_by_name(name), model, recorded, dt, t, scales, layouts or {})
+        for name, model in models.items()
+    }
+    return run_modules(steps, recorded)
+
+
+def _chain_step(
+    module: Module,
+    model: ModuleModel,
+    recorded: Mapping[str, np.ndarray],
+    dt: float,
+    t: np.ndarray,
+    scales: Mapping[str, Scales],
+    layouts: Mapping[str, ModuleData],
+) -> Step:
+    """Return module ``module``'s step in :func:`run_chain` (None from it: an input missing)."""
     n = len(t)
-    simulated: dict[str, np.ndarray] = {}
-    for module in MODULES:
-        if module.name not in models:
-            continue
-        available = {**recorded, **simulated}
-        if module.name == "M4" and "x" in simulated:
-            available["v"] = simulated["v"]
+    plant = CONTRACTS[module.name].law == "plant"
+    layout = layouts.get(module.name)
+    options = {}
+    if layout is not None:
+        options = {
+            "discretisation": layout.discretisation,
+            "horizon": layout.horizon,
+            "restarts": layout.restarts,
+        }
+
+    def step(available: Mapping[str, np.ndarray]) -> dict[str, np.ndarray] | None:
         inputs = module_inputs(module.name, available, dt)
         if inputs is None:
-            continue
+            return None
         output = recorded.get(module.output, np.zeros(n))
         velocity = inputs.get("v")
-        layout = (layouts or {}).get(module.name)
-        options = {}
-        if layout is not None:
-            options = {
-                "discretisation": layout.discretisation,
-                "horizon": layout.horizon,
-                "restarts": layout.restarts,
-            }
-        if module.name == "M1":
+        if plant:
             source = recorded["x"] if "x" in recorded else np.zeros(n)
             if layout is not None and layout.velocity is not None:
                 velocity = layout.velocity
@@ -152,14 +167,14 @@ def run_chain(
         data = ModuleData(
             module.name, inputs, output, dt, t, velocity, scales.get(module.name), **options
         )
-        model = models[module.name]
         out = simulate_module(data, model.lin, model.effect, model.theta)
-        if module.name == "M1" and "x" in recorded:
+        if not plant:
+            return {module.output: out}
+        if "x" in recorded:
             out = np.where(np.isnan(out), recorded["x"], out)  # unscored warm-up samples
-        simulated[module.output] = out
-        if module.name == "M1":
-            v = np.empty(n)
-            v[:-1] = np.diff(out) / dt
-            v[-1] = v[-2]
-            simulated["v"] = v
-    return simulated
+        v = np.empty(n)
+        v[:-1] = np.diff(out) / dt
+        v[-1] = v[-2]
+        return {module.output: out, "v": v}
+
+    return step
