@@ -35,6 +35,7 @@ from dtwin._validation import (
     require_nonnegative,
     require_number,
 )
+from dtwin.config_sections import require_keys
 from dtwin.physics import backward_velocity, fuse, kpi
 from dtwin.wiring import RESIDUALS
 
@@ -153,15 +154,38 @@ class FaultMagnitudes:
     drift_origin: str = "global"
 
     def __post_init__(self) -> None:
-        require_nonnegative("faults.sensor_A_std", self.sensor_A_std)
-        require_nonnegative("faults.sensor_B_std", self.sensor_B_std)
-        require_number("faults.dynamics_scale", self.dynamics_scale)
-        require_number("faults.drift_per_sample", self.drift_per_sample)
+        require_nonnegative("faults.magnitudes.sensor_A_std", self.sensor_A_std)
+        require_nonnegative("faults.magnitudes.sensor_B_std", self.sensor_B_std)
+        require_number("faults.magnitudes.dynamics_scale", self.dynamics_scale)
+        require_number("faults.magnitudes.drift_per_sample", self.drift_per_sample)
         if self.drift_origin not in DRIFT_ORIGINS:
             raise DtwinValueError(
                 f"faults.drift_origin must be one of {', '.join(DRIFT_ORIGINS)} "
                 f"(got {self.drift_origin!r})"
             )
+
+    @classmethod
+    def from_mapping(
+        cls, raw: Any, section: str = "faults", drift_origin: str | None = None
+    ) -> FaultMagnitudes:
+        """Return the fault sizes of config section ``section`` (errors name the key).
+
+        Reads ``magnitudes`` and ``drift_origin`` (``drift_origin`` given here overrides it);
+        the section's other keys (``schedule``, ``seed``) are not read.
+
+        Examples
+        --------
+        >>> FaultMagnitudes.from_mapping({"magnitudes": {"sensor_A_std": 0.1}}, drift_origin="global")
+        FaultMagnitudes(sensor_A_std=0.1, sensor_B_std=0.05, dynamics_scale=0.8, drift_per_sample=0.0007, drift_origin='global')
+        """  # noqa: E501
+        if isinstance(raw, cls):
+            return raw
+        needed = ("magnitudes",) if drift_origin is not None else ("magnitudes", "drift_origin")
+        raw = require_keys(section, raw, needed, others=True)
+        names = [name for name in cls.__dataclass_fields__ if name != "drift_origin"]
+        magnitudes = require_keys(f"{section}.magnitudes", raw["magnitudes"], (), names)
+        origin = raw["drift_origin"] if drift_origin is None else drift_origin
+        return cls(**magnitudes, drift_origin=origin)
 
 
 def regime_labels(t: Any, schedule: Sequence[RegimeWindow] = FAULT_SCHEDULE) -> np.ndarray:

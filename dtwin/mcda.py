@@ -26,11 +26,19 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from dtwin._validation import DtwinValueError, require_finite_array
+from dtwin._validation import (
+    DtwinValueError,
+    require_finite_array,
+    require_in_range,
+    require_nonnegative,
+    require_positive,
+)
+from dtwin.config_sections import require_keys
 
 __all__ = [
     "ACTIONS",
@@ -97,6 +105,46 @@ class McdaSettings:
     min_dwell_sec: float = 0.50
     switch_margin: float = 0.02
     legacy_r: bool = False
+
+    @classmethod
+    def from_mapping(
+        cls, raw: Any, section: str = "mcda", *, legacy_r: bool = False
+    ) -> McdaSettings:
+        """Return the validated settings of config section ``section`` (errors name the key).
+
+        ``legacy_r`` is not a config key: the R crosscheck asks for it.
+
+        Examples
+        --------
+        >>> weights = dict.fromkeys(CRITERIA, 1.0)
+        >>> McdaSettings.from_mapping({"weights": weights, "roll_sec": 2}).roll_sec
+        2.0
+        >>> McdaSettings.from_mapping({"weights": weights, "gate_quantile": 1.5})
+        Traceback (most recent call last):
+        ...
+        dtwin._validation.DtwinValueError: mcda.gate_quantile must be in [0, 1] (got 1.5)
+        """
+        if isinstance(raw, cls):
+            return raw
+        optional = ("roll_sec", "gate_quantile", "gate_p_nominal", "min_dwell_sec", "switch_margin")
+        raw = require_keys(section, raw, ("weights",), optional)
+        weights = require_keys(f"{section}.weights", raw["weights"], CRITERIA)
+        values = {key: raw[key] for key in optional if key in raw}
+        checks = {
+            "roll_sec": require_positive,
+            "gate_quantile": lambda name, v: require_in_range(name, v, 0.0, 1.0),
+            "gate_p_nominal": lambda name, v: require_in_range(name, v, 0.0, 1.0),
+            "min_dwell_sec": require_nonnegative,
+            "switch_margin": require_nonnegative,
+        }
+        return cls(
+            weights={
+                name: require_nonnegative(f"{section}.weights.{name}", weights[name])
+                for name in CRITERIA
+            },
+            **{key: checks[key](f"{section}.{key}", value) for key, value in values.items()},
+            legacy_r=legacy_r,
+        )
 
 
 @dataclass(frozen=True)

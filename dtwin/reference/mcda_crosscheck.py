@@ -13,10 +13,9 @@ import numpy as np
 import pandas as pd
 
 from dtwin.artifacts import Check
-from dtwin.mcda import run_mcda
+from dtwin.mcda import McdaSettings, run_mcda
 from dtwin.reference.crosscheck_result import CrosscheckResult
 from dtwin.reference.loaders import load_r_fault_scenario
-from dtwin.stages.decisions import mcda_settings_from_mapping
 
 __all__ = ["crosscheck_mcda_legacy"]
 
@@ -47,7 +46,7 @@ def crosscheck_mcda_legacy(
         and ``final_agreement`` (shares of the steps).
     """
     residuals, probs = load_r_fault_scenario(r_pipeline_path)
-    settings = mcda_settings_from_mapping(mcda, legacy_r=True)
+    settings = McdaSettings.from_mapping(mcda, legacy_r=True)
     legacy = run_mcda(residuals, probs, dt, settings).timeline
     raw = float(np.mean(legacy["best"].to_numpy() == r_timeline["best"].to_numpy()))
     final = float(np.mean(legacy["action"].to_numpy() == r_timeline["action"].to_numpy()))

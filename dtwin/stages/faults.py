@@ -43,7 +43,6 @@ from dtwin.surrogate import compute_residuals
 
 __all__ = [
     "POSTERIOR_COLUMNS",
-    "fault_magnitudes",
     "inject_scenario",
     "score_regime_fit",
     "FaultScenario",
@@ -58,12 +57,6 @@ POSTERIOR_COLUMNS: tuple[str, ...] = (
     "mapped_regime",
     *(f"p_{regime}" for regime in REGIMES),
 )
-
-
-def fault_magnitudes(faults: Mapping[str, Any], drift_origin: str | None = None) -> FaultMagnitudes:
-    """Return the fault sizes of the ``faults`` section (``drift_origin`` overrides its own)."""
-    origin = faults["drift_origin"] if drift_origin is None else drift_origin
-    return FaultMagnitudes(**faults["magnitudes"], drift_origin=origin)
 
 
 def inject_scenario(
@@ -94,7 +87,7 @@ def inject_scenario(
         w2=twin.kpi.w2,
         dt=twin.dt,
         schedule=fault_schedule(faults["schedule"]),
-        magnitudes=fault_magnitudes(faults, drift_origin),
+        magnitudes=FaultMagnitudes.from_mapping(faults, drift_origin=drift_origin),
     )
     columns = ["t", "regime", *(c for c in faulted.columns if c not in ("t", "regime"))]
     faulted = faulted[columns]

@@ -344,11 +344,10 @@ def parse_with_the_library(config: dict) -> None:
     from dtwin._validation import require_seed
     from dtwin.arx import arx_orders_from_mapping
     from dtwin.command import n_steps_for
-    from dtwin.fault_injection import fault_schedule
+    from dtwin.fault_injection import FaultMagnitudes, fault_schedule
     from dtwin.gap import GapSettings
+    from dtwin.mcda import McdaSettings
     from dtwin.residual_stats import white_noise_band
-    from dtwin.stages.decisions import mcda_settings_from_mapping
-    from dtwin.stages.faults import fault_magnitudes
 
     twin = twin_params_from_mapping(config["twin"])
     simulation = sections.SimulationSettings.from_mapping(config["simulation"])
@@ -364,8 +363,8 @@ def parse_with_the_library(config: dict) -> None:
     sections.DrawsSettings.from_mapping(config["draws"])
     sections.SensitivitySettings.from_mapping(config["sensitivity"])
     fault_schedule(config["faults"]["schedule"])
-    fault_magnitudes(config["faults"])
-    mcda_settings_from_mapping(config["mcda"])
+    FaultMagnitudes.from_mapping(config["faults"])
+    McdaSettings.from_mapping(config["mcda"])
     settings = dict(config["gap"]["diagnose"])  # as scripts/gap_diagnose.py splits them
     settings.pop("train_frac", None), settings.pop("calibrate", None)
     GapSettings.from_mapping(settings)
