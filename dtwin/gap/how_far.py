@@ -24,7 +24,7 @@ from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED
 from dtwin.gap.intervals import parameter_intervals
 from dtwin.gap.localise import ModuleModel, normalised_rms, run_chain, upstream_modules
 from dtwin.gap.models import simulate_module
-from dtwin.gap.recording import Recording
+from dtwin.gap.recording import DERIVED_INPUTS, Recording
 from dtwin.gap.results import ModuleReport
 from dtwin.gap.where import ModuleWork, Split, nominal_lin
 from dtwin.gap.which import linear_refit_gap, shrink_pct
@@ -113,7 +113,7 @@ def _skipped_report(module, rec: Recording) -> ModuleReport:
     missing = [
         s
         for s in (*module.inputs, module.output)
-        if s not in rec.signals and not (module.name == "M4" and s == "v")
+        if s not in rec.signals and s not in DERIVED_INPUTS
     ]
     return ModuleReport(
         module.name, "skipped", f"column(s) not in the recording: {', '.join(missing)}"

@@ -34,6 +34,7 @@ __all__ = [
     "Recording",
     "read_recording",
     "recording_from_frame",
+    "DERIVED_INPUTS",
     "diagnosable_modules",
 ]
 
@@ -41,6 +42,10 @@ logger = logging.getLogger(__name__)
 
 #: Fewest samples a recording may have.
 MIN_SAMPLES = 200
+#: Module inputs a recording may leave out, because the diagnoser derives them from another
+#: column: the velocity ``v`` (which the KPI reads) from the position ``x``
+#: (:func:`dtwin.gap.models.velocity_from_position`).
+DERIVED_INPUTS: frozenset[str] = frozenset({"v"})
 #: Largest allowed deviation of one time step from dt, as a fraction of dt (rounding aside).
 STEP_TOLERANCE = 0.01
 #: Outlier rule (docs/gap.md §Bad input): the bulk of a column is its values between the
@@ -332,7 +337,7 @@ def diagnosable_modules(signals: Mapping[str, np.ndarray]) -> list[str]:
     """
     names = []
     for module in MODULES:
-        inputs = [s for s in module.inputs if not (module.name == "M4" and s == "v")]
+        inputs = [s for s in module.inputs if s not in DERIVED_INPUTS]
         if all(s in signals for s in inputs) and module.output in signals:
             names.append(module.name)
     return names
