@@ -158,3 +158,21 @@ def test_the_shared_start_loads_nothing_a_budget_forbids(loaded):
 def test_every_budgeted_script_exists():
     missing = [name for name in BUDGETS if not (REPO / "scripts" / f"{name}.py").exists()]
     assert not missing
+
+
+def test_the_pipeline_diagram_loads_no_pandas():
+    """Fig. 1 reads no table: its job, and the artifact writers every job loads, skip pandas
+    (~0.3 CPU-s a process). Checked in a fresh interpreter, as the forked children above
+    start with pandas loaded."""
+    code = top_level_imports((REPO / "scripts" / "fig01_pipeline.py").read_text())
+    probe = "\nimport sys\nprint('pandas' in sys.modules)"
+    done = subprocess.run(
+        [sys.executable, "-c", code + probe],
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO), "MPLBACKEND": "Agg"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["False"]
