@@ -16,7 +16,10 @@ Calibration (:func:`calibrate_linear`) fits a module's linear twin from scratch:
 least-squares estimate (paper Eq. (24)) gives the starting point, then simulation error refines
 it. For the plant it also finds an input offset and an input delay in whole samples, and fits
 the ARX on a decimated signal when the sample rate is high, since ARX on samples much faster
-than the dynamics is ill-conditioned.
+than the dynamics is ill-conditioned. When its input reacts to the position's noise (a
+feedback loop, :func:`dtwin.gap.closed_loop.in_loop`), the exact plant with a causal hold is
+then fitted by prediction error with a noise model
+(:func:`dtwin.gap.closed_loop.loop_prediction_error_fit`; docs/gap.md §Closed loop).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from dtwin.exact_plant import hold_matrices
+from dtwin.gap.closed_loop import CAUSAL_HOLDS, in_loop, loop_prediction_error_fit
 from dtwin.gap.effects import (
     MAX_DELAY_SAMPLES,
     Effect,
@@ -571,7 +575,15 @@ def _calibrate_plant(data: ModuleData, n_train: int, near: int | None) -> dict[s
     if data.discretisation != EULER:
         starts = _exact_arx_by_delay(x, u, data.dt, data.discretisation, cost)
         if starts:
-            return _fit_delay(data, starts, n_train, near)
+            lin = _fit_delay(data, starts, n_train, near)
+            if data.discretisation in CAUSAL_HOLDS and in_loop(u, x):
+                # docs/gap.md §Closed loop: the output-error fit is biased by noise fed back
+                arx = [starts[d][1] for d in (0, 1) if d in starts]
+                horizon = data.horizon or n_train
+                lin, _ = loop_prediction_error_fit(
+                    x, u, data.dt, data.discretisation, [lin, *arx], horizon
+                )
+            return lin
     candidates = []
     factor = 1
     while n_train // factor >= 100:

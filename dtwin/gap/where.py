@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from dtwin._validation import DtwinValueError
+from dtwin.gap.closed_loop import in_loop
 from dtwin.gap.effects import Scales
 from dtwin.gap.fit import calibrate_linear, fit_candidate, linear_typical
 from dtwin.gap.localise import module_inputs, normalised_rms
@@ -300,6 +301,9 @@ def _exact_plant_window(data, nominal, n_train, n_held) -> tuple[int, dict | Non
         return plant_horizon(nominal, data.dt, n_held), None, None
     horizon = max(n_held // 4, MIN_HORIZON)
     fitted = fitted_horizon = None
+    if in_loop(data.inputs["u_act"][:n_train], data.output[:n_train]):
+        # docs/gap.md §Closed loop: the longest window (the controller holds the position)
+        return horizon, calibrate_linear(replace(data, horizon=horizon), n_train), horizon
     for _ in range(WINDOW_ROUNDS):
         fitted, fitted_horizon = calibrate_linear(replace(data, horizon=horizon), n_train), horizon
         following = plant_horizon(fitted, data.dt, n_held)

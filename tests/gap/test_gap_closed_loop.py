@@ -2,11 +2,22 @@
 
 from __future__ import annotations
 
-import numpy as np
-import pytest
+import math
 
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.signal import lfilter
+
+from dtwin.exact_plant import hold_matrices
 from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping
-from dtwin.gap.closed_loop import FEEDBACK_THRESHOLD, feedback_statistic, loop_statistic
+from dtwin.gap.closed_loop import (
+    FEEDBACK_THRESHOLD,
+    feedback_statistic,
+    in_loop,
+    loop_prediction_error_fit,
+    loop_statistic,
+)
 from dtwin.gapbench.generator import generate_case
 from dtwin.gapbench.rigs import generate_rig_case
 
@@ -75,3 +86,84 @@ def test_a_coulomb_rig_in_a_pd_loop_reads_its_friction_through_a_causal_hold():
     assert result.modules["M1"].discretisation == "zoh"
     assert (result.module, result.effect) == ("M1", "coulomb_friction")
     assert result.params["Fc"] == pytest.approx(case.key["params"]["Fc"], rel=0.02)
+
+
+#: The PD loop of :func:`_pd_loop`: mass (kg), damping (N·s/m), loop natural frequency (rad/s).
+LOOP_M, LOOP_C, LOOP_OMEGA = 2.0, 4.0, 60.0
+
+
+def _pd_loop(pole: float, seed: int, n: int = 6000, dt: float = 1e-3) -> pd.DataFrame:
+    """An integrating plant (k = 0, exact zero-order hold) in a digital PD position loop.
+
+    The loop tracks a multisine (8 lines in 0.3-3 Hz) from the measured position, whose noise
+    (2 % of the reference's spread; white, or AR(1) with ``pole``) it feeds back into the
+    recorded force; offsets 1.5 N on the force and 0.3 m on the position.
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt
+    freqs, phases = rng.uniform(0.3, 3.0, 8), rng.uniform(0.0, 2 * np.pi, 8)
+    reference = np.sin(2 * np.pi * np.outer(t, freqs) + phases).sum(axis=1) / 2.0
+    white = rng.standard_normal(n)
+    shape = lfilter([math.sqrt(1.0 - pole**2)], [1.0, -pole], white)
+    noise = 0.02 * np.std(reference) * shape
+    step = hold_matrices(LOOP_C / LOOP_M, 0.0, dt, "zoh")
+    kp, kd = LOOP_M * LOOP_OMEGA**2, 2 * 0.7 * LOOP_M * LOOP_OMEGA
+    state, u, y = np.zeros(2), np.zeros(n), np.zeros(n)
+    for j in range(n):
+        y[j] = state[0] + noise[j]
+        previous = y[j - 1] if j else y[j]
+        u[j] = kp * (reference[j] - y[j]) - kd * (y[j] - previous) / dt
+        state = step.a @ state + step.taps[0] * (u[j] / LOOP_M)
+    return pd.DataFrame({"t": t, "u_act": u + 1.5, "x": y + 0.3})
+
+
+def _assert_integrating_plant(lin):
+    """m within 1 %, c within 2 %, and a spring below 1e-4 of m·ω² (ω the loop's 60 rad/s)."""
+    assert lin["m"] == pytest.approx(LOOP_M, rel=0.01)
+    assert lin["c"] == pytest.approx(LOOP_C, rel=0.02)
+    assert lin["k"] <= 1e-4 * LOOP_M * LOOP_OMEGA**2
+    assert lin["delay_samples"] == 0
+
+
+@pytest.mark.parametrize("pole", [0.0, 0.9])
+def test_the_loop_fit_reads_an_integrating_plant_from_a_biased_start(pole):
+    """Start from what output error reads in such loops (a spring, a light mass, a long delay)."""
+    frame = _pd_loop(pole, seed=1).iloc[:3000]
+    x, u = frame["x"].to_numpy(), frame["u_act"].to_numpy()
+    assert in_loop(u, x)
+    biased = {"m": 0.7 * LOOP_M, "c": 3 * LOOP_C, "k": 0.3 * LOOP_M * LOOP_OMEGA**2}
+    lin, noise = loop_prediction_error_fit(
+        x, u, 1e-3, "zoh", [dict(biased, u_offset=0.0, delay_samples=25)], horizon=100
+    )
+    _assert_integrating_plant(lin)
+    assert lin["u_offset"] == pytest.approx(1.5, abs=0.05 * np.std(u))
+    # the whitening filter inverts the noise: 1 − 0.9·q⁻¹ for the AR(1), about 1 for white noise
+    assert noise[0] == pytest.approx(-pole, abs=0.1)
+    assert abs(noise[1]) <= 0.1
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("pole", "seed"), [(0.0, 1), (0.0, 2), (0.9, 1), (0.9, 2)])
+def test_a_calibrated_plant_in_a_pd_loop_is_consistent_with_white_or_coloured_noise(pole, seed):
+    """Output error alone read m 17,800x the truth (white, seed 2) and m +3.9 % (pole 0.9, 1)."""
+    frame = _pd_loop(pole, seed)
+    recording = recording_from_frame(frame)
+    result = diagnose(recording, twin_from_mapping({"dt": 1e-3}, dt=1e-3), calibrate=True)
+    assert any("feedback loop" in note for note in result.notes)
+    _assert_integrating_plant(result.modules["M1"].lin_used)
+
+
+def test_an_open_loop_recording_is_calibrated_without_the_loop_fit(monkeypatch):
+    """Below the feedback threshold calibration is output error as before, untouched."""
+    import dtwin.gap.fit as fit
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the loop fit ran on an open-loop recording")
+
+    monkeypatch.setattr(fit, "loop_prediction_error_fit", refuse)
+    rig = generate_rig_case("none", 15006)  # open loop, 60 samples per period
+    assert not rig.key["closed_loop"]
+    recording = recording_from_frame(rig.recording.iloc[:2000])
+    result = diagnose(recording, twin_from_mapping(rig.twin, dt=recording.dt), calibrate=True)
+    assert not any("feedback loop" in note for note in result.notes)
+    assert result.modules["M1"].lin_used["m"] == pytest.approx(rig.key["plant"]["m"], rel=0.05)
