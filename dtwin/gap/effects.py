@@ -141,6 +141,16 @@ class Effect:
         Catalogue effects this one contains as a special case (Stribeck friction with
         ``Fs = Fc`` is Coulomb friction): the plain one is the answer unless this one removes
         clearly more (``dtwin.gap.which.NEST_MARGIN_PCT``).
+    nested_starts : callable or None
+        Starting points from the fitted parameters of the effect it nests (``nests[0]``):
+        ``nested_starts(theta_plain, scales) -> [theta0, ...]``, the first of them the plain
+        fit itself in this form (Stribeck friction with ``Fs = Fc``), so that the wider form,
+        fitted from there, never fits the training part worse than the form it contains.
+    departure : callable or None
+        How far fitted parameters lie from the form it nests, relative to the effect's size:
+        ``departure(theta) -> float`` (Stribeck friction: ``(Fs − Fc)/Fc``, the breakaway
+        force's excess over the sliding one). From ``dtwin.gap.which.NEST_DEPARTURE`` on,
+        the data show what the plain form lacks.
     force_law : callable or None
         A ``force`` effect's law: ``force_law(theta, velocity_std, ops) -> F(x, v)``, built on
         ``ops`` (:data:`ARRAY_OPS` for numpy arrays, :data:`SCALAR_OPS` for Python floats).
@@ -171,6 +181,8 @@ class Effect:
     typical: Callable[[Scales], list[float]]
     linear_form: bool = False
     nests: tuple[str, ...] = ()
+    nested_starts: Callable[[Sequence[float], Scales], list[list[float]]] | None = None
+    departure: Callable[[Sequence[float]], float] | None = None
     force_law: Callable[..., Callable[[float, float], float]] | None = None
     compiled_law: Callable[[list[float], float], CompiledLaw] | None = None
     input_map: Callable[[np.ndarray, Sequence[float], float], np.ndarray] | None = None
@@ -232,6 +244,25 @@ def _stribeck_law(theta, velocity_std: float, ops: ForceOps):
         return (fc + bump * ops.exp(-ratio * ratio)) * ops.tanh(v / smooth)
 
     return stribeck
+
+
+def _stribeck_from_coulomb(theta: Sequence[float], s: Scales) -> list[list[float]]:
+    """Stribeck starts from a fitted Coulomb level ``Fc``: the Coulomb fit itself, then a bump.
+
+    A Coulomb friction fitted to a friction with a breakaway force reads a level between the
+    sliding and the breakaway force, so the bumped starts put the sliding force below it and
+    the breakaway force above it, at a low and a middling Stribeck velocity.
+    """
+    fc = float(theta[0])
+    low, mid = 0.1 * s.velocity_std, 0.3 * s.velocity_std
+    return [[fc, fc, low], [0.8 * fc, 2.0 * fc, low], [0.8 * fc, 2.0 * fc, mid]]
+
+
+def _breakaway_excess(theta: Sequence[float]) -> float:
+    """``(Fs − Fc)/Fc`` (0 without a bump, inf for a bump on no sliding force)."""
+    fc, fs = float(theta[0]), float(theta[1])
+    bump = max(fs - fc, 0.0)
+    return bump / fc if fc > 0 else (math.inf if bump > 0 else 0.0)
 
 
 def _cubic_law(theta, velocity_std: float, ops: ForceOps):
@@ -634,6 +665,8 @@ EFFECTS: tuple[Effect, ...] = (
         lambda s: [[0.05 * s.input_std, 0.1 * s.input_std, f * s.velocity_std] for f in (0.1, 0.3)],
         lambda s: [0.1 * s.input_std, 0.1 * s.input_std, 0.1 * s.velocity_std],
         nests=("coulomb_friction",),
+        nested_starts=_stribeck_from_coulomb,
+        departure=_breakaway_excess,
         force_law=_stribeck_law,
         compiled_law=_stribeck_compiled,
     ),

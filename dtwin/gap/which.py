@@ -38,6 +38,7 @@ from dtwin.gap.where import ModuleWork, Split
 __all__ = [
     "FittedCandidate",
     "NEST_MARGIN_PCT",
+    "NEST_DEPARTURE",
     "shrink_pct",
     "fit_candidates",
     "score_candidates",
@@ -100,12 +101,22 @@ def fit_candidates(work: ModuleWork, split: Split) -> None:
     each candidate's gaps on the choosing and the scoring part are kept (docs/gap.md §Which).
     """
     start = work.lin_base
+    fits: dict[str, CandidateFit] = {}
     for effect in effects_for_module(work.name, include_mismatch=not work.calibrated):
-        fitted = fit_candidate(work.data, effect, start, n_train=split.n_train)
+        plain = fits.get(effect.nests[0]) if effect.nests and effect.nested_starts else None
+        if plain is None:
+            fitted = fit_candidate(work.data, effect, start, n_train=split.n_train)
+        else:  # a wider form starts from the form it contains, as fitted (docs/gap.md §Which)
+            scales = work.data.scales
+            starts = effect.nested_starts(plain.theta, scales) + effect.starts(scales)
+            fitted = fit_candidate(
+                work.data, effect, plain.lin, n_train=split.n_train, starts=starts
+            )
         if work.calibrated and work.name == "M1":  # its delay was chosen without the effect
             fitted = refit_delay(work.data, effect, fitted, split.n_train)
         if effect.refits_linear:
             start = fitted.lin  # the effects start from the re-fitted linear twin
+        fits[effect.name] = fitted
         predicted = simulate_module(work.data, fitted.lin, effect, fitted.theta)
         gaps = [
             _finite(normalised_rms(work.data.output, predicted, part, work.norm))
@@ -244,18 +255,28 @@ def choose(flagged: list[ModuleWork], ranked: Mapping[str, list], settings: GapS
 #: Share of the choosing excess (percentage points) a candidate must remove beyond a candidate
 #: it nests (``Effect.nests``) to be chosen over it (docs/gap.md §Which).
 NEST_MARGIN_PCT = 5.0
+#: Departure from the nested form (``Effect.departure``: a breakaway force 25 % above the
+#: sliding one) from which a best-scored wider form is chosen whatever its margin.
+NEST_DEPARTURE = 0.25
 
 
 def _plain_over_nesting(ranked: Sequence[CandidateReport]) -> CandidateReport:
-    """Return the best candidate, or the plain one it nests if that removes nearly as much.
+    """Return the best candidate, or the plain one it nests if the data do not show more.
 
     Stribeck friction with its breakaway force equal to its sliding one is Coulomb friction:
     with many effective samples the score prefers the wider form for any small mismatch of
     shape (a sharper sign), not for a bump. The plain form is kept unless the wider one removes
-    :data:`NEST_MARGIN_PCT` more of the choosing excess; it then carries both weights.
+    :data:`NEST_MARGIN_PCT` more of the choosing excess or its fitted parameters depart from
+    the plain form by :data:`NEST_DEPARTURE` or more (a breakaway force 25 % above the sliding
+    one, which the plain form's level cannot hold); kept, it carries both weights.
     """
     best = ranked[0]
-    for name in effect_by_name(best.effect).nests:
+    effect = effect_by_name(best.effect)
+    if effect.departure is not None:
+        theta = [best.params[name] for name in effect.params]
+        if effect.departure(theta) >= NEST_DEPARTURE:
+            return best
+    for name in effect.nests:
         plain = next((r for r in ranked if r.effect == name), None)
         if (
             plain is not None

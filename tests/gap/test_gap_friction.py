@@ -1,0 +1,98 @@
+"""Friction beyond Coulomb: Stribeck friction fitted from Coulomb friction, chosen when it shows."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from dtwin.gap.effects import Scales, effect_by_name
+from dtwin.gap.results import CandidateReport, GapSettings
+from dtwin.gap.which import NEST_DEPARTURE, NEST_MARGIN_PCT, choose
+
+
+def _report(effect: str, params: dict, share: float, score: float, weight: float):
+    return CandidateReport(
+        module="M1",
+        effect=effect,
+        params=params,
+        lin={"m": 1.0, "c": 0.1, "k": 1.0},
+        n_params=3 + len(params),
+        choosing_gap=0.02,
+        choosing_share_pct=share,
+        scoring_gap_after=0.02,
+        raw_shrink_pct=50.0,
+        own_shrink_pct=share,
+        excess_shrink_pct=share,
+        excess_clipped=False,
+        score=score,
+        weight=weight,
+    )
+
+
+class _Work:
+    name, gap_cal, threshold = "M1", 0.1, 0.02
+
+
+def _answer(fs: float, stribeck_share: float):
+    ranked = [
+        _report("stribeck_friction", {"Fc": 1.0, "Fs": fs, "vs": 0.2}, stribeck_share, 0.0, 0.9),
+        _report("coulomb_friction", {"Fc": 1.3}, 80.0, 40.0, 0.1),
+    ]
+    return choose([_Work()], {"M1": ranked}, GapSettings())[1]
+
+
+def test_a_breakaway_the_fit_shows_is_stribeck_friction_whatever_its_share_margin():
+    """A breakaway force 1.6 times the sliding one, 1 point more of the excess: Stribeck."""
+    chosen = _answer(fs=1.6, stribeck_share=81.0)
+    assert chosen.effect == "stribeck_friction" and chosen.weight == pytest.approx(0.9)
+
+
+def test_a_faint_bump_stays_coulomb_friction_unless_it_removes_clearly_more():
+    """A bump of 10 % is a shape mismatch: Coulomb keeps both weights; 6 points more win."""
+    faint = _answer(fs=1.0 + 0.4 * NEST_DEPARTURE, stribeck_share=81.0)
+    assert faint.effect == "coulomb_friction" and faint.weight == pytest.approx(1.0)
+    clear = _answer(fs=1.0 + 0.4 * NEST_DEPARTURE, stribeck_share=80.0 + NEST_MARGIN_PCT + 1)
+    assert clear.effect == "stribeck_friction"
+
+
+def test_stribeck_friction_starts_at_the_fitted_coulomb_friction_and_departs_by_its_bump():
+    stribeck = effect_by_name("stribeck_friction")
+    scales = Scales(
+        input_std=2.0,
+        input_max=6.0,
+        output_std=1.0,
+        velocity_std=4.0,
+        duration=10.0,
+        dt=0.01,
+        noise_std=0.01,
+    )
+    starts = stribeck.nested_starts([0.7], scales)
+    assert starts[0] == [0.7, 0.7, pytest.approx(0.4)]  # the Coulomb fit itself
+    assert all(fs > fc for fc, fs, _ in starts[1:])
+    low, high = stribeck.bounds(scales)[2]
+    assert all(low <= vs <= high for _, _, vs in starts)
+    assert stribeck.departure(starts[0]) == 0.0
+    assert stribeck.departure([1.0, 1.5, 0.2]) == pytest.approx(0.5)
+    assert stribeck.departure([1.0, 0.8, 0.2]) == 0.0  # no bump below the sliding force
+    assert math.isinf(stribeck.departure([0.0, 0.5, 0.2]))
+    assert effect_by_name("coulomb_friction").departure is None
+
+
+def test_a_breakaway_rig_reads_stribeck_friction_though_it_removes_barely_more():
+    """Harder rig, Stribeck seed 501 (a dev seed; open loop, 979 samples per period, Fs = 2.6
+    Fc): Stribeck friction removes 76 % of the choosing excess, Coulomb friction 75 % with a
+    level 1.6 times the sliding force. The fitted breakaway (Fs/Fc = 2.6) shows what Coulomb
+    friction lacks; before, the share margin alone kept Coulomb friction."""
+    from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping
+    from dtwin.gapbench.rigs import generate_hard_rig_case
+
+    case = generate_hard_rig_case("stribeck_friction", 501)
+    recording = recording_from_frame(case.recording)
+    result = diagnose(recording, twin_from_mapping(case.twin, dt=recording.dt), calibrate=True)
+    truth = case.key["params"]
+    assert (result.module, result.effect) == ("M1", "stribeck_friction")
+    for name in ("Fc", "Fs"):
+        assert result.params[name] == pytest.approx(truth[name], rel=0.1)
+        low, high = result.param_intervals[name]
+        assert low <= truth[name] <= high
