@@ -39,6 +39,7 @@ __all__ = [
     "FittedCandidate",
     "NEST_MARGIN_PCT",
     "NEST_DEPARTURE",
+    "NEST_EVIDENCE",
     "shrink_pct",
     "fit_candidates",
     "score_candidates",
@@ -256,8 +257,13 @@ def choose(flagged: list[ModuleWork], ranked: Mapping[str, list], settings: GapS
 #: it nests (``Effect.nests``) to be chosen over it (docs/gap.md §Which).
 NEST_MARGIN_PCT = 5.0
 #: Departure from the nested form (``Effect.departure``: a breakaway force 25 % above the
-#: sliding one) from which a best-scored wider form is chosen whatever its margin.
+#: sliding one) from which a wider form scored :data:`NEST_EVIDENCE` better is chosen whatever
+#: its margin.
 NEST_DEPARTURE = 0.25
+#: Score difference (BIC, ``−2·ln`` of the Bayes factor) by which a departing wider form must
+#: beat the form it nests: "strong" evidence on Kass and Raftery's scale (J. Am. Stat. Assoc.
+#: 90, 1995).
+NEST_EVIDENCE = 6.0
 
 
 def _plain_over_nesting(ranked: Sequence[CandidateReport]) -> CandidateReport:
@@ -266,22 +272,25 @@ def _plain_over_nesting(ranked: Sequence[CandidateReport]) -> CandidateReport:
     Stribeck friction with its breakaway force equal to its sliding one is Coulomb friction:
     with many effective samples the score prefers the wider form for any small mismatch of
     shape (a sharper sign), not for a bump. The plain form is kept unless the wider one removes
-    :data:`NEST_MARGIN_PCT` more of the choosing excess or its fitted parameters depart from
+    :data:`NEST_MARGIN_PCT` more of the choosing excess, or its fitted parameters depart from
     the plain form by :data:`NEST_DEPARTURE` or more (a breakaway force 25 % above the sliding
-    one, which the plain form's level cannot hold); kept, it carries both weights.
+    one, which the plain form's level cannot hold) and it scores :data:`NEST_EVIDENCE` better
+    where the plain form leaves part of the choosing excess (a plain form that explains all of
+    it down to the noise floor leaves nothing a bump could show); kept, the plain form carries
+    both weights.
     """
     best = ranked[0]
     effect = effect_by_name(best.effect)
-    if effect.departure is not None:
-        theta = [best.params[name] for name in effect.params]
-        if effect.departure(theta) >= NEST_DEPARTURE:
-            return best
+    theta = [best.params.get(name, math.nan) for name in effect.params]
+    departs = effect.departure is not None and effect.departure(theta) >= NEST_DEPARTURE
     for name in effect.nests:
         plain = next((r for r in ranked if r.effect == name), None)
-        if (
-            plain is not None
-            and best.choosing_share_pct - plain.choosing_share_pct < NEST_MARGIN_PCT
-        ):
+        if plain is None:
+            continue
+        # a bump can show only where the plain form leaves an excess above the floor
+        leaves = plain.choosing_share_pct < 100.0
+        shown = departs and leaves and plain.score - best.score >= NEST_EVIDENCE
+        if not shown and best.choosing_share_pct - plain.choosing_share_pct < NEST_MARGIN_PCT:
             return replace(plain, weight=plain.weight + best.weight)
     return best
 

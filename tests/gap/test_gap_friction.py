@@ -8,7 +8,7 @@ import pytest
 
 from dtwin.gap.effects import Scales, effect_by_name
 from dtwin.gap.results import CandidateReport, GapSettings
-from dtwin.gap.which import NEST_DEPARTURE, NEST_MARGIN_PCT, choose
+from dtwin.gap.which import NEST_DEPARTURE, NEST_EVIDENCE, NEST_MARGIN_PCT, choose
 
 
 def _report(effect: str, params: dict, share: float, score: float, weight: float):
@@ -34,10 +34,10 @@ class _Work:
     name, gap_cal, threshold = "M1", 0.1, 0.02
 
 
-def _answer(fs: float, stribeck_share: float):
+def _answer(fs: float, stribeck_share: float, coulomb_score: float = 40.0):
     ranked = [
         _report("stribeck_friction", {"Fc": 1.0, "Fs": fs, "vs": 0.2}, stribeck_share, 0.0, 0.9),
-        _report("coulomb_friction", {"Fc": 1.3}, 80.0, 40.0, 0.1),
+        _report("coulomb_friction", {"Fc": 1.3}, 80.0, coulomb_score, 0.1),
     ]
     return choose([_Work()], {"M1": ranked}, GapSettings())[1]
 
@@ -46,6 +46,14 @@ def test_a_breakaway_the_fit_shows_is_stribeck_friction_whatever_its_share_margi
     """A breakaway force 1.6 times the sliding one, 1 point more of the excess: Stribeck."""
     chosen = _answer(fs=1.6, stribeck_share=81.0)
     assert chosen.effect == "stribeck_friction" and chosen.weight == pytest.approx(0.9)
+    weak = _answer(fs=1.6, stribeck_share=81.0, coulomb_score=0.8 * NEST_EVIDENCE)
+    assert weak.effect == "coulomb_friction"  # a bump the score barely prefers: not shown
+    ranked = [
+        _report("stribeck_friction", {"Fc": 1.0, "Fs": 1.6, "vs": 0.2}, 100.0, 0.0, 0.9),
+        _report("coulomb_friction", {"Fc": 1.3}, 100.0, 40.0, 0.1),
+    ]
+    plain = choose([_Work()], {"M1": ranked}, GapSettings())[1]
+    assert plain.effect == "coulomb_friction"  # Coulomb friction leaves nothing to the floor
 
 
 def test_a_faint_bump_stays_coulomb_friction_unless_it_removes_clearly_more():
