@@ -12,6 +12,24 @@ weighted means and variances; AR(1) emissions: weighted least squares), then the
 floor; the stopping rule is depmixS4's ``(LL − LL_old)/|LL_old| < tol``. Arrays are time-first
 ``(T, D)``.
 
+Subnormal numbers: once EM has settled, transition probabilities of unused transitions and
+the scaled forward variables of far-away states decay through the subnormal range (below
+2.2250738585072014e-308) towards 0, and every product with a subnormal operand or result takes
+the processor's slow path (about 30 % of an iteration's time at K ≥ 12 late in EM, measured at
+T = 1000, D = 10). :func:`em` therefore runs inside :func:`subnormals_flushed` on x86-64
+(called by :mod:`dtwin._multistart`): the SSE control register's flush-to-zero and
+denormals-are-zero bits make any result or operand below the smallest normal float exactly 0.
+A probability that small contributes below 1e-300 to any sum here, so log-likelihoods,
+parameters and posteriors move by round-off at most; every iteration count, status and decoded
+path of the paper pipeline is unchanged (every table byte-identical). A transition
+probability flushed to 0 stays 0, as one that underflows. Elsewhere (another architecture, or
+the hmmlearn engine) subnormals are kept.
+
+Where the scaled forward pass underflows (a sample far from every state: all its emission
+densities below 1e-300), :func:`em` reruns the start in log space (``log_space``), hmmlearn's
+``implementation="log"`` compiled the same way (:func:`_estep_log`), and :func:`score`
+continues in log space.
+
 Functions are compiled on first use and cached on disk (``cache=True``, numba's per-function
 cache files, written atomically), so a process that finds the cache loads machine code instead
 of compiling; ``make venv`` warms it with :func:`warm_up`.
@@ -20,9 +38,15 @@ of compiling; ``make venv`` warms it with :func:`warm_up`.
 from __future__ import annotations
 
 import math
+import platform
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 __all__ = [
     "AR1",
@@ -33,6 +57,7 @@ __all__ = [
     "UNDERFLOW",
     "em",
     "score",
+    "subnormals_flushed",
     "viterbi",
 ]
 
@@ -44,6 +69,59 @@ GAUSSIAN, AR1 = 0, 1
 
 #: hmmlearn's underflow bound on a forward normaliser (``min_sum`` of ``forward_scaling``).
 _MIN_SUM = 1e-300
+
+#: The SSE control register (MXCSR) bits flush-to-zero (0x8000: a result below the smallest
+#: normal float becomes 0) and denormals-are-zero (0x0040: such an operand reads as 0).
+_FLUSH_BITS = 0x8040
+
+#: Whether the processor has the SSE control register (x86-64); elsewhere nothing is flushed.
+_HAS_MXCSR = platform.machine().lower() in ("x86_64", "amd64")
+
+
+@intrinsic
+def _mxcsr(typingctx, value):
+    """Swap the thread's SSE control register with ``value`` (uint32); returns the old value."""
+
+    def codegen(context, builder, signature, args):
+        pointer = ir.IntType(8).as_pointer()
+        hook = ir.FunctionType(ir.VoidType(), [pointer])
+        store = cgutils.get_or_insert_function(builder.module, hook, "llvm.x86.sse.stmxcsr")
+        load = cgutils.get_or_insert_function(builder.module, hook, "llvm.x86.sse.ldmxcsr")
+        slot = cgutils.alloca_once(builder, ir.IntType(32))
+        builder.call(store, [builder.bitcast(slot, pointer)])
+        old = builder.load(slot)
+        builder.store(args[0], slot)
+        builder.call(load, [builder.bitcast(slot, pointer)])
+        return old
+
+    return types.uint32(types.uint32), codegen
+
+
+@njit(cache=True)
+def _swap_control(value):
+    """Set the SSE control register to ``value``; returns its previous value (x86-64 only)."""
+    return _mxcsr(np.uint32(value))
+
+
+@contextmanager
+def subnormals_flushed() -> Iterator[None]:
+    """Within the block, this thread's floating-point arithmetic flushes subnormals to 0.
+
+    On x86-64 the SSE control register gets its flush-to-zero and denormals-are-zero bits
+    (:data:`_FLUSH_BITS`) and is restored on exit; every result or operand of magnitude below
+    2.2250738585072014e-308 is then exactly 0 (in compiled kernels, numpy and Python floats
+    alike). Elsewhere it does nothing. The register is per thread and the block is entered
+    and left by separate compiled calls, so no kernel's arithmetic moves across the switch.
+    """
+    if not _HAS_MXCSR:
+        yield
+        return
+    previous = int(_swap_control(0x1F80))  # read it (0x1F80: the default, nothing flushed)
+    _swap_control(previous | _FLUSH_BITS)
+    try:
+        yield
+    finally:
+        _swap_control(previous)
 
 
 @njit(cache=True)
@@ -292,6 +370,123 @@ def _estep(kind, data, emission, startprob, transmat, buffers, xi):
 
 
 @njit(cache=True)
+def _logsumexp(values):
+    """``log Σ_i exp(v_i)`` of a vector, shifted by its maximum (−∞ if every entry is −∞)."""
+    peak = -np.inf
+    for i in range(values.shape[0]):
+        peak = max(peak, values[i])
+    if not np.isfinite(peak):
+        return peak
+    total = 0.0
+    for i in range(values.shape[0]):
+        total += _exp(values[i] - peak)
+    return math.log(total) + peak
+
+
+@njit(cache=True)
+def _log_forward(log_start, log_trans_t, log_frameprob, fwd):
+    """Log-space forward pass (Eq. (4)): ``log α_t(j)``; returns log p(X).
+
+    hmmlearn's ``forward_log``: ``log α_t(j) = logsumexp_i(log α_t−1(i) + log A_ij) + log b_j``;
+    ``log_trans_t`` is log Aᵀ (contiguous rows over i).
+    """
+    n_steps, n_states = log_frameprob.shape
+    terms = np.empty(n_states)
+    for j in range(n_states):
+        fwd[0, j] = log_start[j] + log_frameprob[0, j]
+    for t in range(1, n_steps):
+        for j in range(n_states):
+            for i in range(n_states):
+                terms[i] = fwd[t - 1, i] + log_trans_t[j, i]
+            fwd[t, j] = _logsumexp(terms) + log_frameprob[t, j]
+    return _logsumexp(fwd[n_steps - 1])
+
+
+@njit(cache=True)
+def _log_backward(log_trans, log_frameprob, bwd, weighted):
+    """Log-space backward pass (hmmlearn's ``backward_log``), ``log β_T = 0``.
+
+    Row t ≥ 1 of ``weighted`` receives ``log b_t + log β_t``, the ξ-sum's right factor.
+    """
+    n_steps, n_states = log_frameprob.shape
+    terms = np.empty(n_states)
+    for i in range(n_states):
+        bwd[n_steps - 1, i] = 0.0
+    for t in range(n_steps - 2, -1, -1):
+        for j in range(n_states):
+            weighted[t + 1, j] = log_frameprob[t + 1, j] + bwd[t + 1, j]
+        for i in range(n_states):
+            for j in range(n_states):
+                terms[j] = log_trans[i, j] + weighted[t + 1, j]
+            bwd[t, i] = _logsumexp(terms)
+
+
+@njit(cache=True)
+def _xi_peaks(fwd, weighted, peaks):
+    """``peaks_ij = max_t (log α_t(i) + log b_j + log β_t+1(j))`` (−∞ if every term is)."""
+    n_steps, n_states = fwd.shape
+    peaks[:, :] = -np.inf
+    for t in range(n_steps - 1):
+        for i in range(n_states):
+            for j in range(n_states):
+                peaks[i, j] = max(peaks[i, j], fwd[t, i] + weighted[t + 1, j])
+
+
+@njit(cache=True)
+def _log_xi_sum(fwd, log_trans, weighted, log_prob, peaks, out):
+    """Σ_t ξ_t(i, j) from log-space lattices (hmmlearn's ``compute_log_xi_sum``, exponentiated).
+
+    ``log Σ_t ξ_t(i, j) = log A_ij + logsumexp_t(log α_t(i) + log b_j + log β_t+1(j)) − log p``,
+    each (i, j) shifted by its own maximum over t (two passes; ``peaks`` (K, K) holds them).
+    """
+    n_steps, n_states = fwd.shape
+    _xi_peaks(fwd, weighted, peaks)
+    out[:, :] = 0.0
+    for t in range(n_steps - 1):
+        for i in range(n_states):
+            for j in range(n_states):
+                if np.isfinite(peaks[i, j]):
+                    out[i, j] += _exp(fwd[t, i] + weighted[t + 1, j] - peaks[i, j])
+    for i in range(n_states):
+        for j in range(n_states):
+            if np.isfinite(peaks[i, j]) and out[i, j] > 0.0:
+                out[i, j] = _exp(log_trans[i, j] + peaks[i, j] + math.log(out[i, j]) - log_prob)
+            else:
+                out[i, j] = 0.0
+
+
+@njit(cache=True)
+def _log_posteriors(fwd, bwd, out):
+    """γ_t = exp(log α_t + log β_t − logsumexp_k(…)) (hmmlearn's ``_compute_posteriors_log``)."""
+    n_steps, n_states = fwd.shape
+    for t in range(n_steps):
+        for k in range(n_states):
+            out[t, k] = fwd[t, k] + bwd[t, k]
+        norm = _logsumexp(out[t])
+        for k in range(n_states):
+            out[t, k] = _exp(out[t, k] - norm)
+
+
+@njit(cache=True)
+def _estep_log(kind, data, emission, startprob, transmat, buffers, xi):
+    """:func:`_estep` in log space (hmmlearn's ``implementation="log"``), for when it underflows.
+
+    The same statistics, exact where every emission density of a sample underflows (an
+    outlier far from every state): returns log p(X) (−∞ or NaN if not finite).
+    """
+    log_frameprob, fwd, bwd, gamma, weighted, products, _ = buffers
+    _log_frameprob(kind, data, emission, log_frameprob)
+    log_start, log_trans = np.log(startprob), np.log(transmat)
+    log_prob = _log_forward(log_start, np.ascontiguousarray(log_trans.T), log_frameprob, fwd)
+    if not np.isfinite(log_prob):
+        return log_prob
+    _log_backward(log_trans, log_frameprob, bwd, weighted)
+    _log_xi_sum(fwd, log_trans, weighted, log_prob, products, xi)
+    _log_posteriors(fwd, bwd, gamma)
+    return log_prob
+
+
+@njit(cache=True)
 def _weighted_sums(gamma, columns):
     """Σ_t γ_t(k) (summed in order) and γᵀ·columns (BLAS), shapes (K,) and (K, C)."""
     n_steps, n_states = gamma.shape
@@ -459,9 +654,12 @@ def _is_distribution(startprob, transmat):
 
 
 @njit(cache=True)
-def em(kind, data, emission, max_iter, tol, var_floor):
+def em(kind, data, emission, max_iter, tol, var_floor, log_space):
     """EM from one emission start (π, A uniform); the emission is Gaussian or AR(1) by ``kind``.
 
+    Scaled recursions (:func:`_estep`; :data:`UNDERFLOW` where hmmlearn's would underflow) or,
+    with ``log_space``, log-space ones (:func:`_estep_log`, hmmlearn's ``implementation="log"``;
+    a non-finite log-likelihood is :data:`NON_FINITE`).
     Returns ``(code, history, stopped_by_tol, startprob, transmat, emission, final, γ)``.
     """
     n_steps, n_states = data.shape[0], emission.shape[1]
@@ -471,10 +669,13 @@ def em(kind, data, emission, max_iter, tol, var_floor):
     history = np.empty(max_iter)
     n_done, stopped, code = 0, False, OK
     while True:
-        log_prob = _estep(kind, data, emission, startprob, transmat, buffers, xi)
-        if math.isnan(log_prob):
-            code = UNDERFLOW
-            break
+        if log_space:
+            log_prob = _estep_log(kind, data, emission, startprob, transmat, buffers, xi)
+        else:
+            log_prob = _estep(kind, data, emission, startprob, transmat, buffers, xi)
+            if math.isnan(log_prob):
+                code = UNDERFLOW
+                break
         gamma = buffers[3]
         startprob, transmat = _transition_mstep(startprob, transmat, gamma, xi)
         emission = _emission_mstep(kind, gamma, data, var_floor)
@@ -493,7 +694,10 @@ def em(kind, data, emission, max_iter, tol, var_floor):
     final = math.nan
     if code == OK and not _is_distribution(startprob, transmat):
         code = NOT_DISTRIBUTION
-    if code == OK:
+    if code == OK and log_space:
+        final = _estep_log(kind, data, emission, startprob, transmat, buffers, xi)
+        code = OK if np.isfinite(final) else NON_FINITE
+    elif code == OK:
         final = _estep(kind, data, emission, startprob, transmat, buffers, xi)
         code = UNDERFLOW if math.isnan(final) else OK
     gamma = buffers[3]
@@ -548,12 +752,17 @@ def viterbi(kind, data, emission, startprob, transmat):
 
 @njit(cache=True)
 def score(kind, data, emission, startprob, transmat):
-    """Log p(rows) by the scaled forward pass; NaN where hmmlearn's would underflow."""
+    """Log p(rows) by the scaled forward pass, or the log-space one where that underflows."""
     n_steps, n_states = data.shape[0], emission.shape[1]
     frameprob, fwd = np.empty((n_steps, n_states)), np.empty((n_steps, n_states))
     _log_frameprob(kind, data, emission, frameprob)
     _exp_all(frameprob)
-    return _forward(startprob, transmat, frameprob, fwd, np.empty(n_steps))
+    log_prob = _forward(startprob, transmat, frameprob, fwd, np.empty(n_steps))
+    if math.isnan(log_prob):
+        _log_frameprob(kind, data, emission, frameprob)
+        log_trans_t = np.ascontiguousarray(np.log(transmat).T)
+        log_prob = _log_forward(np.log(startprob), log_trans_t, frameprob, fwd)
+    return log_prob
 
 
 def warm_up() -> None:
@@ -575,7 +784,9 @@ def warm_up() -> None:
             np.ones((3, 2, 2)),
         ),
     )
-    for kind, data, emission in cases:
-        em(kind, data, emission, 2, 1e-8, 1e-3)
-        viterbi(kind, data, emission, startprob, transmat)
-        score(kind, data, emission, startprob, transmat)
+    with subnormals_flushed():
+        for kind, data, emission in cases:
+            for log_space in (False, True):
+                em(kind, data, emission, 2, 1e-8, 1e-3, log_space)
+            viterbi(kind, data, emission, startprob, transmat)
+            score(kind, data, emission, startprob, transmat)

@@ -1,10 +1,11 @@
-"""hmmlearn as the reference EM engine and the fallback of the compiled one (paper §2.1, §5).
+"""hmmlearn as the reference EM engine (paper §2.1, §5).
 
-The regime HMMs run EM in :mod:`dtwin._em_kernels`; this module keeps hmmlearn 0.3.3 for what
-the kernels do not do (its log-space implementation, the fallback when the scaled recursions
-underflow) and as the reference the tests compare the kernels with (config ``hmm.engine:
-hmmlearn`` runs every fit here). It is imported only when one of those is needed, so a fit
-that does not fall back loads neither hmmlearn nor scikit-learn.
+The regime HMMs run EM in :mod:`dtwin._em_kernels` (scaled recursions, and log-space ones
+where those underflow); this module keeps hmmlearn 0.3.3 as the reference the tests compare
+the kernels with (config ``hmm.engine: hmmlearn`` runs every fit here, or numba is missing),
+for :func:`dtwin.hmm.to_hmmlearn` and for scoring an AR(1)-HMM whose scaled forward pass
+underflows. It is imported only then, so a compiled fit loads neither hmmlearn nor
+scikit-learn.
 
 The Gaussian model (:class:`_MatmulGaussianHMM`) and the AR(1) model (:class:`_ArGaussianHMM`)
 extend hmmlearn through its documented hooks: the emission methods its own model classes

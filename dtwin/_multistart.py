@@ -2,10 +2,10 @@
 
 :func:`dtwin.hmm.fit_hmm` (Gaussian emissions) and :func:`dtwin.hmm_ar.fit_ar_hmm` (AR(1)
 emissions) run their starts here: each start's EM through the chosen engine (``compiled``:
-:func:`dtwin._em_kernels.em`; ``hmmlearn``: :mod:`dtwin._em_reference`), hmmlearn's log-space
-implementation when the scaled recursions fail, and one row per start with an honest status
+:func:`dtwin._em_kernels.em`; ``hmmlearn``: :mod:`dtwin._em_reference`), the same engine's
+log-space recursions when the scaled ones fail, and one row per start with an honest status
 (``ok``, ``max_iter``, ``not_monotone``, ``degenerate``, ``failed``). hmmlearn is imported only
-by the reference engine and the fallback, numba only when a start runs or a path is decoded.
+by the reference engine, numba only when a start runs or a path is decoded.
 """
 
 from __future__ import annotations
@@ -82,11 +82,12 @@ RESTART_COLUMNS = (
     "message",
 )
 
-#: Messages of the kernels' failure codes (:data:`dtwin._em_kernels.UNDERFLOW`, ...).
+#: Messages of the kernels' failure codes (:data:`dtwin._em_kernels.UNDERFLOW`, ...), as
+#: hmmlearn's for the same failure; ``{}`` is the implementation.
 _KERNEL_FAILURES = {
     "UNDERFLOW": "forward pass failed with underflow; consider using implementation='log'",
-    "NON_FINITE": "non-finite log-likelihood or parameters (scaling)",
-    "NOT_DISTRIBUTION": "startprob_ or transmat_ rows do not sum to 1 (scaling)",
+    "NON_FINITE": "non-finite log-likelihood or parameters ({})",
+    "NOT_DISTRIBUTION": "startprob_ or transmat_ rows do not sum to 1 ({})",
 }
 
 
@@ -131,7 +132,8 @@ class EmRun:
         Smoothed posteriors γ_t(k) under the returned parameters; :func:`fit_starts` keeps them
         only for its best start (a T′×K array per start: 32 MB at T′ = 1e6, K = 4).
     implementation : str
-        ``scaling`` (scaled recursions, compiled or hmmlearn's) or ``log`` (hmmlearn's).
+        ``scaling`` (scaled recursions) or ``log`` (log-space recursions, run when the scaled
+        ones underflowed); compiled or hmmlearn's, by the engine.
     """
 
     startprob: np.ndarray
@@ -167,37 +169,43 @@ def kernel_array(array: Any) -> np.ndarray:
     return np.require(array, dtype=float, requirements=["C_CONTIGUOUS", "WRITEABLE", "ALIGNED"])
 
 
-def _compiled_em(data: EmData, emission: np.ndarray, options: dict[str, Any]) -> EmRun:
+def _compiled_em(
+    data: EmData, emission: np.ndarray, implementation: str, options: dict[str, Any]
+) -> EmRun:
+    """EM in the compiled kernels, scaled (``scaling``) or log-space (``log``) recursions."""
     from dtwin import _em_kernels as kernels
 
-    code, history, stopped, startprob, transmat, fitted, final, posteriors = kernels.em(
-        int(data.kind),
-        kernel_array(data.kernel),
-        kernel_array(emission),
-        int(options["max_iter"]),
-        float(options["tol"]),
-        float(options["var_floor"]),
-    )
+    arrays = kernel_array(data.kernel), kernel_array(emission)
+    with kernels.subnormals_flushed():
+        code, history, stopped, startprob, transmat, fitted, final, posteriors = kernels.em(
+            int(data.kind),
+            *arrays,
+            int(options["max_iter"]),
+            float(options["tol"]),
+            float(options["var_floor"]),
+            implementation == "log",
+        )
     if code != kernels.OK:
         failure = next(name for name in _KERNEL_FAILURES if getattr(kernels, name) == code)
-        raise EmError(_KERNEL_FAILURES[failure])
+        raise EmError(_KERNEL_FAILURES[failure].format(implementation))
     history = np.append(history, final)
-    return EmRun(startprob, transmat, fitted, history, bool(stopped), posteriors, "scaling")
+    return EmRun(startprob, transmat, fitted, history, bool(stopped), posteriors, implementation)
 
 
 def run_start(
     data: EmData, emission: np.ndarray, engine: str, options: dict[str, Any]
 ) -> tuple[EmRun | None, list[str]]:
-    """Run EM from one emission start (π, A uniform); scaled recursions, then hmmlearn's log.
+    """Run EM from one emission start (π, A uniform); scaled recursions, then log-space ones.
 
+    Both in the engine's implementation (compiled, or hmmlearn's ``scaling`` and ``log``).
     Returns the run (None if both failed) and the failure messages, ``"<implementation>: …"``.
     """
     messages = []
     engine = available_engine(engine)
     for implementation in ("scaling", "log"):
         try:
-            if engine == "compiled" and implementation == "scaling":
-                return _compiled_em(data, emission, options), messages
+            if engine == "compiled":
+                return _compiled_em(data, emission, implementation, options), messages
             from dtwin import _em_reference
 
             return _em_reference.run_em(data, emission, implementation, options), messages

@@ -3,10 +3,10 @@
 A K-state HMM with diagonal-covariance Gaussian emissions (paper Eq. (3); depmixS4's
 independent ``gaussian()`` responses, r_notes.md §4) is fitted by EM to z-scored residual
 features, arrays time-first ``(T, D)``. EM runs hmmlearn 0.3.3's equations and scaled
-recursions compiled with numba, one call per start (:mod:`dtwin._em_kernels`; the starts,
-statuses and fallback in :mod:`dtwin._multistart`); hmmlearn itself is the reference engine
-(``engine="hmmlearn"``, config ``hmm.engine``; :mod:`dtwin._em_reference`) and the fallback
-when the scaled recursions underflow, and is imported only then.
+recursions compiled with numba, one call per start, and its log-space recursions where the
+scaled ones underflow (:mod:`dtwin._em_kernels`; the starts, statuses and fallback in
+:mod:`dtwin._multistart`); hmmlearn itself is the reference engine (``engine="hmmlearn"``,
+config ``hmm.engine``; :mod:`dtwin._em_reference`), and is imported only then.
 ``tests/concepts/test_hmm_engine.py`` holds the two engines to the same iterations, statuses
 and numbers. dtwin adds what depmixS4 did and hmmlearn does not:
 
@@ -405,7 +405,7 @@ def fit_hmm(
         or k-means++ seeding (states start apart; see :data:`START_METHODS`).
     engine : {"compiled", "hmmlearn"}, default "compiled"
         EM engine: the compiled kernels of :mod:`dtwin._em_kernels` (hmmlearn's equations and
-        recursions; imports neither hmmlearn nor scikit-learn unless a start falls back) or
+        recursions, scaled and log-space; imports neither hmmlearn nor scikit-learn) or
         hmmlearn itself (the reference; config ``hmm.engine``).
 
     Returns
@@ -425,7 +425,8 @@ def fit_hmm(
     assignment), fits means and ML standard deviations to those weights, and sets π and A
     uniform (depmixS4's ``random.start``). EM (Eqs. (4)–(9)) runs the scaled forward-backward
     recursions (compiled, or hmmlearn's ``implementation="scaling"``), restarting from the
-    same point in hmmlearn's ``"log"`` implementation if they fail; BLAS is held to one thread.
+    same point in log space (the engine's ``"log"`` implementation) if they underflow; BLAS is
+    held to one thread.
     A start is ``ok`` when the tolerance stopped it, its parameters are finite and its
     log-likelihood never fell by more than round-off;
     ``max_iter`` starts are usable but not converged; ``degenerate`` (a state with expected

@@ -398,16 +398,13 @@ def score_ar_hmm(fit: ArHmmFit, X: Any) -> float:
     data = EmData(AR1, design, design)
     emission = np.stack([fit.intercepts, fit.coefs, fit.sds**2])
     arrays = (design, emission, fit.startprob, fit.transmat)
-    log_likelihood = math.nan
     if available_engine("compiled") == "compiled":
         from dtwin import _em_kernels as kernels
 
-        log_likelihood = kernels.score(data.kind, *(kernel_array(a) for a in arrays))
-    if np.isnan(log_likelihood):  # underflow (or no numba): hmmlearn's log space
-        from dtwin._em_reference import score
+        return float(kernels.score(data.kind, *(kernel_array(a) for a in arrays)))
+    from dtwin._em_reference import score  # no numba: hmmlearn's log space
 
-        log_likelihood = score(data, fit.startprob, fit.transmat, emission, "log")
-    return float(log_likelihood)
+    return score(data, fit.startprob, fit.transmat, emission, "log")
 
 
 # --- model order ----------------------------------------------------------------------------

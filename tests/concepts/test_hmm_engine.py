@@ -221,3 +221,87 @@ def test_only_the_best_start_keeps_its_posteriors(features):
     assert len(runs) > 1
     assert [number for number, run in runs.items() if run.posteriors is not None] == [best]
     np.testing.assert_allclose(runs[best].posteriors.sum(axis=1), 1.0)
+
+
+#: A start on R's seed-11 fault features (K = 2, its random-start seed in the BIC sweep of
+#: rule bic_r_signals) whose scaled forward pass underflows at R's outlier sample t = 725.
+UNDERFLOWING_START = (2, 4080602305)
+
+
+def test_a_start_whose_scaled_pass_underflows_reruns_in_compiled_log_space(features):
+    """The compiled engine reruns it in its own log space, as hmmlearn's log implementation."""
+    initial = _gaussian_initial(features, *UNDERFLOWING_START)
+    compiled, reference = _both(_em_data(features), initial)
+    for row, _ in (compiled, reference):
+        assert row["implementation"] == "log"
+        assert row["message"].startswith("scaling: forward pass failed with underflow")
+    _assert_same_run(compiled, reference)
+    code = (
+        "import sys, numpy as np, pandas as pd\n"
+        "from dtwin.fault_injection import regime_features\n"
+        "from dtwin.hmm import _em_data, _random_start, zscore\n"
+        "from dtwin._multistart import fit_one_start\n"
+        "X = zscore(regime_features(pd.read_csv("
+        "'config/reference/faulted_pipeline_seed11_rerun.csv'))).values\n"
+        f"m, v, occ = _random_start(X, {UNDERFLOWING_START[0]}, "
+        f"np.random.default_rng({UNDERFLOWING_START[1]}), 1e-3)\n"
+        f"row, _ = fit_one_start(_em_data(X), 0, (np.stack([m, v]), occ), 'compiled', {OPTIONS})\n"
+        "print(row['implementation'], sorted({'hmmlearn', 'sklearn'} & {*sys.modules}))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO
+    )
+    assert out.stdout.strip() == "log []"
+
+
+def _hmmlearn_log_estep(startprob, transmat, log_frameprob):
+    from hmmlearn import _hmmc
+
+    log_prob, fwd = _hmmc.forward_log(startprob, transmat, log_frameprob)
+    bwd = _hmmc.backward_log(startprob, transmat, log_frameprob)
+    with np.errstate(under="ignore", divide="ignore"):
+        xi = np.exp(_hmmc.compute_log_xi_sum(fwd, transmat, bwd, log_frameprob))
+        log_gamma = fwd + bwd
+        gamma = np.exp(log_gamma - np.logaddexp.reduce(log_gamma, axis=1, keepdims=True))
+    return log_prob, gamma, xi
+
+
+def test_log_space_estep_is_hmmlearns():
+    """log p(X), γ and Σ ξ of the compiled log-space E-step against hmmlearn's ``_hmmc``, with
+    a forbidden transition (log A = −∞) and a sample whose every density underflows."""
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(400, 3))
+    X[150] = 60.0  # every state's density below 1e-300: the scaled pass fails here
+    emission = np.stack([rng.normal(size=(4, 3)), rng.uniform(0.5, 2.0, size=(4, 3))])
+    startprob = np.array([0.4, 0.3, 0.2, 0.1])
+    transmat = rng.dirichlet(np.ones(4), size=4)
+    transmat[1, 3] = 0.0
+    transmat[1] /= transmat[1].sum()
+    data = np.hstack([X, X * X])
+    buffers, xi = kernels._lattices(len(X), 4), np.empty((4, 4))
+    assert math.isnan(kernels._estep(0, data, emission, startprob, transmat, buffers, xi))
+    log_prob = kernels._estep_log(0, data, emission, startprob, transmat, buffers, xi)
+    log_frameprob = np.empty((len(X), 4))
+    kernels._log_frameprob(0, data, emission, log_frameprob)
+    ref_log_prob, ref_gamma, ref_xi = _hmmlearn_log_estep(startprob, transmat, log_frameprob)
+    assert log_prob == pytest.approx(ref_log_prob, rel=1e-12)
+    np.testing.assert_allclose(buffers[3], ref_gamma, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(xi, ref_xi, rtol=1e-10, atol=0)
+    assert xi[1, 3] == 0.0
+    score = kernels.score(0, data, emission, startprob, transmat)
+    assert score == pytest.approx(ref_log_prob, rel=1e-12)
+
+
+def test_subnormals_flush_to_zero_inside_the_block_only():
+    """Inside subnormals_flushed a product below the smallest normal float is 0 (x86-64)."""
+    tiny, factor = 1e-300, np.float64(1e-10)  # their product, 1e-310, is subnormal
+    assert tiny * factor == pytest.approx(1e-310, rel=1e-6)
+    with kernels.subnormals_flushed():
+        inside = (tiny * factor, float(np.multiply(np.array([tiny]), factor)[0]))
+        assert tiny * 1e10 == 1e-290  # normal results are untouched
+    assert tiny * factor == pytest.approx(1e-310, rel=1e-6)
+    with pytest.raises(RuntimeError), kernels.subnormals_flushed():
+        raise RuntimeError
+    assert tiny * factor > 0.0  # restored on an exception too
+    expected = (0.0, 0.0) if kernels._HAS_MXCSR else (tiny * factor,) * 2
+    assert inside == expected
