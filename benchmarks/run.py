@@ -6,16 +6,16 @@ load average before and after it), medians where repeated. Sections (`python ben
 
 - ``dag``: the paper DAG (every paper figure, without the gap benchmark and the draws) cold with
   --cores 2 and --cores 1 on a copy in a temporary folder after set-up (:func:`set_up`: the EM
-  kernels and the force loop compiled into the copy's numba cache, as `make` does), then the no-op (a rerun and a
-  dry run ``snakemake -n``, median of 3 each, wall and CPU seconds). CPU seconds come from the
-  processes themselves, not Snakemake's ``benchmark:`` sampler (which stops after ~15 s): every
-  job is measured by the kernel (benchmarks/cpu_probe/sitecustomize.py: ``os.wait4`` on the
+  kernels and the force loop compiled into the copy's numba cache, as `make` does), then the no-op
+  (a rerun and a dry run ``snakemake -n``, median of 3 each, wall and CPU seconds). CPU seconds come
+  from the processes themselves, not Snakemake's ``benchmark:`` sampler (which stops after ~15 s):
+  every job is measured by the kernel (benchmarks/cpu_probe/sitecustomize.py: ``os.wait4`` on the
   job's process), Snakemake's own process by ``getrusage``, and the run's total is the
-  ``RUSAGE_CHILDREN`` of this process around it. Per job (``jobs``: CPU s, wall s, peak MB) and
-  per rule (``by_rule``: jobs, wall s, CPU s) for the cold --cores 2 run, with each job's
-  start and end (s after the run started) and the jobs' summed wall time over the run's
-  (``jobs_wall_over_run_wall``: 2 when both cores are always busy); ``vs_r`` is the R
-  scripts' time (:data:`R_REFERENCE_S`) over ours, for each core count;
+  ``RUSAGE_CHILDREN`` of this process around it. Per job (``jobs``: CPU s, wall s, peak MB) and per
+  rule (``by_rule``: jobs, wall s, CPU s) for the cold --cores 2 run, with each job's start and end
+  (s after the run started) and the jobs' summed wall time over the run's
+  (``jobs_wall_over_run_wall``: 2 when both cores are always busy); ``vs_r`` is the R scripts' time
+  (:data:`R_REFERENCE_S`) over ours, for each core count;
 - ``figures``: `snakemake --cores 2 all` cold after set-up (every artifact incl. the gap
   benchmark and the claims across draws), measured the same way;
 - ``imports``: per script in scripts/, the CPU seconds of a fresh interpreter that runs only its

@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Sequence
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import pandas as pd
+from threadpoolctl import threadpool_limits
 
 from dtwin._jit import HAVE_NUMBA
 
@@ -33,6 +36,7 @@ __all__ = [
     "decode",
     "fit_starts",
     "kernel_array",
+    "one_blas_thread",
     "restart_seeds",
     "run_start",
 ]
@@ -57,6 +61,32 @@ def available_engine(engine: str) -> str:
             _FALLBACK_WARNED.append(True)
         return "hmmlearn"
     return engine
+
+
+#: Whether this thread is inside :func:`one_blas_thread`.
+_ONE_BLAS_THREAD = threading.local()
+
+
+@contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Hold every BLAS library to one thread (threadpoolctl) for the block; nested blocks reuse it.
+
+    ``threadpool_limits`` scans the process's loaded libraries on every entry (~4 ms); a BIC
+    sweep entered it about twice per K, so the outermost block limits and the inner ones pass
+    through. The compiled kernels call scipy's OpenBLAS, which numba loads with the first
+    kernel; it is loaded here first, so that the limit holds it from the first start on.
+    """
+    if getattr(_ONE_BLAS_THREAD, "active", False):
+        yield
+        return
+    if HAVE_NUMBA:
+        import scipy.linalg.cython_blas  # noqa: F401  (numba's BLAS)
+    with threadpool_limits(limits=1):
+        _ONE_BLAS_THREAD.active = True
+        try:
+            yield
+        finally:
+            _ONE_BLAS_THREAD.active = False
 
 
 #: Emission families of :class:`EmData` (``kind`` of :mod:`dtwin._em_kernels`, equal there).

@@ -38,7 +38,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
-from threadpoolctl import threadpool_limits
 
 from dtwin._multistart import (
     ENGINES,
@@ -49,6 +48,7 @@ from dtwin._multistart import (
     decode,
     fit_one_start,
     fit_starts,
+    one_blas_thread,
     restart_seeds,
 )
 from dtwin._validation import (
@@ -304,7 +304,7 @@ def split_fits(
     data, options = _em_data(X), {"max_iter": max_iter, "tol": tol, "var_floor": var_floor}
     rows: list[dict[str, Any]] = []
     best: tuple[float, np.ndarray] | None = None
-    with threadpool_limits(limits=1):
+    with one_blas_thread():
         for state in range(len(means)):
             initial = np.stack(_split_start(means, variances, state, rng))
             occupancy = np.full(len(means) + 1, np.inf)
@@ -446,7 +446,7 @@ def fit_hmm(
     options = _em_options(
         X, n_states, max_iter=max_iter, tol=tol, var_floor=var_floor, start=start, engine=engine
     )
-    with threadpool_limits(limits=1):
+    with one_blas_thread():
         seeds = restart_seeds(seed, n_restarts)
         restarts, runs = _gaussian_starts(X, n_states, seeds, 1, options)
         return _assemble_fit(X, n_states, restarts, runs, options["engine"])
@@ -460,10 +460,17 @@ def _require_usable(n_states: int, restarts: pd.DataFrame, runs: dict[int, EmRun
         )
 
 
+def _best_position(restarts: pd.DataFrame, runs: dict[int, EmRun]) -> int:
+    """Return the row of the usable start with the highest log-likelihood (first of ties)."""
+    numbers = restarts["restart"].to_numpy()
+    values = restarts["log_likelihood"].to_numpy(dtype=float)
+    rows = [row for row, number in enumerate(numbers) if int(number) in runs]
+    return max(rows, key=lambda row: -math.inf if math.isnan(values[row]) else values[row])
+
+
 def _best_restart(restarts: pd.DataFrame, runs: dict[int, EmRun]) -> int:
     """Return the number of the usable start with the highest log-likelihood (first of ties)."""
-    usable = restarts[restarts["restart"].isin(runs)]
-    return int(usable.loc[usable["log_likelihood"].idxmax(), "restart"])
+    return int(restarts["restart"].iloc[_best_position(restarts, runs)])
 
 
 def _assemble_fit(
@@ -718,22 +725,53 @@ def bic_row(
         difference shows whether doubling the random starts still helped; ``n_starts`` counts
         the random starts, ``n_split_starts`` the split ones.
     """
-    usable = ~restarts["status"].isin(["failed", "degenerate"])
-    values = restarts["log_likelihood"].where(usable)
-    n_random = len(restarts) if n_random is None else int(n_random)
+    statuses = restarts["status"].to_numpy(dtype=object)
+    values = restarts["log_likelihood"].to_numpy(dtype=float)
+    return _bic_row(n_states, statuses, values, n_params, bic, converged, source, n_random)
+
+
+#: Statuses of the starts that give no usable model.
+_UNUSABLE = ("failed", "degenerate")
+
+
+def _usable(statuses: np.ndarray) -> np.ndarray:
+    """Boolean mask (n,) of the statuses of usable starts."""
+    return np.array([status not in _UNUSABLE for status in statuses], dtype=bool)
+
+
+def _nanmax(values: np.ndarray) -> float:
+    """Largest non-NaN value (NaN if there is none), as pandas' ``Series.max``."""
+    finite = values[~np.isnan(values)]
+    return float(finite.max()) if finite.size else math.nan
+
+
+def _bic_row(
+    n_states: int,
+    statuses: np.ndarray,
+    values: np.ndarray,
+    n_params: int,
+    bic: float,
+    converged: bool,
+    source: str,
+    n_random: int | None,
+) -> dict[str, Any]:
+    """:func:`bic_row` from the starts' statuses and log-likelihoods, arrays (n,) in order."""
+    usable = _usable(statuses)
+    values = np.where(usable, values, math.nan)
+    n_random = len(values) if n_random is None else int(n_random)
     half = max(1, n_random // 2)
-    in_half = np.arange(len(restarts)) < half
+    in_half = np.arange(len(values)) < half
     in_half[n_random:] = True
     return {
         "K": int(n_states),
-        "log_likelihood": float(values.max()),
+        "log_likelihood": _nanmax(values),
         "n_params": int(n_params),
         "bic": float(bic),
         "converged": bool(converged),
         "n_usable": int(usable.sum()),
-        "log_likelihood_half": float(values[in_half].max()),
+        "log_likelihood_half": _nanmax(values[in_half]),
         "n_starts": n_random,
-        "n_split_starts": len(restarts) - n_random,
+        "n_split_starts": len(values) - n_random,
         "source": source,
     }
 
@@ -767,27 +805,35 @@ def _combined_row(
     n_features: int,
     n_samples: int,
 ) -> tuple[dict[str, Any], tuple[np.ndarray, np.ndarray]]:
-    """Return the BIC row of a K's random and split starts, and the best emissions."""
+    """Return the BIC row of a K's random and split starts, and the best emissions.
+
+    Works on the tables' columns as arrays (a sweep calls it once per K and doubling; pandas
+    indexing cost ~15 ms a call).
+    """
     _require_usable(k, restarts, runs)
-    n_random, best_restart = len(restarts), _best_restart(restarts, runs)
-    run = runs[best_restart]
+    n_random, position = len(restarts), _best_position(restarts, runs)
+    run = runs[int(restarts["restart"].iloc[position])]
     best = (run.emission[0].copy(), run.emission[1].copy())
     log_likelihood = float(run.history[-1])
-    converged = bool(restarts.loc[restarts["restart"] == best_restart, "converged"].iloc[0])
+    converged = bool(restarts["converged"].iloc[position])
+    statuses = restarts["status"].to_numpy(dtype=object)
+    values = restarts["log_likelihood"].to_numpy(dtype=float)
     if splits is not None:
-        splits = splits.assign(restart=splits["restart"] + n_random)
-        restarts = pd.concat([restarts, splits], ignore_index=True)
-        usable = splits[~splits["status"].isin(["failed", "degenerate"])]
-        if grown is not None and usable["log_likelihood"].max() > log_likelihood:
-            top = usable.loc[usable["log_likelihood"].idxmax()]
+        split_statuses = splits["status"].to_numpy(dtype=object)
+        split_values = splits["log_likelihood"].to_numpy(dtype=float)
+        usable = np.flatnonzero(_usable(split_statuses) & ~np.isnan(split_values))
+        if grown is not None and usable.size and split_values[usable].max() > log_likelihood:
+            top = usable[np.argmax(split_values[usable])]
             log_likelihood, converged, best = (
-                float(top["log_likelihood"]),
-                bool(top["converged"]),
+                float(split_values[top]),
+                bool(splits["converged"].iloc[top]),
                 grown,
             )
+        statuses = np.concatenate([statuses, split_statuses])
+        values = np.concatenate([values, split_values])
     n_params = n_hmm_params(k, n_features)
     bic = -2.0 * log_likelihood + n_params * math.log(n_samples)
-    row = bic_row(k, restarts, n_params, bic, converged, n_random=n_random)
+    row = _bic_row(k, statuses, values, n_params, bic, converged, "sweep", n_random)
     return row, best
 
 
@@ -810,7 +856,7 @@ def _sweep_row(
     splits, grown = _grown_splits(X, k, entropy, grow_from, options)
     tables, runs, n = [], {}, 0
     target = n_restarts
-    with threadpool_limits(limits=1):
+    with one_blas_thread():
         while True:
             seeds = restart_seeds([*entropy, k], target, first=n)
             table, new_runs = _gaussian_starts(X, k, seeds, n + 1, options)
@@ -895,26 +941,29 @@ def bic_by_k(
     k_last = max(ks) if k_max is None else max(max(ks), _require_count("k_max", k_max, 1))
     rows: list[dict[str, Any]] = []
     best: tuple[np.ndarray, np.ndarray] | None = None
-    for k in [*ks, *range(max(ks) + 1, k_last + 1)]:
-        if k > max(ks) and bic_minimum_bracketed([r["bic"] for r in rows], stop_after_rises):
-            break
-        if k in given:
-            row = dict(given[k])
-            best = _given_params(row)
-            row.setdefault("n_split_starts", 0)
-        else:
-            grow_from = best if split_starts else None
-            row, best = _sweep_row(X, k, n_restarts, entropy, grow_from, fit_options, max_restarts)
-        rows.append(row)
-        logger.info(
-            "bic_by_k K=%d: logL=%.3f (first half of the random starts %.3f) BIC=%.3f "
-            "(%d/%d usable, %d split starts)",
-            k,
-            row["log_likelihood"],
-            row["log_likelihood_half"],
-            row["bic"],
-            row["n_usable"],
-            row["n_starts"] + row["n_split_starts"],
-            row["n_split_starts"],
-        )
+    with one_blas_thread():  # one scan of the BLAS libraries per sweep
+        for k in [*ks, *range(max(ks) + 1, k_last + 1)]:
+            if k > max(ks) and bic_minimum_bracketed([r["bic"] for r in rows], stop_after_rises):
+                break
+            if k in given:
+                row = dict(given[k])
+                best = _given_params(row)
+                row.setdefault("n_split_starts", 0)
+            else:
+                grow_from = best if split_starts else None
+                row, best = _sweep_row(
+                    X, k, n_restarts, entropy, grow_from, fit_options, max_restarts
+                )
+            rows.append(row)
+            logger.info(
+                "bic_by_k K=%d: logL=%.3f (first half of the random starts %.3f) BIC=%.3f "
+                "(%d/%d usable, %d split starts)",
+                k,
+                row["log_likelihood"],
+                row["log_likelihood_half"],
+                row["bic"],
+                row["n_usable"],
+                row["n_starts"] + row["n_split_starts"],
+                row["n_split_starts"],
+            )
     return pd.DataFrame(rows)

@@ -40,7 +40,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from threadpoolctl import threadpool_limits
 
 from dtwin._multistart import (
     AR1,
@@ -49,6 +48,7 @@ from dtwin._multistart import (
     decode,
     fit_starts,
     kernel_array,
+    one_blas_thread,
     restart_seeds,
 )
 from dtwin._validation import DtwinValueError, require_finite_array, require_positive
@@ -342,7 +342,7 @@ def fit_ar_hmm(
     engine = _require_engine(engine)
     design = _design(X)
     data = EmData(AR1, design, design)
-    with threadpool_limits(limits=1):
+    with one_blas_thread():
         restarts, runs = fit_starts(
             data,
             restart_seeds(seed, n_restarts),

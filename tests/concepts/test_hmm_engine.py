@@ -305,3 +305,26 @@ def test_subnormals_flush_to_zero_inside_the_block_only():
     assert tiny * factor > 0.0  # restored on an exception too
     expected = (0.0, 0.0) if kernels._HAS_MXCSR else (tiny * factor,) * 2
     assert inside == expected
+
+
+def test_a_sweep_limits_blas_once_and_numbas_blas_from_the_first_start(features, monkeypatch):
+    """bic_by_k enters threadpool_limits once (a scan of the loaded libraries each time), and
+    scipy's OpenBLAS, which the kernels call, is loaded before the limit, so it is held too."""
+    import dtwin._multistart as multistart
+    from dtwin.hmm import bic_by_k
+
+    entered, real = [], multistart.threadpool_limits
+
+    def counting(**kwargs):
+        entered.append(kwargs)
+        return real(**kwargs)
+
+    monkeypatch.setattr(multistart, "threadpool_limits", counting)
+    bic_by_k(features[:300], [2, 3], n_restarts=2, seed=0, split_starts=True, max_restarts=4)
+    assert entered == [{"limits": 1}]
+    with multistart.one_blas_thread():
+        assert "scipy.linalg.cython_blas" in sys.modules
+        from threadpoolctl import threadpool_info
+
+        blas = [lib for lib in threadpool_info() if lib["user_api"] == "blas"]
+        assert len(blas) >= 2 and all(lib["num_threads"] == 1 for lib in blas)
