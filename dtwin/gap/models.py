@@ -391,11 +391,13 @@ def warmup_samples(horizon: int) -> int:
     return max(3, int(horizon) // 5)
 
 
-def _window_states(data, u, m, c, k, windows, warmup) -> tuple[np.ndarray, np.ndarray]:
+def _window_states(data, u, m, c, k, windows, warmup, drive=None) -> tuple[np.ndarray, np.ndarray]:
     """Return the windows' initial states: least squares on each one's first ``warmup`` samples.
 
     The linear plant's forced response from rest is removed from the recorded position; the
-    rest is the free response ``Φ·s₀`` (:func:`~dtwin.exact_plant.free_response_basis`).
+    rest is the free response ``Φ·s₀`` (:func:`~dtwin.exact_plant.free_response_basis`). The
+    forced response is simulated over the warm-ups only (it is causal: the same values as over
+    the whole windows); ``drive`` is the hold's drive of ``u/m`` when the caller has it.
     """
     n = len(u)
     zeros = np.zeros(n)
@@ -405,10 +407,11 @@ def _window_states(data, u, m, c, k, windows, warmup) -> tuple[np.ndarray, np.nd
         c,
         k,
         data.dt,
-        windows=windows,
+        windows=[(a, a + warmup) for a, _ in windows],
         x_start=zeros,
         v_start=zeros,
         hold=data.discretisation,
+        drive=drive,
     )
     step = hold_matrices(c / m, k / m, data.dt, data.discretisation)
     solve = np.linalg.pinv(free_response_basis(step, warmup))
@@ -493,10 +496,14 @@ def _exact_plant(data, lin, u, force, stop, segments):
     m, c, k = float(lin["m"]), float(lin["c"]), float(lin["k"])
     x_start, v_start = data.output, data.velocity
     warmup = None
+    # the input's drive, once for the warm-ups' states and the windows (the same u, m, c, k)
+    drive = hold_matrices(c / m, k / m, data.dt, data.discretisation).drive(
+        np.asarray(u, dtype=float) / m, windows
+    )
     if data.horizon is not None:
         warmup = warmup_samples(data.horizon)
         windows = [(a, b) for a, b in windows if b - a > warmup]
-        x_start, v_start = _window_states(data, u, m, c, k, windows, warmup)
+        x_start, v_start = _window_states(data, u, m, c, k, windows, warmup, drive)
 
     def run(x_from, v_from):
         return exact_plant_response(
@@ -510,6 +517,7 @@ def _exact_plant(data, lin, u, force, stop, segments):
             v_start=v_from,
             hold=data.discretisation,
             force=force,
+            drive=drive,
         )
 
     out = run(x_start, v_start)
