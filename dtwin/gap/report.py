@@ -240,16 +240,18 @@ def _free_run_lines(d: Diagnosis) -> list[str]:
     ]
 
 
-def render_markdown(diagnosis: Diagnosis, figure_name: str = "gap.png") -> str:
-    """Return ``report.md``: the answer first, then per-module gaps, candidates, definitions."""
+def render_markdown(diagnosis: Diagnosis, figure_name: str | None = "gap.png") -> str:
+    """Return ``report.md``: the answer first, then per-module gaps, candidates, definitions.
+
+    ``figure_name`` None: no figure to link.
+    """
     d = diagnosis
     lines = [
         "# Sim-to-real gap diagnosis",
         "",
         _headline(d),
         "",
-        f"![gap diagnosis]({figure_name})",
-        "",
+        *([f"![gap diagnosis]({figure_name})", ""] if figure_name else []),
         f"Recording: {d.n_samples} samples, dt = {d.dt:.6g} s; parameters fitted on the first "
         f"{d.n_train} samples ({d.train_frac:.0%}, training part), decisions taken on the next "
         f"{d.n_choose - d.n_train} (choosing part), every shrink measured on the remaining "
@@ -356,13 +358,21 @@ def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
     save_figure(fig, paths)
 
 
-def write_report(diagnosis: Diagnosis, out_dir: str | os.PathLike) -> list[Path]:
-    """Write ``diagnosis.json``, ``report.md`` and ``gap.png`` into ``out_dir``; return paths."""
+def write_report(
+    diagnosis: Diagnosis, out_dir: str | os.PathLike, *, figure: bool = True
+) -> list[Path]:
+    """Write ``diagnosis.json``, ``report.md`` and ``gap.png`` into ``out_dir``; return paths.
+
+    ``figure=False`` leaves out ``gap.png`` (and ``report.md``'s link to it): the benchmark
+    reads ``diagnosis.json`` only, and drawing the figure took half of a case's diagnosis.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     json_path, md_path, png_path = out / "diagnosis.json", out / "report.md", out / "gap.png"
     write_json(diagnosis_to_dict(diagnosis), json_path)
-    text = render_markdown(diagnosis, png_path.name)
+    text = render_markdown(diagnosis, png_path.name if figure else None)
     atomic_write(md_path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
+    if not figure:
+        return [json_path, md_path]
     _draw_figure(diagnosis, [png_path])
     return [json_path, md_path, png_path]

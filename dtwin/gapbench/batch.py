@@ -7,7 +7,7 @@ its CSV before it is diagnosed), so the files and the diagnoses do not depend on
 
 Folder of one case: ``recording.csv`` (t in s, signals in the twin's units), ``twin.yaml`` (the
 nominal twin), ``key.json`` (the truth; the diagnoser never reads it); folder of one diagnosis:
-the files of :func:`dtwin.gap.report.write_report` (``diagnosis.json``, ``report.md``,
+``diagnosis.json`` and ``report.md`` (:func:`dtwin.gap.report.write_report` without
 ``gap.png``).
 """
 
@@ -78,7 +78,10 @@ def diagnose_case_folder(
         The ``gap.diagnose`` config section: ``train_frac``, ``calibrate`` and the decision
         constants of :class:`dtwin.gap.results.GapSettings`.
     out_folder : path
-        Created if missing; receives the files of :func:`dtwin.gap.report.write_report`.
+        Created if missing; receives ``diagnosis.json`` and ``report.md``
+        (:func:`dtwin.gap.report.write_report` without the figure: the benchmark reads the
+        JSON only, and ``gap.png`` cost as much as the diagnosis; ``dtwin diagnose`` on the
+        case folder draws it).
     """
     from dtwin.gap import GapSettings, diagnose, twin_discretisation, twin_from_mapping
     from dtwin.gap.recording import read_recording
@@ -99,4 +102,4 @@ def diagnose_case_folder(
         discretisation=twin_discretisation(twin_content),
     )
     Path(out_folder).mkdir(parents=True, exist_ok=True)
-    write_report(result, out_folder)
+    write_report(result, out_folder, figure=False)
