@@ -17,7 +17,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["STEPS", "WEIGHT_CLIP", "MIN_STEP_ANSWERS", "calibrated_confidence", "fit_steps"]
+__all__ = [
+    "STEPS",
+    "FITTING_CASES",
+    "WEIGHT_CLIP",
+    "MIN_STEP_ANSWERS",
+    "calibrated_confidence",
+    "fit_steps",
+]
 
 #: Weights are clipped to ``[WEIGHT_CLIP, 1 − WEIGHT_CLIP]`` (a weight of exactly 1 in floating
 #: point carries no more evidence than 1 − 1e-9: all such answers are one group).
@@ -30,6 +37,9 @@ STEPS: tuple[tuple[float, float], ...] = (
     (0.776877, 0.95),
     (1.0 - WEIGHT_CLIP, 0.980620),
 )
+#: The benchmark case numbers (``NN`` of a case ``<type>_NN``, its seed's offset) whose answers
+#: :data:`STEPS` was fitted on; the others check it (:mod:`dtwin.gapbench.scores`).
+FITTING_CASES: frozenset[int] = frozenset(range(5))
 
 
 def calibrated_confidence(weight: float, steps: Sequence[tuple[float, float]] = STEPS) -> float:

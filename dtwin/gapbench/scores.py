@@ -29,6 +29,7 @@ from typing import Any
 import pandas as pd
 
 from dtwin.artifacts import Check
+from dtwin.gap.confidence import FITTING_CASES
 from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED
 from dtwin.proportions import wilson_interval
 
@@ -43,8 +44,10 @@ __all__ = [
     "CONFIDENCE_BINS",
     "MAGNITUDE_BINS",
     "SHRINK_COLUMNS",
+    "CALIBRATION_MIN_ANSWERS",
     "true_parameter",
     "reliability_table",
+    "calibration_metrics",
     "score_cases",
     "benchmark_metrics",
     "benchmark_checks",
@@ -77,6 +80,10 @@ DEFAULT_ARM = "default"
 
 #: Edges of the confidence bins of the reliability table.
 CONFIDENCE_BINS: tuple[float, ...] = (0.0, 0.5, 0.8, 0.95, 0.99, 1.0)
+
+#: Fewest answers of a confidence bin the calibration target holds for (docs/gap.md §Targets:
+#: every bin of at least 20 answers within 0.10 of its accuracy).
+CALIBRATION_MIN_ANSWERS = 20
 
 #: Edges of the effect-magnitude bins (0 = barely above the noise, 1 = strong).
 MAGNITUDE_BINS: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
@@ -322,6 +329,45 @@ def reliability_table(table: pd.DataFrame) -> list[dict[str, Any]]:
     return rows
 
 
+def _case_numbers(table: pd.DataFrame) -> pd.Series | None:
+    """Return each case's number ``NN`` (of ``<type>_NN``), or None without a ``case`` column."""
+    if "case" not in table:
+        return None
+    return pd.to_numeric(table["case"].astype(str).str.rsplit("_", n=1).str[-1], errors="coerce")
+
+
+def _max_gap(rows: list[dict[str, Any]], min_answers: int) -> float | None:
+    gaps = [row["gap"] for row in rows if row["n"] >= min_answers]
+    return max(gaps) if gaps else None
+
+
+def calibration_metrics(
+    table: pd.DataFrame, min_answers: int = CALIBRATION_MIN_ANSWERS
+) -> dict[str, Any] | None:
+    """Return the confidence's reliability on the cases it was fitted on and on the others.
+
+    The confidence map (:data:`dtwin.gap.confidence.STEPS`) was fitted on the answers of the
+    cases numbered :data:`~dtwin.gap.confidence.FITTING_CASES`; the **checking** set is every
+    other case (other seeds), every family together. Each set gets its
+    :func:`reliability_table` and ``max_gap``: the largest ``|accuracy − mean confidence|``
+    over its bins of at least ``min_answers`` answers (None when no bin has that many); the
+    target (docs/gap.md §Targets) is the checking set's. None when the table names no cases.
+    """
+    numbers = _case_numbers(table)
+    if numbers is None:
+        return None
+    fitting = numbers.isin(FITTING_CASES)
+    out: dict[str, Any] = {"min_answers": int(min_answers)}
+    for name, part in (("fitting", table[fitting]), ("checking", table[~fitting]), ("all", table)):
+        rows = reliability_table(part)
+        out[name] = {
+            "n_answers": int(sum(row["n"] for row in rows)),
+            "reliability": rows,
+            "max_gap": _max_gap(rows, min_answers),
+        }
+    return out
+
+
 def _parameter_errors(right: pd.DataFrame) -> dict[str, Any]:
     """Return the median parameter error per effect (with n) and over every effect."""
     errors = right.dropna(subset=["param_error"])
@@ -450,6 +496,8 @@ def benchmark_metrics(table: pd.DataFrame) -> dict[str, Any]:
     metrics = _with_arms(table[family == "paper"])
     rig = table[family == "rig"]
     metrics["rig"] = _with_arms(rig) if len(rig) else None
+    metrics["calibration"] = calibration_metrics(table)
+    metrics["interval_coverage_all"] = _interval_coverage(table[table.in_list & table.effect_ok])
     return metrics
 
 
@@ -475,6 +523,22 @@ def benchmark_checks(table: pd.DataFrame, metrics: Mapping[str, Any]) -> list[Ch
             bool(len(table) > 0),
         )
     ]
+    calibration = metrics.get("calibration")
+    if calibration is not None:
+        gap = calibration["checking"]["max_gap"]
+        target = TARGETS["max_calibration_gap"]
+        checks.append(
+            Check(
+                "target_calibration_checking_set",
+                "target",
+                "docs/gap.md target: on the cases the confidence was not fitted on (every "
+                f"family), every bin of >= {calibration['min_answers']} answers within "
+                f"{target} of its accuracy ({calibration['checking']['n_answers']} answers)",
+                target,
+                gap,
+                _target_met("max_calibration_gap", target, gap),
+            )
+        )
     families = [("", TARGETS, metrics, "docs/gap.md target")]
     if metrics.get("rig"):
         families.append(("rig_", RIG_TARGETS, metrics["rig"], "docs/gap.md rig-family target"))

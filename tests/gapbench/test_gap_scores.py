@@ -22,6 +22,7 @@ from dtwin.gapbench.scores import (
     TARGETS,
     benchmark_checks,
     benchmark_metrics,
+    calibration_metrics,
     reliability_table,
     score_cases,
     true_parameter,
@@ -270,3 +271,24 @@ def test_confidence_is_the_mapped_weight_and_rises_with_it():
     assert result.confidence == pytest.approx(calibrated_confidence(result.bic_weight))
     payload = diagnosis_to_dict(result)
     assert payload["bic_weight"] == result.bic_weight
+
+
+def test_calibration_is_scored_on_the_cases_the_confidence_was_not_fitted_on():
+    # fitting cases 00-04: every 0.95 answer right; checking cases 05-09: 0.95 right 16 of 20
+    # times (gap 0.15, a bin of 20 answers) and 0.6 right 0 of 5 times (a bin too small to count)
+    fitting = _table([0.95] * 25, [True] * 25).assign(case=[f"a_{i % 5:02d}" for i in range(25)])
+    checking = pd.concat(
+        [_table([0.95] * 20, [True] * 16 + [False] * 4), _table([0.6] * 5, [False] * 5)]
+    ).assign(case=[f"b_{5 + i % 5:02d}" for i in range(25)])
+    table = pd.concat([fitting, checking], ignore_index=True)
+    calibration = calibration_metrics(table)
+    assert calibration["fitting"]["n_answers"] == 25 and calibration["checking"]["n_answers"] == 25
+    assert calibration["fitting"]["max_gap"] == pytest.approx(0.05)
+    assert calibration["checking"]["max_gap"] == pytest.approx(0.15)  # not the 0.6 bin's 0.6
+    assert calibration["all"]["max_gap"] == pytest.approx(abs(41 / 45 - 0.95))
+    checks = {c.id: c for c in benchmark_checks(table, benchmark_metrics(table))}
+    assert not checks["target_calibration_checking_set"].passed
+    assert checks["target_calibration_checking_set"].observed == pytest.approx(0.15)
+    healthy = table.assign(effect_ok=[True] * 25 + [True] * 19 + [False] + [False] * 5)
+    assert calibration_metrics(healthy)["checking"]["max_gap"] == pytest.approx(0.0)
+    assert calibration_metrics(table.drop(columns="case")) is None
