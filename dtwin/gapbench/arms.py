@@ -391,31 +391,36 @@ def _rk4_chain(u_in, tau, m, c, k, dt, force, eta, xi, substeps):
     """RK4 of ``τ·u̇ = u_in + η − u``, ``ẋ = v``, ``m·v̇ = u − c·v − k·x − F(x, v) + m·ξ``.
 
     The inputs ``u_in[j−1] + η[j]`` and ``ξ[j]`` are held over step ``j`` (from sample ``j−1``
-    to ``j``). Returns the state at every sub-step, shape ``((n−1)·substeps + 1, 3)``.
+    to ``j``). Returns the state at every sub-step, shape ``((n−1)·substeps + 1, 3)``. The
+    loop runs on Python floats (each stage's three derivatives written out, the arithmetic of
+    a ``deriv(state)`` call in the same order).
     """
     n = len(u_in)
     h = dt / substeps
+    half, sixth = h / 2, h / 6
     extra = force or (lambda xp, vp: 0.0)
-    out = np.zeros(((n - 1) * substeps + 1, 3))
+    u_list, eta_list, xi_list = (np.asarray(s, dtype=float).tolist() for s in (u_in, eta, xi))
+    rows = [(0.0, 0.0, 0.0)]
+    append = rows.append
     a, x, v = 0.0, 0.0, 0.0
-
-    def deriv(a_, x_, v_, drive, noise):
-        return (drive - a_) / tau, v_, (a_ - c * v_ - k * x_ - extra(x_, v_)) / m + noise
-
-    row = 0
     for j in range(1, n):
-        drive, noise = u_in[j - 1] + eta[j], xi[j]
+        drive, noise = u_list[j - 1] + eta_list[j], xi_list[j]
         for _ in range(substeps):
-            k1 = deriv(a, x, v, drive, noise)
-            k2 = deriv(a + h / 2 * k1[0], x + h / 2 * k1[1], v + h / 2 * k1[2], drive, noise)
-            k3 = deriv(a + h / 2 * k2[0], x + h / 2 * k2[1], v + h / 2 * k2[2], drive, noise)
-            k4 = deriv(a + h * k3[0], x + h * k3[1], v + h * k3[2], drive, noise)
-            a += h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
-            x += h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
-            v += h / 6 * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2])
-            row += 1
-            out[row] = a, x, v
-    return out
+            k1a, k1x, k1v = (drive - a) / tau, v, (a - c * v - k * x - extra(x, v)) / m + noise
+            a2, x2, v2 = a + half * k1a, x + half * k1x, v + half * k1v
+            k2a, k2x = (drive - a2) / tau, v2
+            k2v = (a2 - c * v2 - k * x2 - extra(x2, v2)) / m + noise
+            a3, x3, v3 = a + half * k2a, x + half * k2x, v + half * k2v
+            k3a, k3x = (drive - a3) / tau, v3
+            k3v = (a3 - c * v3 - k * x3 - extra(x3, v3)) / m + noise
+            a4, x4, v4 = a + h * k3a, x + h * k3x, v + h * k3v
+            k4a, k4x = (drive - a4) / tau, v4
+            k4v = (a4 - c * v4 - k * x4 - extra(x4, v4)) / m + noise
+            a += sixth * (k1a + 2 * k2a + 2 * k3a + k4a)
+            x += sixth * (k1x + 2 * k2x + 2 * k3x + k4x)
+            v += sixth * (k1v + 2 * k2v + 2 * k3v + k4v)
+            append((a, x, v))
+    return np.array(rows, dtype=float)
 
 
 def _continuous_lag(x_fine: np.ndarray, tau: float, h: float, delay: float) -> np.ndarray:
