@@ -91,7 +91,7 @@ DRAWS = {"claims_draws", "bic_draws", "fig12_claims_across_draws"}
 
 
 def small_sweep(config: dict) -> None:
-    """A 2 x 1 x 2 sweep grid (4 points: 4 chunks of one) with 2 EM starts, for workflow tests."""
+    """A 2 x 1 x 2 sweep grid (4 points: 2 chunks of two) with 2 EM starts, for workflow tests."""
     sweep = config["sensitivity"]
     sweep.update(alphas=[0.2, 0.8], sensor_A_mults=[1.0], sensor_B_mults=[0.5, 1.5])
     sweep["hmm"]["n_restarts"] = 2
@@ -249,7 +249,7 @@ def test_every_artifact_is_produced_with_passing_validity_checks(workflow_copy):
     assert crosschecks == {"r_inputs_rebuilt_exactly": True}
     assert len(fig11["metrics"]["configurations"]) == 4
     chunks = workflow_copy / "results" / "sensitivity" / "chunks"
-    assert sorted(p.name for p in chunks.glob("*.json")) == [f"{i}-of-4.json" for i in range(1, 5)]
+    assert sorted(p.name for p in chunks.glob("*.json")) == ["1-of-2.json", "2-of-2.json"]
     points = [p for c in sorted(chunks.glob("*.json")) for p in json.loads(c.read_text())["points"]]
     assert sorted((p["alpha"], p["m_B"]) for p in points) == [
         (0.2, 0.5),
@@ -350,16 +350,16 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
     assert planned_rules(workflow_copy) == set()
 
 
-def test_growing_the_sweep_grid_reruns_only_the_chunks_whose_points_change(workflow_copy):
-    # 4 points in 4 chunks -> 6 points in 4 chunks: [p1] [p2 new] [p3] [p4 new]; chunks 1 and 3
-    # keep their points (and their files), chunks 2 and 4 rerun
-    edit_config(workflow_copy, lambda c: c["sensitivity"]["alphas"].append(0.5))
+def test_changing_the_sweep_grid_reruns_only_the_chunks_whose_points_change(workflow_copy):
+    # 4 points in 2 chunks, m_B outside alpha: [(0.2, 0.5) (0.8, 0.5)] [(0.2, 1.5) (0.8, 1.5)];
+    # m_B 1.5 -> 2.0 changes the points of chunk 2 only: chunk 1 keeps its file
+    edit_config(workflow_copy, lambda c: c["sensitivity"].update(sensor_B_mults=[0.5, 2.0]))
     assert planned_jobs(workflow_copy) == {
-        "sweep_chunk": 2,
+        "sweep_chunk": 1,
         "fig11_sensitivity": 1,
         "claims": 1,
     }
-    edit_config(workflow_copy, lambda c: c["sensitivity"]["alphas"].remove(0.5))
+    edit_config(workflow_copy, lambda c: c["sensitivity"].update(sensor_B_mults=[0.5, 1.5]))
     edit_config(workflow_copy, lambda c: c["sensitivity"]["correction"].update(method="paper"))
     assert planned_jobs(workflow_copy) == {"fig11_sensitivity": 1, "claims": 1}
     edit_config(workflow_copy, lambda c: c["sensitivity"]["correction"].update(method="code"))
@@ -472,7 +472,7 @@ def case_files(workdir: Path, chunks: str) -> dict[str, bytes]:
 
 
 def test_chunked_and_unchunked_batches_give_byte_identical_outputs(workflow_copy):
-    """One chunk instead of the default (4 sweep chunks, 2 gap chunks): same bytes everywhere.
+    """One chunk instead of the default (2 sweep chunks, 2 gap chunks): same bytes everywhere.
 
     A changed chunk count plans only the chunk jobs and the rules that gather them.
     """
@@ -570,8 +570,8 @@ def test_sweep_dry_run_plans_the_requested_number_of_chunks(tmp_path):
         )
 
     edit_config(workdir, grid)
-    # 6 points: the default 4 chunks, 2 when asked, at most one per point, 0 = one per point
-    for scatter, chunks in (([], 4), (["sweep=2"], 2), (["sweep=50"], 6), (["sweep=0"], 6)):
+    # 6 points: the default 2 chunks, 4 when asked, at most one per point, 0 = one per point
+    for scatter, chunks in (([], 2), (["sweep=4"], 4), (["sweep=50"], 6), (["sweep=0"], 6)):
         options = ["--set-scatter", *scatter] if scatter else []
         assert planned_jobs(workdir, "fig11_sensitivity", *options) == {
             "sweep_chunk": chunks,
@@ -847,10 +847,10 @@ echo "$!"
 
 
 def test_sweep_jobs_run_unchanged_under_a_cluster_executor(workflow_copy):
-    """The four sweep chunks through cluster-generic give the local run's bytes."""
+    """The two sweep chunks through cluster-generic give the local run's bytes."""
     sweep_dir = workflow_copy / "results" / "sensitivity"
     local = {p: p.read_bytes() for p in sorted(sweep_dir.glob("chunks/*.json"))}
-    assert len(local) == 4
+    assert len(local) == 2
     for path in local:
         path.unlink()
     (workflow_copy / "submit.sh").write_text(SUBMIT_SCRIPT)

@@ -27,6 +27,7 @@ rule sweep_chunk:
     benchmark:
         "benchmarks/rules/sweep_chunk/{scatteritem}.tsv"
     threads: 1
+    priority: PRIORITY_SWEEP
     resources:
         mem_mb=500,
         runtime=sweep_chunk_runtime,
