@@ -8,9 +8,7 @@ which r_notes.md §2 calls "input delay 1").
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -20,15 +18,25 @@ from dtwin._validation import (
     require_finite_array,
     require_min_length,
 )
+from dtwin.wiring import MODULES
 
 __all__ = [
+    "ARX_MODULES",
+    "ROLLOUT_INITS",
     "ArxOrders",
     "ArxFit",
-    "arx_orders_from_mapping",
     "arx_regressors",
     "fit_arx",
     "simulate_arx",
 ]
+
+
+#: Modules the twin replaces with an ARX model.
+ARX_MODULES: tuple[str, ...] = tuple(m.name for m in MODULES if m.surrogate == "arx")
+
+#: How rollouts start: ``"physics"`` (first physics samples, the authors' fault and
+#: sensitivity scripts) or ``"zeros"`` (ARX_vs_Phys.R).
+ROLLOUT_INITS: tuple[str, ...] = ("physics", "zeros")
 
 
 @dataclass(frozen=True)
@@ -184,8 +192,3 @@ def simulate_arx(fit: ArxFit, u: np.ndarray, initial_y: np.ndarray) -> np.ndarra
     state = lfiltic(numerator, denominator, past_y, past_u)
     y_hat[p:], _ = lfilter(numerator, denominator, u[p:], zi=state)
     return y_hat
-
-
-def arx_orders_from_mapping(arx: Mapping[str, Any]) -> dict[str, ArxOrders]:
-    """Return ``{module: ArxOrders}`` from the ``arx`` config section's ``orders`` mapping."""
-    return {str(name): ArxOrders(**spec) for name, spec in arx["orders"].items()}

@@ -1,8 +1,9 @@
 """Typed, frozen settings of the config sections, parsed once at a stage's entry.
 
-``hmm`` (and ``sensitivity.hmm``), ``simulation``, ``acf``, ``correction`` (and the sweep's two
-shapings), ``bic``. A stage (or the figure a script draws) turns its config section into one of
-these objects at its entry; everything after reads the object's attributes, never the raw
+``hmm`` (and ``sensitivity.hmm``), ``simulation``, ``arx``, ``acf``, ``correction`` (and the
+sweep's two shapings), ``bic``, ``ar_hmm``, ``sensitivity``, ``draws``. A stage (or the figure a
+script draws) turns its config section into one of these objects at its entry; everything after
+reads the object's attributes, never the raw
 mapping, so every fit of the same kind reads the same keys. Library defaults are the dataclass
 defaults (they equal the defaults of the library function the settings feed). Every section is
 parsed the same way, by a ``from_mapping(raw, section)`` classmethod, which returns an object of
@@ -28,6 +29,7 @@ from dtwin._validation import (
     require_positive,
     require_seed,
 )
+from dtwin.arx import ARX_MODULES, ROLLOUT_INITS, ArxOrders
 from dtwin.sensitivity_sweep import CORRECTION_METHODS, SweepPoint, sweep_grid
 
 __all__ = [
@@ -42,6 +44,7 @@ __all__ = [
     "SensitivitySettings",
     "DrawBicSettings",
     "DrawsSettings",
+    "ArxSettings",
     "require_keys",
     "section_keys",
 ]
@@ -766,3 +769,71 @@ class DrawsSettings:
             interval=_open_unit(f"{section}.interval", raw["interval"]),
             bic=DrawBicSettings.from_mapping(raw["bic"], f"{section}.bic"),
         )
+
+
+@dataclass(frozen=True)
+class ArxSettings:
+    """The ``arx`` section: the ARX surrogates of paper §3.2, Eq. (22).
+
+    Attributes
+    ----------
+    orders : mapping of module name to ArxOrders
+        The lag orders of every module the twin replaces by an ARX model (``M0, M1, M2a,
+        M2b``: :attr:`dtwin.wiring.Module.surrogate` ``"arx"``), in the section's order.
+    train_frac : float, default 0.5
+        Fraction of the samples, from the start, the models are fitted on, in (0, 1] (the
+        paper: the first half).
+    rollout_init : str, default "physics"
+        Rollout start: ``physics`` (the first physics samples) or ``zeros``.
+    """
+
+    orders: Mapping[str, ArxOrders]
+    train_frac: float = 0.5
+    rollout_init: str = "physics"
+
+    @classmethod
+    def from_mapping(cls, raw: Any, section: str = "arx") -> ArxSettings:
+        """Return the validated settings of config section ``section``.
+
+        Examples
+        --------
+        >>> order = {"na": 1, "nb": 1, "d": 0}
+        >>> raw = {"orders": {"M0": order, "M1": {"na": 2, "nb": 2}, "M2a": order, "M2b": order}}
+        >>> ArxSettings.from_mapping(raw).orders["M1"]
+        ArxOrders(na=2, nb=2, d=0)
+        >>> ArxSettings.from_mapping({**raw, "train_frac": 0})
+        Traceback (most recent call last):
+        ...
+        dtwin._validation.DtwinValueError: arx.train_frac must be in (0, 1] (got 0.0)
+        """
+        if isinstance(raw, cls):
+            return raw
+        raw = section_keys(cls, raw, section)
+        orders = require_keys(f"{section}.orders", raw["orders"], ARX_MODULES)
+        train_frac = require_number(f"{section}.train_frac", raw.get("train_frac", 0.5))
+        if not 0 < train_frac <= 1:
+            raise DtwinValueError(f"{section}.train_frac must be in (0, 1] (got {train_frac})")
+        rollout_init = raw.get("rollout_init", "physics")
+        if rollout_init not in ROLLOUT_INITS:
+            raise DtwinValueError(
+                f"{section}.rollout_init must be one of {', '.join(ROLLOUT_INITS)} "
+                f"(got {rollout_init!r})"
+            )
+        return cls(
+            orders={
+                str(name): _arx_orders(f"{section}.orders.{name}", spec)
+                for name, spec in orders.items()
+            },
+            train_frac=train_frac,
+            rollout_init=rollout_init,
+        )
+
+
+def _arx_orders(section: str, raw: Any) -> ArxOrders:
+    """Return one module's :class:`dtwin.arx.ArxOrders` (``na >= 0``, ``nb >= 1``, ``d >= 0``)."""
+    raw = require_keys(section, raw, ("na", "nb"), ("d",))
+    return ArxOrders(
+        na=_integer(f"{section}.na", raw["na"], 0),
+        nb=_integer(f"{section}.nb", raw["nb"], 1),
+        d=_integer(f"{section}.d", raw.get("d", 0), 0),
+    )

@@ -15,14 +15,12 @@ import numpy as np
 import pandas as pd
 
 from dtwin._validation import DtwinValueError, require_in_range
-from dtwin.arx import ArxFit, ArxOrders, fit_arx, simulate_arx
+from dtwin.arx import ARX_MODULES, ROLLOUT_INITS, ArxFit, ArxOrders, fit_arx, simulate_arx
 from dtwin.params import TwinParams
 from dtwin.physics import PHYSICS_STEPS, backward_velocity
 from dtwin.wiring import MODULES, RESIDUALS, SIGNALS
 
 __all__ = [
-    "ARX_MODULES",
-    "ROLLOUT_INITS",
     "n_train_samples",
     "fit_surrogates",
     "run_surrogate_chain",
@@ -30,13 +28,6 @@ __all__ = [
     "theta_table",
     "fits_from_theta_table",
 ]
-
-#: Modules the twin replaces with an ARX model.
-ARX_MODULES: tuple[str, ...] = tuple(m.name for m in MODULES if m.surrogate == "arx")
-
-#: How rollouts start: ``"physics"`` (first physics samples, the authors' fault and
-#: sensitivity scripts) or ``"zeros"`` (ARX_vs_Phys.R).
-ROLLOUT_INITS: tuple[str, ...] = ("physics", "zeros")
 
 
 def n_train_samples(n_steps: int, train_frac: float) -> int:

@@ -8,8 +8,9 @@ from dtwin._script import start_rule
 
 start_rule(snakemake)
 
+from dtwin.config_sections import ArxSettings
 from dtwin.figures._style import publish_artifact
 from dtwin.figures.fig01_pipeline import fig01_pipeline
 
-artifact = fig01_pipeline(snakemake.params.arx)
+artifact = fig01_pipeline(ArxSettings.from_mapping(snakemake.params.arx))
 publish_artifact(artifact, [snakemake.output.png, snakemake.output.pdf], snakemake.output.json)

@@ -13,6 +13,7 @@ start_rule(snakemake)
 import pandas as pd
 
 from dtwin.artifacts import load_yaml
+from dtwin.config_sections import ArxSettings
 from dtwin.figures._style import publish_artifact
 from dtwin.figures.fig02_arx_vs_physics import fig02_arx_vs_physics
 from dtwin.reference.crosscheck_result import read_crosscheck
@@ -21,7 +22,7 @@ inputs = snakemake.input
 artifact = fig02_arx_vs_physics(
     *(pd.read_csv(path) for path in (inputs.physics, inputs.surrogate, inputs.residuals)),
     pd.read_csv(inputs.theta),
-    snakemake.params.arx,
+    ArxSettings.from_mapping(snakemake.params.arx),
     read_crosscheck(inputs.crosscheck),
     load_yaml(inputs.r_numbers),
 )

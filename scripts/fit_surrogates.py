@@ -14,19 +14,19 @@ start_rule(snakemake)
 import pandas as pd
 
 from dtwin.artifacts import write_csv
-from dtwin.arx import arx_orders_from_mapping
+from dtwin.config_sections import ArxSettings
 from dtwin.params import twin_params_from_mapping
 from dtwin.reference.arx_crosscheck import crosscheck_arx
 from dtwin.reference.crosscheck_result import write_crosscheck
 from dtwin.stages.twin import fit_twin_surrogates
 
-inputs, arx = snakemake.input, snakemake.params.arx
+inputs, arx = snakemake.input, ArxSettings.from_mapping(snakemake.params.arx)
 theta = fit_twin_surrogates(pd.read_csv(inputs.physics), arx)
 crosscheck = crosscheck_arx(
     inputs.r_pipeline,
     inputs.r_theta,
-    arx_orders_from_mapping(arx),
-    arx["train_frac"],
+    arx.orders,
+    arx.train_frac,
     twin_params_from_mapping(snakemake.params.twin),
 )
 write_csv(theta, snakemake.output.theta, float_format="%.17g")

@@ -5,7 +5,6 @@ from __future__ import annotations
 import textwrap
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -13,7 +12,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import FancyBboxPatch
 
 from dtwin.artifacts import Check, FigureArtifact
-from dtwin.arx import arx_orders_from_mapping
+from dtwin.config_sections import ArxSettings
 from dtwin.figures._style import BAND_COLOR, SURROGATE_FILL, new_figure, tex
 from dtwin.wiring import MODULES, Module
 
@@ -195,9 +194,9 @@ def plot_pipeline(modules: Sequence[Module], surrogate_labels: Mapping[str, str]
     return figure
 
 
-def fig01_pipeline(arx: Mapping[str, Any]) -> FigureArtifact:
+def fig01_pipeline(arx: ArxSettings) -> FigureArtifact:
     """Paper Fig. 1 drawn from :data:`dtwin.wiring.MODULES`."""
-    orders = arx_orders_from_mapping(arx)
+    orders = arx.orders
     labels = {
         m.name: (
             f"ARX({orders[m.name].na},{orders[m.name].nb})" if m.surrogate == "arx" else "algebraic"

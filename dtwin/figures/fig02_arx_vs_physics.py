@@ -13,6 +13,7 @@ from matplotlib.lines import Line2D
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite
 from dtwin.claim_criteria import RMSE_RATIO, rmse_like_r
+from dtwin.config_sections import ArxSettings
 from dtwin.figures._style import (
     BAND_COLOR,
     PHYSICS_COLOR,
@@ -96,7 +97,7 @@ def fig02_arx_vs_physics(
     surrogate: pd.DataFrame,
     residuals: pd.DataFrame,
     theta: pd.DataFrame,
-    arx: Mapping[str, Any],
+    arx: ArxSettings,
     crosscheck: CrosscheckResult,
     r_numbers: Mapping[str, Any],
 ) -> FigureArtifact:
@@ -108,7 +109,7 @@ def fig02_arx_vs_physics(
         ``results/physics.csv``, ``results/surrogate.csv``, ``results/residuals.csv``.
     theta : DataFrame
         ``results/arx_theta.csv`` (its ``n_train`` is the training window, samples).
-    arx : mapping
+    arx : ArxSettings
         The ``arx`` config section (``rollout_init`` is reported).
     crosscheck : CrosscheckResult
         ``results/arx_crosscheck.json`` (our ARX fit and rollout on R's signals).
@@ -145,7 +146,7 @@ def fig02_arx_vs_physics(
     metrics = {
         "n_steps": len(physics),
         "n_train": n_train,
-        "rollout_init": arx["rollout_init"],
+        "rollout_init": arx.rollout_init,
         "rmse_all_samples": rmse_all,
         "rmse_test_half": rmse_test,
         "r_rmse_all_samples_zero_seed": dict(r_numbers["nominal_rmse_zeroseed"]),
@@ -167,5 +168,5 @@ def fig02_arx_vs_physics(
             f"test-half RMSE: {worst} {rmse_test[worst]:.3g})."
         ),
         provenance="results/physics.csv, results/surrogate.csv (ARX rollout from "
-        f"rollout_init={arx['rollout_init']}), results/arx_crosscheck.json",
+        f"rollout_init={arx.rollout_init}), results/arx_crosscheck.json",
     )

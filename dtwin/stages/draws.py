@@ -26,7 +26,7 @@ from typing import Any
 import pandas as pd
 
 from dtwin._validation import DtwinValueError
-from dtwin.config_sections import CorrectionSettings, SimulationSettings
+from dtwin.config_sections import ArxSettings, CorrectionSettings, SimulationSettings
 from dtwin.fault_injection import regime_features
 from dtwin.params import twin_params_from_mapping
 from dtwin.sensitivity_sweep import replicate_seed
@@ -182,8 +182,9 @@ def run_draw_regimes(draw: int, sections: Mapping[str, Mapping[str, Any]]) -> Dr
     twin = twin_params_from_mapping(s["twin"])
     seeds = draw_seeds(draw, simulation.seed, s["faults"]["seed"], s["hmm"]["seed"])
     physics = simulate_asset(replace(simulation, seed=seeds.simulation), s["command"], twin)
-    theta = fit_twin_surrogates(physics, s["arx"])
-    surrogate, residuals = roll_out_twin(physics, theta, twin, s["arx"]["rollout_init"])
+    arx = ArxSettings.from_mapping(s["arx"])
+    theta = fit_twin_surrogates(physics, arx)
+    surrogate, residuals = roll_out_twin(physics, theta, twin, arx.rollout_init)
     hmm = {**s["hmm"], "seed": seeds.hmm}
     _, nominal_model = fit_nominal_regimes(residuals, hmm)
     faults = {**s["faults"], "seed": seeds.faults}

@@ -21,7 +21,7 @@ from dtwin._validation import (
     require_nonnegative,
 )
 from dtwin.bias_correction import correct_bias, correct_plant_bias_viterbi
-from dtwin.config_sections import SimulationSettings, SweepPointSettings
+from dtwin.config_sections import ArxSettings, SimulationSettings, SweepPointSettings
 from dtwin.hmm import fit_hmm, zscore
 from dtwin.params import TwinParams, twin_params_from_mapping
 from dtwin.physics import fuse, sensor_first_order
@@ -106,12 +106,13 @@ def _evaluate(
     physics_seed: int | None,
     hmm_seed: int,
     twin: TwinParams,
-    arx: Mapping[str, Any],
+    arx: ArxSettings | Mapping[str, Any],
     sweep: SweepPointSettings,
 ) -> SweepRun:
     """Refit the surrogates and the HMM on ``physics`` and score both corrections."""
+    arx = ArxSettings.from_mapping(arx)
     surrogate, residual_table = roll_out_twin(
-        physics, fit_twin_surrogates(physics, arx), twin, arx["rollout_init"]
+        physics, fit_twin_surrogates(physics, arx), twin, arx.rollout_init
     )
     residuals = residual_table[list(RESIDUALS)].to_numpy()
     hmm = sweep.hmm

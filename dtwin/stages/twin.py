@@ -13,9 +13,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dtwin.arx import arx_orders_from_mapping
 from dtwin.command import make_command, n_steps_for
-from dtwin.config_sections import SimulationSettings
+from dtwin.config_sections import ArxSettings, SimulationSettings
 from dtwin.params import TwinParams, command_params_from_mapping, twin_params_from_mapping
 from dtwin.physics import simulate_physics
 from dtwin.surrogate import (
@@ -51,9 +50,12 @@ def simulate_asset(
     return simulate_physics(twin_params, u_cmd, rng)
 
 
-def fit_twin_surrogates(physics: pd.DataFrame, arx: Mapping[str, Any]) -> pd.DataFrame:
+def fit_twin_surrogates(
+    physics: pd.DataFrame, arx: ArxSettings | Mapping[str, Any]
+) -> pd.DataFrame:
     """Fit the ARX surrogates on the training window; return the coefficient table."""
-    fits = fit_surrogates(physics, arx_orders_from_mapping(arx), arx["train_frac"])
+    arx = ArxSettings.from_mapping(arx)
+    fits = fit_surrogates(physics, arx.orders, arx.train_frac)
     return theta_table(fits)
 
 

@@ -342,7 +342,6 @@ def parse_with_the_library(config: dict) -> None:
     """Parse every config section with the library's own checks, as the stage scripts do."""
     from dtwin import config_sections as sections
     from dtwin._validation import require_seed
-    from dtwin.arx import arx_orders_from_mapping
     from dtwin.command import n_steps_for
     from dtwin.fault_injection import FaultMagnitudes, fault_schedule
     from dtwin.gap import GapSettings
@@ -354,7 +353,7 @@ def parse_with_the_library(config: dict) -> None:
     n_steps_for(simulation.T, twin.dt)
     require_seed("faults.seed", config["faults"]["seed"])
     command_params_from_mapping(config["command"])
-    arx_orders_from_mapping(config["arx"])
+    sections.ArxSettings.from_mapping(config["arx"])
     white_noise_band(sections.AcfSettings.from_mapping(config["acf"]).white_noise_n)
     sections.HmmSettings.from_mapping(config["hmm"])
     sections.CorrectionSettings.from_mapping(config["correction"])

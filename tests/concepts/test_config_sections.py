@@ -169,3 +169,23 @@ def test_the_draws_section_parses_and_names_a_bad_key(config):
         DrawsSettings.from_mapping({**config["draws"], "bic": bic})
     with pytest.raises(DtwinValueError, match=r"draws has unknown key\(s\): typo"):
         DrawsSettings.from_mapping({**config["draws"], "typo": 1})
+
+
+def test_the_arx_section_parses_and_names_a_bad_key(config):
+    from dtwin.config_sections import ArxSettings
+
+    raw = config["arx"]
+    settings = ArxSettings.from_mapping(raw)
+    assert ArxSettings.from_mapping(settings) is settings
+    assert list(settings.orders) == list(raw["orders"])
+    assert {name: o.__dict__ for name, o in settings.orders.items()} == raw["orders"]
+    assert (settings.train_frac, settings.rollout_init) == (raw["train_frac"], raw["rollout_init"])
+    # Fig. 1's rule passes the orders alone
+    assert ArxSettings.from_mapping({"orders": raw["orders"]}).orders == settings.orders
+    orders = {**raw["orders"], "M1": {"na": 2, "nb": 0}}
+    with pytest.raises(DtwinValueError, match=r"arx\.orders\.M1\.nb must be an integer >= 1"):
+        ArxSettings.from_mapping({**raw, "orders": orders})
+    with pytest.raises(DtwinValueError, match=r"arx\.orders is missing key\(s\): M2a, M2b"):
+        ArxSettings.from_mapping({**raw, "orders": {k: raw["orders"][k] for k in ("M0", "M1")}})
+    with pytest.raises(DtwinValueError, match=r"arx\.rollout_init must be one of physics, zeros"):
+        ArxSettings.from_mapping({**raw, "rollout_init": "r"})

@@ -22,6 +22,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from dtwin.artifacts import FigureArtifact
+from dtwin.config_sections import ArxSettings
 from dtwin.figures._print_check import (
     axes_and_legends_check,
     drawn_texts,
@@ -224,7 +225,7 @@ def test_a_published_figure_reruns_byte_identical(tmp_path):
 
 def test_fig01_is_drawn_at_print_size_without_collisions():
     arx = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["arx"]
-    artifact = fig01_pipeline(arx)
+    artifact = fig01_pipeline(ArxSettings.from_mapping(arx))
     check = print_check(artifact.figure)
     assert check.passed, check.observed
     assert artifact.paper_figure == "Fig. 1" and artifact.caption

@@ -24,6 +24,7 @@ from matplotlib.figure import Figure
 from matplotlib.layout_engine import ConstrainedLayoutEngine
 
 from dtwin.artifacts import FigureArtifact, to_jsonable
+from dtwin.config_sections import ArxSettings
 from dtwin.fault_injection import FEATURES
 from dtwin.figures._correction_cause import unchanged_cause
 from dtwin.figures._print_check import reader_checks
@@ -68,7 +69,7 @@ def smooth(n_columns: int, scale: float = 1.0, seed: int = 0) -> np.ndarray:
 
 def draw_fig01():
     arx = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["arx"]
-    return fig01_pipeline(arx).figure
+    return fig01_pipeline(ArxSettings.from_mapping(arx)).figure
 
 
 def draw_fig02():
