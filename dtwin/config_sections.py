@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import MISSING, asdict, dataclass, fields
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from dtwin._validation import (
     DtwinValueError,
@@ -30,7 +30,14 @@ from dtwin._validation import (
     require_seed,
 )
 from dtwin.arx import ARX_MODULES, ROLLOUT_INITS, ArxOrders
-from dtwin.sensitivity_sweep import CORRECTION_METHODS, SweepPoint, sweep_grid
+
+if TYPE_CHECKING:
+    from dtwin.sensitivity_sweep import SweepPoint
+
+#: The sweep's two correction shapings (:data:`dtwin.sensitivity_sweep.CORRECTION_METHODS`,
+#: equal by test): the sweep's module is imported only to check a grid, so reading a config
+#: loads no pandas (the Fig. 1 job loads none).
+_SHAPINGS: tuple[str, ...] = ("code", "paper")
 
 __all__ = [
     "EmSettings",
@@ -584,11 +591,11 @@ class SweepPointSettings:
             return raw
         raw = require_keys(section, raw, _POINT_KEYS, others=True)
         correction = require_keys(
-            f"{section}.correction", raw["correction"], CORRECTION_METHODS, others=True
+            f"{section}.correction", raw["correction"], _SHAPINGS, others=True
         )
         code, paper = (
             CorrectionSettings.from_mapping(correction[m], f"{section}.correction.{m}")
-            for m in CORRECTION_METHODS
+            for m in _SHAPINGS
         )
         return cls(
             seed=require_seed(f"{section}.seed", raw["seed"]),
@@ -656,14 +663,16 @@ class SensitivitySettings:
             return raw
         raw = require_keys(section, raw, (*_GRID_KEYS, "interval", *_POINT_KEYS))
         correction = require_keys(
-            f"{section}.correction", raw["correction"], ("method", *CORRECTION_METHODS)
+            f"{section}.correction", raw["correction"], ("method", *_SHAPINGS)
         )
         method = correction["method"]
-        if method not in CORRECTION_METHODS:
+        if method not in _SHAPINGS:
             raise DtwinValueError(
-                f"{section}.correction.method must be one of {', '.join(CORRECTION_METHODS)} "
+                f"{section}.correction.method must be one of {', '.join(_SHAPINGS)} "
                 f"(got {method!r})"
             )
+        from dtwin.sensitivity_sweep import sweep_grid  # on first use: see _SHAPINGS
+
         sweep_grid(*(raw[key] for key in _GRID_KEYS))  # checks the grid, naming the key
         return cls(
             alphas=tuple(float(value) for value in raw["alphas"]),
@@ -677,6 +686,8 @@ class SensitivitySettings:
 
     def grid(self) -> list[SweepPoint]:
         """Return every point of the sweep (:func:`dtwin.sensitivity_sweep.sweep_grid`)."""
+        from dtwin.sensitivity_sweep import sweep_grid  # on first use: see _SHAPINGS
+
         return sweep_grid(self.alphas, self.sensor_A_mults, self.sensor_B_mults, self.n_replicates)
 
 

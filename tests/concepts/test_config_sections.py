@@ -189,3 +189,11 @@ def test_the_arx_section_parses_and_names_a_bad_key(config):
         ArxSettings.from_mapping({**raw, "orders": {k: raw["orders"][k] for k in ("M0", "M1")}})
     with pytest.raises(DtwinValueError, match=r"arx\.rollout_init must be one of physics, zeros"):
         ArxSettings.from_mapping({**raw, "rollout_init": "r"})
+
+
+def test_the_sweeps_shapings_are_the_sweeps_correction_methods():
+    """config_sections names them itself so that reading a config loads no pandas."""
+    from dtwin.config_sections import _SHAPINGS
+    from dtwin.sensitivity_sweep import CORRECTION_METHODS
+
+    assert _SHAPINGS == CORRECTION_METHODS
