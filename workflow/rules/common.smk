@@ -228,9 +228,20 @@ def gap_chunks():
     return chunk_names("gap", len(GAP_CASES))
 
 
+def gap_chunk_cases(scatteritem):
+    """The case names of gap chunk ``scatteritem`` ("i-of-n"): every n-th case from the i-th.
+
+    Dealt round robin, not in contiguous slices, so every chunk holds a like mix of case types
+    (the harder rigs, last in the list, cost ~5x a paper-asset case: a slice of them was the
+    last chunk to finish on two cores).
+    """
+    index, n = (int(part) for part in scatteritem.split("-of-"))
+    return GAP_CASES[index - 1 :: n]
+
+
 def gap_cases_of_chunk(wildcards):
     """The case names of one gap chunk (params of gap_cases and gap_diagnoses)."""
-    return chunk_of(GAP_CASES, wildcards.scatteritem)
+    return gap_chunk_cases(wildcards.scatteritem)
 
 
 def gap_chunk_runtime(wildcards):
@@ -240,11 +251,8 @@ def gap_chunk_runtime(wildcards):
 
 def gap_case_files(kind, name):
     """``results/gap/<kind>/<chunk>/<case>/<name>`` of every case, in GAP_CASES order."""
-    return [
-        f"results/gap/{kind}/{item}/{case}/{name}"
-        for item in gap_chunks()
-        for case in chunk_of(GAP_CASES, item)
-    ]
+    chunk = {case: item for item in gap_chunks() for case in gap_chunk_cases(item)}
+    return [f"results/gap/{kind}/{chunk[case]}/{case}/{name}" for case in GAP_CASES]
 
 
 # --- claims across random draws (issue 12, Fig. 12): one job per chunk of draws ----------------
