@@ -103,12 +103,12 @@ print(json.dumps({"": start, **result}))
 """
 
 
-def modules_loaded(sources: dict[str, str], folder: Path) -> dict[str, set[str]]:
-    """The modules loaded by each source's top-level imports (key ``""``: the shared start)."""
-    codes = {name: top_level_imports(source) for name, source in sources.items()}
+def run_python(*args: str, stdin: str | None = None) -> str:
+    """Stdout of a fresh interpreter run with ``args`` in the repository (Agg backend);
+    fails the test with its stderr if it exits non-zero."""
     done = subprocess.run(
-        [sys.executable, "-c", FORK_PER_SCRIPT, str(folder), *PRELOADED],
-        input=json.dumps(codes),
+        [sys.executable, *args],
+        input=stdin,
         cwd=REPO,
         env={**os.environ, "PYTHONPATH": str(REPO), "MPLBACKEND": "Agg"},
         capture_output=True,
@@ -116,7 +116,14 @@ def modules_loaded(sources: dict[str, str], folder: Path) -> dict[str, set[str]]
         timeout=300,
     )
     assert done.returncode == 0, done.stderr
-    return {name: set(modules) for name, modules in json.loads(done.stdout).items()}
+    return done.stdout
+
+
+def modules_loaded(sources: dict[str, str], folder: Path) -> dict[str, set[str]]:
+    """The modules loaded by each source's top-level imports (key ``""``: the shared start)."""
+    codes = {name: top_level_imports(source) for name, source in sources.items()}
+    stdout = run_python("-c", FORK_PER_SCRIPT, str(folder), *PRELOADED, stdin=json.dumps(codes))
+    return {name: set(modules) for name, modules in json.loads(stdout).items()}
 
 
 @pytest.fixture(scope="module")
@@ -166,13 +173,4 @@ def test_the_pipeline_diagram_loads_no_pandas():
     start with pandas loaded."""
     code = top_level_imports((REPO / "scripts" / "fig01_pipeline.py").read_text())
     probe = "\nimport sys\nprint('pandas' in sys.modules)"
-    done = subprocess.run(
-        [sys.executable, "-c", code + probe],
-        cwd=REPO,
-        env={**os.environ, "PYTHONPATH": str(REPO), "MPLBACKEND": "Agg"},
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.split() == ["False"]
+    assert run_python("-c", code + probe).split() == ["False"]
