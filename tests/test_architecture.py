@@ -281,3 +281,29 @@ def test_the_library_carries_no_issue_numbers_or_dated_measurements():
         if match
     ]
     assert found == []
+
+
+#: Packages whose code treats modules by their role (dtwin.wiring.ROLES), never by their name.
+ROLE_DISPATCHED = ("gap",)
+MODULE_NAME = re.compile(r"^M\d[a-z]?$")
+
+
+def _names_a_module(node: ast.expr) -> bool:
+    if isinstance(node, ast.Constant):
+        return isinstance(node.value, str) and bool(MODULE_NAME.match(node.value))
+    if isinstance(node, ast.Tuple | ast.List | ast.Set):
+        return any(_names_a_module(element) for element in node.elts)
+    return False
+
+
+def test_no_code_compares_with_a_module_name():
+    """``name == "M1"`` hides the plant behind a label: ask the wiring table for the role."""
+    found = [
+        f"{path.relative_to(REPO).as_posix()}:{node.lineno}"
+        for package in ROLE_DISPATCHED
+        for path in sorted((LIBRARY / package).glob("*.py"))
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.Compare)
+        and any(_names_a_module(side) for side in (node.left, *node.comparators))
+    ]
+    assert found == []

@@ -32,6 +32,7 @@ from scipy.signal import lfilter, savgol_filter
 from dtwin.exact_plant import exact_plant_response, free_response_basis, hold_matrices
 from dtwin.gap.effects import MAX_DELAY_SAMPLES, fractional_delay
 from dtwin.modules import EULER, ZOH
+from dtwin.wiring import PLANT, only_module
 
 __all__ = [
     "CAUSAL_HOLDS",
@@ -136,14 +137,15 @@ def causal_holds(
         :data:`FEEDBACK_THRESHOLD`), the holds of :data:`CAUSAL_HOLDS` among ``holds`` and one
         note giving the statistic; otherwise ``holds`` unchanged and no note.
     """
-    if "M1" not in names or len(holds) == 1:
+    plant = only_module(PLANT)
+    if plant not in names or len(holds) == 1:
         return holds, []
     statistic = loop_statistic(signals["u_act"][:n_train], signals["x"][:n_train])
     if statistic < FEEDBACK_THRESHOLD:
         return holds, []
     causal = tuple(h for h in holds if h in CAUSAL_HOLDS)
     note = (
-        f"M1 runs in a feedback loop: its input reacts to the position's noise (statistic "
+        f"{plant} runs in a feedback loop: its input reacts to the position's noise (statistic "
         f"{statistic:.2f} >= {FEEDBACK_THRESHOLD}); only causal plants ({', '.join(causal)}) "
         "were tried (docs/gap.md, Closed loop)"
     )

@@ -51,6 +51,7 @@ from dtwin.gap.models import (
     simulate_module,
 )
 from dtwin.modules import EULER, ZOH
+from dtwin.wiring import ACTUATOR, FUSION, KPI, PLANT, SENSOR, role_of
 
 __all__ = [
     "CandidateFit",
@@ -107,7 +108,7 @@ def training_view(data: ModuleData, n_train: int) -> tuple[ModuleData, list | No
     0.12). Everything else: ``data`` unchanged and :func:`train_segments`.
     """
     longest = MAX_FIT_SAMPLES // MIN_FIT_WINDOWS
-    if data.name == "M1" and data.horizon is not None and data.horizon > longest:
+    if data.role == PLANT and data.horizon is not None and data.horizon > longest:
         data = replace(data, horizon=longest)
     return data, train_segments(data, n_train)
 
@@ -123,7 +124,7 @@ def train_segments(data: ModuleData, n_train: int) -> list[tuple[int, int]] | No
     (:func:`~dtwin.gap.models.plant_windows`), evenly thinned to at most ``MAX_FIT_SAMPLES``
     samples.
     """
-    if data.name != "M1":
+    if data.role != PLANT:
         return None
     if data.horizon is not None:
         windows = plant_windows(n_train, data.horizon, data.restarts)
@@ -152,7 +153,7 @@ def linear_typical(
     no absolute floor of 1 (a mass of 1e-6 in volt units is as ordinary as one of 1e6); a zero
     ``k`` or ``c`` is typically that of a mode of 1000 samples.
     """
-    if scale_free and name == "M1":
+    if scale_free and role_of(name) == PLANT:
         return _plant_typical(lin, scales)
     typical = {}
     for key, value in lin.items():
@@ -646,26 +647,50 @@ def calibrate_linear(
         :data:`LINEAR_PARAMS` of the module; the plant adds ``u_offset`` (input units) and
         ``delay_samples`` (extra whole-sample input delay).
     """
-    name = data.name
+    return _CALIBRATORS[data.role](data, n_train, delay_near)
+
+
+def _calibrate_actuator(data: ModuleData, n_train: int, near: int | None) -> dict[str, float]:
+    """Return the lag's ``tau``: first-order ARX, refined by simulation error."""
     y = data.output[:n_train]
-    if name == "M0":
-        a, _, _ = _arx_first_order(y, data.inputs["u_cmd"][:n_train])
-        start = {"tau": _lag_coefficient_to_tau(a, data.dt)}
-    elif name == "M1":
-        return _calibrate_plant(data, n_train, delay_near)
-    elif name in ("M2a", "M2b"):
-        x = data.inputs["x"][:n_train]
-        a, _, _ = _arx_first_order(y, x)
-        tau = _lag_coefficient_to_tau(a, data.dt)
-        bias = float(np.mean(y - first_order_lag(x, tau, data.dt, x[0])))
-        start = {"tau": tau, "bias": bias}
-    elif name == "M3":
-        y_a, y_b = data.inputs["y_A"][:n_train], data.inputs["y_B"][:n_train]
-        diff = y_a - y_b
-        alpha = float(np.dot(diff, y - y_b) / max(np.dot(diff, diff), 1e-300))
-        return {"alpha": min(max(alpha, 0.0), 1.0)}
-    else:
-        phi = np.column_stack([data.inputs["x"][:n_train], data.velocity[:n_train]])
-        coef, *_ = np.linalg.lstsq(phi, y, rcond=None)
-        return {"w1": float(coef[0]), "w2": float(coef[1])}
+    a, _, _ = _arx_first_order(y, data.inputs["u_cmd"][:n_train])
+    start = {"tau": _lag_coefficient_to_tau(a, data.dt)}
     return fit_candidate(data, None, start, n_train=n_train).lin
+
+
+def _calibrate_sensor(data: ModuleData, n_train: int, near: int | None) -> dict[str, float]:
+    """Return the lag's ``tau`` (first-order ARX) and offset ``bias``, refined together."""
+    y = data.output[:n_train]
+    x = data.inputs["x"][:n_train]
+    a, _, _ = _arx_first_order(y, x)
+    tau = _lag_coefficient_to_tau(a, data.dt)
+    bias = float(np.mean(y - first_order_lag(x, tau, data.dt, x[0])))
+    start = {"tau": tau, "bias": bias}
+    return fit_candidate(data, None, start, n_train=n_train).lin
+
+
+def _calibrate_fusion(data: ModuleData, n_train: int, near: int | None) -> dict[str, float]:
+    """Return the weight ``alpha`` by least squares, clipped to [0, 1]."""
+    y = data.output[:n_train]
+    y_a, y_b = data.inputs["y_A"][:n_train], data.inputs["y_B"][:n_train]
+    diff = y_a - y_b
+    alpha = float(np.dot(diff, y - y_b) / max(np.dot(diff, diff), 1e-300))
+    return {"alpha": min(max(alpha, 0.0), 1.0)}
+
+
+def _calibrate_kpi(data: ModuleData, n_train: int, near: int | None) -> dict[str, float]:
+    """Return the weights ``w1, w2`` by least squares on position and velocity."""
+    y = data.output[:n_train]
+    phi = np.column_stack([data.inputs["x"][:n_train], data.velocity[:n_train]])
+    coef, *_ = np.linalg.lstsq(phi, y, rcond=None)
+    return {"w1": float(coef[0]), "w2": float(coef[1])}
+
+
+#: Each role's calibration ``(data, n_train, delay_near) → linear parameters``.
+_CALIBRATORS = {
+    ACTUATOR: _calibrate_actuator,
+    PLANT: _calibrate_plant,
+    SENSOR: _calibrate_sensor,
+    FUSION: _calibrate_fusion,
+    KPI: _calibrate_kpi,
+}

@@ -28,7 +28,7 @@ from dtwin.gap.recording import DERIVED_INPUTS, Recording
 from dtwin.gap.results import ModuleReport
 from dtwin.gap.where import ModuleWork, Split, nominal_lin
 from dtwin.gap.which import linear_refit_gap, shrink_pct
-from dtwin.wiring import MODULES
+from dtwin.wiring import MODULES, PLANT, only_module
 
 __all__ = [
     "chain_before_after",
@@ -167,7 +167,7 @@ def module_reports(rec, works, flagged, source, chosen, chains, split: Split) ->
             work.n_eff,
             work.lin_nominal,
             work.lin_base,
-            work.data.discretisation if name == "M1" else None,
+            work.data.discretisation if module.role == PLANT else None,
             work.data.horizon,
             work.reference_gap,
             work.tried,
@@ -207,9 +207,9 @@ def free_run_rms(works: Mapping[str, ModuleWork], source, chosen, split: Split) 
     free-run error worth reporting (its position drifts with any force error): both None
     (docs/gap.md §How far).
     """
-    work = source if source is not None else works.get("M1")
+    work = source if source is not None else works.get(only_module(PLANT))
     none = {"free_run_rms_before": None, "free_run_rms_after": None}
-    if work is None or (work.name == "M1" and not _strictly_stable(work.lin_base)):
+    if work is None or (work.data.role == PLANT and not _strictly_stable(work.lin_base)):
         return none
     restarts = tuple(sorted({*work.data.restarts, split.n_choose}))
     data = replace(work.data, horizon=None, restarts=restarts)

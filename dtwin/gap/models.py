@@ -48,6 +48,7 @@ from dtwin.modules import (
     lag_response,
     plant_response,
 )
+from dtwin.wiring import ACTUATOR, FUSION, KPI, PLANT, SENSOR, role_of
 
 __all__ = [
     "LINEAR_PARAMS",
@@ -119,6 +120,11 @@ class ModuleData:
     def n_samples(self) -> int:
         """Number of samples."""
         return len(self.output)
+
+    @property
+    def role(self) -> str:
+        """The module's role (:data:`dtwin.wiring.ROLES`; ``"plant"`` for M1)."""
+        return role_of(self.name)
 
 
 def velocity_from_position(
@@ -247,12 +253,12 @@ def _piecewise_lag(u: np.ndarray, tau: float, dt: float, initial: np.ndarray, re
     return out
 
 
-def _simulate_actuator(data, lin, effect, theta, stop):
+def _simulate_actuator(data, lin, effect, theta, stop, segments=None):
     u = _effect_input(data.inputs["u_cmd"][:stop], effect, theta, data.dt)
     return _piecewise_lag(u, lin["tau"], data.dt, data.output, data.restarts)
 
 
-def _simulate_sensor(data, lin, effect, theta, stop):
+def _simulate_sensor(data, lin, effect, theta, stop, segments=None):
     x = _effect_input(data.inputs["x"][:stop], effect, theta, data.dt)
     lag = _piecewise_lag(x, lin["tau"], data.dt, x, data.restarts)
     bias = lin["bias"]
@@ -606,15 +612,22 @@ def simulate_module(
     numpy.ndarray, shape (stop,)
     """
     stop = data.n_samples if stop is None else stop
-    name = data.name
-    if name == "M0":
-        return _simulate_actuator(data, lin, effect, theta, stop)
-    if name == "M1":
-        return _simulate_plant(data, lin, effect, theta, stop, segments)
-    if name in ("M2a", "M2b"):
-        return _simulate_sensor(data, lin, effect, theta, stop)
-    if name == "M3":
-        return fuse(data.inputs["y_A"][:stop], data.inputs["y_B"][:stop], lin["alpha"])
-    if name == "M4":
-        return kpi(data.inputs["x"][:stop], data.velocity[:stop], lin["w1"], lin["w2"])
-    raise ValueError(f"unknown module {name!r}")
+    return _SIMULATORS[data.role](data, lin, effect, theta, stop, segments)
+
+
+def _simulate_fusion(data, lin, effect, theta, stop, segments):
+    return fuse(data.inputs["y_A"][:stop], data.inputs["y_B"][:stop], lin["alpha"])
+
+
+def _simulate_kpi(data, lin, effect, theta, stop, segments):
+    return kpi(data.inputs["x"][:stop], data.velocity[:stop], lin["w1"], lin["w2"])
+
+
+#: Each role's simulator ``(data, lin, effect, theta, stop, segments) → (stop,)`` array.
+_SIMULATORS = {
+    ACTUATOR: _simulate_actuator,
+    PLANT: _simulate_plant,
+    SENSOR: _simulate_sensor,
+    FUSION: _simulate_fusion,
+    KPI: _simulate_kpi,
+}

@@ -37,8 +37,9 @@ from scipy.linalg import solve_discrete_lyapunov
 from scipy.optimize import nnls
 from scipy.stats import chi2
 
-from dtwin.modules import lag_coefficient, plant_matrices
+from dtwin.modules import CONTRACTS, lag_coefficient, plant_matrices
 from dtwin.params import NoiseParams
+from dtwin.wiring import ACTUATOR, PLANT, SENSOR, role_of
 
 __all__ = [
     "NoiseFloor",
@@ -120,16 +121,16 @@ def _white_acf() -> np.ndarray:
 
 def twin_noise_floor(module: str, noise: NoiseParams, lin: dict, dt: float) -> NoiseFloor:
     """Return the floor implied by the twin's noise levels (see the module docstring)."""
-    if module == "M0":
+    role = role_of(module)
+    if role == ACTUATOR:
         a = lag_coefficient(lin["tau"], dt)
         n_lags = max(2, min(400, int(10 / max(1e-9, 1 - a))))
         return NoiseFloor(noise.actuator / math.sqrt(1 - a * a), "twin", a ** np.arange(n_lags))
-    if module == "M1":
+    if role == PLANT:
         gain, acf = plant_noise_gain(lin["m"], lin["c"], lin["k"], dt)
         return NoiseFloor(noise.plant * gain, "twin", acf)
-    if module in ("M2a", "M2b"):
-        sigma = noise.sensor_A if module == "M2a" else noise.sensor_B
-        return NoiseFloor(sigma, "twin", _white_acf())
+    if role == SENSOR:  # white measurement noise, the sensor's own channel
+        return NoiseFloor(getattr(noise, CONTRACTS[module].noise), "twin", _white_acf())
     return NoiseFloor(0.0, "twin", _white_acf())
 
 
@@ -177,14 +178,15 @@ def data_noise_floor(
     dt : float
         Sample period, s.
     """
-    if module == "M0":
+    role = role_of(module)
+    if role == ACTUATOR:
         a = lag_coefficient(lin["tau"], dt)
         u = inputs["u_cmd"]
         step_error = output[1:] - a * output[:-1] - (1 - a) * u[:-1]
         sigma = robust_std(np.diff(step_error)) / math.sqrt(2.0)
         n_lags = max(2, min(400, int(10 / max(1e-9, 1 - a))))
         return NoiseFloor(sigma / math.sqrt(1 - a * a), "data", a ** np.arange(n_lags))
-    if module == "M1":
+    if role == PLANT:
         return _plant_data_floor(inputs["u_act"], output, lin, dt)
     return _ar1_floor(output - simulated, dt)
 

@@ -22,6 +22,7 @@ from dtwin.artifacts import atomic_write, to_jsonable, write_json
 from dtwin.gap.effects import effect_by_name
 from dtwin.gap.results import Diagnosis
 from dtwin.gap.which import required_share
+from dtwin.wiring import PLANT, only_module
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -228,7 +229,7 @@ def _free_run_lines(d: Diagnosis) -> list[str]:
     """Return the report's free-run sentence and a blank line ([] when there is none)."""
     if d.free_run_rms_before is None:
         return []
-    module = d.module or "M1"
+    module = d.module or only_module(PLANT)
     after = (
         f" → {d.free_run_rms_after:.4g} with the effect" if d.free_run_rms_after is not None else ""
     )

@@ -53,7 +53,7 @@ from dtwin.gap.oe_reference import output_error_reference
 from dtwin.gap.recording import Recording
 from dtwin.modules import EULER
 from dtwin.params import TwinParams
-from dtwin.wiring import module_by_name
+from dtwin.wiring import PLANT, module_by_name, role_of
 
 if TYPE_CHECKING:
     from dtwin.gap.which import FittedCandidate
@@ -180,7 +180,7 @@ def _module_data(
     module = module_by_name(name)
     output = rec.signals[module.output]
     velocity, position, lead = inputs.get("v"), None, 0
-    if name == "M1":
+    if module.role == PLANT:
         position, velocity, lead = plant_state_from_position(
             output, rec.dt, scheme, layout.restarts
         )
@@ -215,8 +215,8 @@ def _scales(
     """
     first_input = next(iter(data.inputs.values()))[:n_train]
     output = data.output
-    velocity_std = float(np.std(data.velocity)) if data.name == "M1" else 0.0
-    if simulated is not None and data.name == "M1" and data.discretisation != EULER:
+    velocity_std = float(np.std(data.velocity)) if data.role == PLANT else 0.0
+    if simulated is not None and data.role == PLANT and data.discretisation != EULER:
         with np.errstate(invalid="ignore"):
             speed = np.gradient(simulated[:n_train]) / data.dt
         if np.isfinite(speed).sum() > 10:
@@ -426,7 +426,7 @@ def _module_twin(name, rec, t, n_train, twins, settings, layout) -> tuple:
     80–1000 samples per period, which then read ``none`` with strong effects).
     """
     nominal, start = twins
-    families = layout.families if name == "M1" else [(EULER,)]
+    families = layout.families if role_of(name) == PLANT else [(EULER,)]
     if start is None and len(families) > 1:
         families = families[1:]  # calibrated from data: the exact holds (docs/gap.md §Twin file)
     prepared = []
@@ -520,7 +520,7 @@ def add_reference_gaps(works: Mapping[str, ModuleWork], split: Split) -> None:
     part: a gap a plain linear OE fit removes is calibration slack (docs/gap.md §Where).
     """
     for work in works.values():
-        if work.name == "M1" and work.calibrated and work.data.discretisation != EULER:
+        if work.data.role == PLANT and work.calibrated and work.data.discretisation != EULER:
             reference = output_error_reference(
                 work.data, int(work.lin_base.get("delay_samples", 0)), split.n_train
             )

@@ -34,6 +34,7 @@ from dtwin.gap.localise import normalised_rms
 from dtwin.gap.models import simulate_module
 from dtwin.gap.results import CandidateReport, GapSettings
 from dtwin.gap.where import ModuleWork, Split
+from dtwin.wiring import PLANT
 
 __all__ = [
     "FittedCandidate",
@@ -113,7 +114,7 @@ def fit_candidates(work: ModuleWork, split: Split) -> None:
             fitted = fit_candidate(
                 work.data, effect, plain.lin, n_train=split.n_train, starts=starts
             )
-        if work.calibrated and work.name == "M1":  # its delay was chosen without the effect
+        if work.calibrated and work.data.role == PLANT:  # its delay was chosen without the effect
             fitted = refit_delay(work.data, effect, fitted, split.n_train)
         if effect.refits_linear:
             start = fitted.lin  # the effects start from the re-fitted linear twin
