@@ -284,7 +284,7 @@ def test_the_library_carries_no_issue_numbers_or_dated_measurements():
 
 
 #: Packages whose code treats modules by their role (dtwin.wiring.ROLES), never by their name.
-ROLE_DISPATCHED = ("gap",)
+ROLE_DISPATCHED = ("gap", "gapbench")
 MODULE_NAME = re.compile(r"^M\d[a-z]?$")
 
 

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from dtwin.gap.confidence import calibrated_confidence
-from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED
+from dtwin.gap.effects import NONE, UNEXPLAINED, effect_by_name
 from dtwin.gap.intervals import parameter_intervals
 from dtwin.gap.localise import ModuleModel, normalised_rms, run_chain, upstream_modules
 from dtwin.gap.models import simulate_module
@@ -239,7 +239,7 @@ def answer_intervals(source, chosen, split: Split) -> dict[str, tuple[float, flo
         split.n_train,
         other_part=(split.n_train, split.n_choose),
     )
-    if chosen.effect == PARAMETER_MISMATCH:
+    if effect_by_name(chosen.effect).refits_linear:
         return intervals
     return {name: value for name, value in intervals.items() if name in chosen.params}
 

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from dtwin.artifacts import atomic_write, to_jsonable, write_json
-from dtwin.gap.effects import effect_by_name
+from dtwin.gap.effects import NONE, UNEXPLAINED, effect_by_name
 from dtwin.gap.results import Diagnosis
 from dtwin.gap.which import required_share
 from dtwin.wiring import PLANT, only_module
@@ -194,7 +194,7 @@ def _also_needed_line(d: Diagnosis) -> str:
 
 
 def _headline(d: Diagnosis) -> str:
-    if d.effect == "none":
+    if d.effect == NONE:
         return "**No gap beyond the noise**: every diagnosed module is within its noise threshold."
     return _answer_headline(d) + _also_needed_line(d)
 
@@ -206,7 +206,7 @@ def _param_text(name: str, value: float, bounds: tuple[float, float] | None) -> 
 
 
 def _answer_headline(d: Diagnosis) -> str:
-    if d.effect == "unexplained":
+    if d.effect == UNEXPLAINED:
         return _unexplained_headline(d)
     params = ", ".join(_param_text(k, v, d.param_intervals.get(k)) for k, v in d.params.items())
     kpi = (
@@ -332,7 +332,7 @@ def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
     ax = axes[2]
     if d.series:
         t, recorded = d.series["t"], d.series["recorded"]
-        after_label = "twin + effect" if d.effect != "unexplained" else "twin + best candidate"
+        after_label = "twin + effect" if d.effect != UNEXPLAINED else "twin + best candidate"
         ax.plot(t, recorded - d.series["before"], color="tab:red", lw=0.8, label="recorded − twin")
         if "after" in d.series:  # no candidate (a calibrated M3 or M4): nothing to add
             ax.plot(
@@ -349,7 +349,7 @@ def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
     else:
         ax.set_axis_off()
     ax.set_title("How far: before / after")
-    title = {"none": "No gap beyond noise", "unexplained": f"{d.module}: unexplained gap"}.get(
+    title = {NONE: "No gap beyond noise", UNEXPLAINED: f"{d.module}: unexplained gap"}.get(
         d.effect,
         f"{d.module}: {d.effect}, own share {(d.own_shrink_pct or 0):.0f} % "
         "(excess gap beyond a linear re-fit removed, scoring part)",

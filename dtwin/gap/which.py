@@ -21,7 +21,6 @@ from typing import Any
 import numpy as np
 
 from dtwin.gap.effects import (
-    PARAMETER_MISMATCH,
     UNEXPLAINED,
     Effect,
     effect_by_name,
@@ -167,7 +166,7 @@ def linear_refit_gap(work: ModuleWork) -> float:
     return work.gap_scored
 
 
-def _three_shrinks(work: ModuleWork, effect: str, gap_after: float, refit: float) -> tuple:
+def _three_shrinks(work: ModuleWork, effect: Effect, gap_after: float, refit: float) -> tuple:
     """Return ``(raw, own, excess, clipped)``: the three shrinks (%) on the scoring part.
 
     ``own`` compares with the linear re-fit ``refit`` (the twin as given for
@@ -176,7 +175,7 @@ def _three_shrinks(work: ModuleWork, effect: str, gap_after: float, refit: float
     """
     floor = work.floor.rms / work.norm
     before = work.gap_scored
-    reference = before if effect == PARAMETER_MISMATCH else refit
+    reference = before if effect.refits_linear else refit
     excess_after = _excess(gap_after, floor)
     return (
         shrink_pct(before, gap_after),
@@ -205,7 +204,7 @@ def score_candidates(work: ModuleWork, split: Split, settings: GapSettings):
         if effect.lattice:
             floor_c, deviance = _quantizer_floor_and_deviance(work, fit, split.choose)
         score = n_eff * deviance + fit.n_free * math.log(max(n_eff, 2.0))
-        raw, own, excess, clipped = _three_shrinks(work, effect.name, fitted.gap_score, refit)
+        raw, own, excess, clipped = _three_shrinks(work, effect, fitted.gap_score, refit)
         reports.append(
             CandidateReport(
                 module=work.name,

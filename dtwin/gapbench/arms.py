@@ -41,8 +41,9 @@ from typing import Any
 import numpy as np
 from scipy.signal import lfilter
 
-from dtwin.gapbench.case_effects import CaseEffect
+from dtwin.gapbench.case_effects import CaseEffect, spec_value
 from dtwin.modules import lag_coefficient
+from dtwin.wiring import ACTUATOR, role_of
 
 __all__ = [
     "ARMS",
@@ -189,7 +190,7 @@ def _draw_quintic(module, level, rng, scale) -> dict[str, Any]:
 
 def _draw_jittered_delay(module, level, rng, scale) -> dict[str, Any]:
     """Delay of ``delay_samples`` with i.i.d. jitter uniform in ±``jitter`` samples."""
-    low, high = (0.8, 6.0) if module == "M0" else (4.0, 15.0)
+    low, high = (0.8, 6.0) if role_of(module) == ACTUATOR else (4.0, 15.0)
     delay = _log_between(low, high, level)
     jitter = rng.uniform(0.25, 0.75) * min(delay, 2.0)
     return {
@@ -365,7 +366,9 @@ def stiction_plant(u, m, c, k, dt, noise, spec) -> tuple[np.ndarray, np.ndarray]
 ARM_CASE_EFFECTS: dict[str, CaseEffect] = {
     effect.name: effect
     for effect in (
-        CaseEffect("stribeck_friction", _draw_stribeck, force=_stribeck_force),
+        CaseEffect(
+            "stribeck_friction", _draw_stribeck, force=_stribeck_force, truth=spec_value("Fc")
+        ),
         CaseEffect("smooth_saturation", _draw_smooth_saturation, actuator=_smooth_saturation),
         CaseEffect("asymmetric_deadzone", _draw_asymmetric_deadzone, actuator=_asymmetric_deadzone),
         CaseEffect("quintic_stiffness", _draw_quintic, force=_quintic_force),
@@ -378,7 +381,7 @@ ARM_CASE_EFFECTS: dict[str, CaseEffect] = {
         CaseEffect("backlash", _draw_backlash, actuator=_backlash),
         CaseEffect("rate_limit", _draw_rate_limit, actuator=_rate_limit),
         CaseEffect("hysteresis", _draw_hysteresis, reading=_hysteresis_reading),
-        CaseEffect("stiction", _draw_stiction, plant=_stiction),
+        CaseEffect("stiction", _draw_stiction, plant=_stiction, truth=spec_value("Fc")),
         CaseEffect("cogging", _draw_cogging, force=_cogging_force),
     )
 }

@@ -21,13 +21,36 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["CaseEffect", "Draw"]
+__all__ = ["CaseEffect", "Draw", "Truth", "spec_value"]
 
 #: ``draw(module, level, rng, scale) -> spec``: the real effect's form and parameters.
 #: ``level`` in [0, 1] maps the strength log-uniformly (0: barely above the noise, 1: strong);
 #: ``scale`` holds the clean run's signal sizes (``u_max``, ``u_std``, ``x_max``, ``x_std``,
 #: ``v_max``, ``v_std``, ``sigma``: the sensor's noise standard deviation).
 Draw = Callable[[str, float, np.random.Generator, Mapping[str, float]], dict[str, Any]]
+
+#: ``truth(spec, key, dt) -> (name, true value, value without the effect)`` or None: the
+#: catalogue parameter that sets the drawn effect's size, in the catalogue's name and units
+#: (``key`` is the case's key, ``dt`` the sample time in s); None when the real form drawn has no
+#: catalogue parameter (docs/gap.md §Scores).
+Truth = Callable[[Mapping[str, Any], Mapping[str, Any], float], tuple[str, float, float] | None]
+
+
+def spec_value(name: str, without: float = 0.0) -> Truth:
+    """Return the :data:`Truth` that reads catalogue parameter ``name`` from the spec as drawn.
+
+    ``without`` is its value without the effect (0; 1 for a gain).
+
+    Examples
+    --------
+    >>> spec_value("gain", without=1.0)({"gain": 1.2}, {}, 0.01)
+    ('gain', 1.2, 1.0)
+    """
+
+    def truth(spec, key, dt):
+        return name, spec[name], without
+
+    return truth
 
 
 @dataclass(frozen=True)
@@ -62,6 +85,9 @@ class CaseEffect:
     continuous_delay : bool
         The continuous asset delays the sensor's continuous position by ``delay_samples`` (its
         ``sensor_input`` acts on samples, which that asset does not have).
+    truth : callable, optional
+        The catalogue parameter that sets the effect's size (see :data:`Truth`); None: the
+        effect has none (its answer is not scored on a parameter).
     """
 
     name: str
@@ -74,3 +100,4 @@ class CaseEffect:
     reading: Callable[..., np.ndarray] | None = None
     asset: Callable[..., None] | None = None
     continuous_delay: bool = False
+    truth: Truth | None = None

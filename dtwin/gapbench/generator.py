@@ -38,7 +38,7 @@ import pandas as pd
 
 from dtwin._validation import DtwinValueError, require_in_range
 from dtwin.command import make_command, time_axis
-from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED, fractional_delay
+from dtwin.gap.effects import EFFECTS, NONE, PARAMETER_MISMATCH, UNEXPLAINED, fractional_delay
 from dtwin.gap.noise import plant_noise_gain
 from dtwin.gapbench.arms import (
     ARM_CASE_EFFECTS,
@@ -54,7 +54,7 @@ from dtwin.gapbench.arms import (
     split_case_type,
     unseen_expected,
 )
-from dtwin.gapbench.case_effects import CaseEffect
+from dtwin.gapbench.case_effects import CaseEffect, spec_value
 from dtwin.modules import (
     CONTRACTS,
     Step,
@@ -66,6 +66,16 @@ from dtwin.modules import (
     run_modules,
 )
 from dtwin.params import CommandParams
+from dtwin.wiring import (
+    ACTUATOR,
+    FUSION,
+    KPI,
+    PLANT,
+    SENSOR,
+    modules_with_role,
+    only_module,
+    role_of,
+)
 
 __all__ = [
     "accepted_effects",
@@ -79,24 +89,14 @@ __all__ = [
     "case_spec",
 ]
 
-#: Effects of the catalogue the generator can inject, with the module(s) they may sit in.
-IN_LIST_EFFECTS: dict[str, tuple[str, ...]] = {
-    "actuator_saturation": ("M0",),
-    "actuator_deadzone": ("M0",),
-    "actuator_delay": ("M0",),
-    "coulomb_friction": ("M1",),
-    "cubic_stiffness": ("M1",),
-    "quadratic_damping": ("M1",),
-    "sensor_quantization": ("M2a", "M2b"),
-    "sensor_scale_error": ("M2a", "M2b"),
-    "sensor_bias_drift": ("M2a", "M2b"),
-    "sensor_delay": ("M2a", "M2b"),
-    PARAMETER_MISMATCH: ("M0", "M1", "M2a", "M2b", "M3", "M4"),
-}
+#: Effects of the catalogue the generator can inject, with the module(s) they may sit in: every
+#: catalogue effect in its modules, in the catalogue's order, but one that only widens another
+#: (``nests``: Stribeck friction is drawn as Coulomb friction, whose real form has the bump).
+IN_LIST_EFFECTS: dict[str, tuple[str, ...]] = {e.name: e.modules for e in EFFECTS if not e.nests}
 #: Effects outside the catalogue: the right answer is ``unexplained`` in that module.
 OUT_OF_LIST_EFFECTS: dict[str, tuple[str, ...]] = {
-    "stiffness_change": ("M1",),
-    "sensor_interference": ("M2a", "M2b"),
+    "stiffness_change": modules_with_role(PLANT),
+    "sensor_interference": modules_with_role(SENSOR),
 }
 #: Every case type, ``none`` included.
 ALL_CASE_EFFECTS: tuple[str, ...] = (*IN_LIST_EFFECTS, *OUT_OF_LIST_EFFECTS, NONE)
@@ -293,7 +293,7 @@ def _draw_mismatch(module, level, rng, scale) -> dict[str, Any]:
     if name == "alpha":
         delta = sign * _log_between(0.06, 0.35, level)
         return {"form": "offset", "section": section, "param": name, "delta": delta}
-    low, high = (0.4, 2.0) if name == "tau" and module in ("M2a", "M2b") else (0.15, 0.6)
+    low, high = (0.4, 2.0) if name == "tau" and role_of(module) == SENSOR else (0.15, 0.6)
     factor = (1 + _log_between(low, high, level)) ** sign
     return {"form": "factor", "section": section, "param": name, "factor": factor}
 
@@ -421,28 +421,77 @@ def _apply_mismatch(asset: dict, nominal, true_effect: dict) -> None:
     true_effect["nominal"] = nominal[section][name]
 
 
+# --- the true catalogue parameter of each drawn form (docs/gap.md §Scores) -----------------
+
+
+def _delay_truth(spec, key, dt):
+    """Return a delay's truth in s (it is drawn in samples)."""
+    return "delay", spec["delay_samples"] * dt, 0.0
+
+
+def _saturation_truth(spec, key, dt):
+    """Return a symmetric saturation's level ``U`` (tanh or clip); None if asymmetric."""
+    if spec.get("form") == "tanh":
+        return "U", spec["U"], math.inf
+    if spec.get("form") == "clip":
+        return "U", spec["U_high"], math.inf
+    return None
+
+
+def _deadzone_truth(spec, key, dt):
+    """Return a symmetric dead zone's half-width ``D``; None for an asymmetric one."""
+    if spec.get("form") in ("symmetric", "smooth"):
+        return "D", spec["D_high"], 0.0
+    return None
+
+
+def _stiffness_truth(spec, key, dt):
+    """Return a stiffness of power exactly 2 as the catalogue's ``k3``; None otherwise."""
+    if spec.get("power") == 2.0:
+        k = key["asset"]["plant"]["k"]
+        return "k3", spec["ratio"] * k / spec["x_ref"] ** 2, 0.0
+    return None
+
+
+def _mismatch_truth(spec, key, dt):
+    """Return the changed parameter, its true value and its nominal one."""
+    return spec["param"], spec["value"], spec["nominal"]
+
+
 #: Every case effect (the generator's and the arms'), by name: its draw and real form.
 CASE_EFFECTS: dict[str, CaseEffect] = {
     effect.name: effect
     for effect in (
-        CaseEffect("actuator_saturation", _draw_saturation, actuator=_saturation),
-        CaseEffect("actuator_deadzone", _draw_deadzone, actuator=_deadzone),
-        CaseEffect("actuator_delay", _draw_actuator_delay, actuator=_delayed),
+        CaseEffect(
+            "actuator_saturation", _draw_saturation, actuator=_saturation, truth=_saturation_truth
+        ),
+        CaseEffect("actuator_deadzone", _draw_deadzone, actuator=_deadzone, truth=_deadzone_truth),
+        CaseEffect("actuator_delay", _draw_actuator_delay, actuator=_delayed, truth=_delay_truth),
         CaseEffect(
             "sensor_delay",
             _draw_sensor_delay,
             sensor_input=_delayed,
             continuous_delay=True,
+            truth=_delay_truth,
         ),
-        CaseEffect("coulomb_friction", _draw_friction, force=_friction),
-        CaseEffect("cubic_stiffness", _draw_stiffness, force=_stiffness),
+        CaseEffect("coulomb_friction", _draw_friction, force=_friction, truth=spec_value("Fc")),
+        CaseEffect("cubic_stiffness", _draw_stiffness, force=_stiffness, truth=_stiffness_truth),
         CaseEffect("quadratic_damping", _draw_damping, force=_damping),
-        CaseEffect("sensor_quantization", _draw_quantization, reading=_quantization),
-        CaseEffect("sensor_scale_error", _draw_scale_error, sensor_gain=_scale_error),
+        CaseEffect(
+            "sensor_quantization", _draw_quantization, reading=_quantization, truth=spec_value("q")
+        ),
+        CaseEffect(
+            "sensor_scale_error",
+            _draw_scale_error,
+            sensor_gain=_scale_error,
+            truth=spec_value("gain", without=1.0),
+        ),
         CaseEffect("sensor_bias_drift", _draw_bias_drift, reading=_bias_drift),
         CaseEffect("sensor_interference", _draw_interference, reading=_interference),
         CaseEffect("stiffness_change", _draw_stiffness_change, plant=_stiffness_change),
-        CaseEffect(PARAMETER_MISMATCH, _draw_mismatch, asset=_apply_mismatch),
+        CaseEffect(
+            PARAMETER_MISMATCH, _draw_mismatch, asset=_apply_mismatch, truth=_mismatch_truth
+        ),
         *ARM_CASE_EFFECTS.values(),
     )
 }
@@ -661,7 +710,7 @@ def generate_case(
     )
     n = int(rng.integers(1000, 5001)) if n_samples is None else int(n_samples)
     # a noisy-position recording has no z: a KPI (M4) effect could not be seen at all
-    module = module or _draw_module(effects[0], rng, "M4" if arm == "noisy_x" else None)
+    module = module or _draw_module(effects[0], rng, only_module(KPI) if arm == "noisy_x" else None)
     dt = float(nominal["dt"])
     t = time_axis(n, dt)
     command, u_cmd = _excitation(rng, n, dt)
@@ -874,16 +923,19 @@ def _draw_noises(rng: np.random.Generator, n: int, noise_true: Mapping[str, floa
 def _signal_scale(u_cmd, baseline, module, noise_true) -> dict[str, float]:
     """Return the clean run's signal sizes that set an effect's strength (see _draw_effect)."""
     n = len(u_cmd)
-    sigma = noise_true["sensor_A"] if module == "M2a" else noise_true["sensor_B"]
+    role = None if module is None else role_of(module)
+    # the sensor's own noise; the last sensor's for another module (its effects read no sigma)
+    channel = CONTRACTS[module if role == SENSOR else modules_with_role(SENSOR)[-1]].noise
+    commanded = u_cmd if role == ACTUATOR else baseline["u_act"]
     return {
         # sizes from the first half, so that the effect shows in a default training part
-        "u_max": float(np.max(np.abs((u_cmd if module == "M0" else baseline["u_act"])[: n // 2]))),
+        "u_max": float(np.max(np.abs(commanded[: n // 2]))),
         "u_std": float(np.std(u_cmd)),
         "x_max": float(np.max(np.abs(baseline["x"]))),
         "x_std": float(np.std(baseline["x"])),
         "v_max": float(np.max(np.abs(baseline["v"]))),
         "v_std": float(np.std(baseline["v"])),
-        "sigma": sigma,
+        "sigma": noise_true[channel],
     }
 
 
@@ -902,16 +954,14 @@ def _effect_snr(asset, nominal, u_cmd, noises, specs, signals, module, t, noise_
 def _module_floor(asset, module, signals, noise_true) -> float:
     """Return the module's noise floor for the asset's true parameters (output units)."""
     dt = asset["dt"]
-    out = _MODULE_OUTPUT[module]
-    floor = {
-        "M0": noise_true["actuator"] / math.sqrt(1 - math.exp(-2 * dt / asset["actuator"]["tau"])),
-        "M1": noise_true["plant"] * plant_noise_gain(**asset["plant"], dt=dt)[0],
-        "M2a": noise_true["sensor_A"],
-        "M2b": noise_true["sensor_B"],
-    }.get(module)
-    if floor is None:
-        floor = float(np.std(signals[out])) * 0.01
-    return floor
+    role = role_of(module)
+    if role == ACTUATOR:
+        return noise_true["actuator"] / math.sqrt(1 - math.exp(-2 * dt / asset["actuator"]["tau"]))
+    if role == PLANT:
+        return noise_true["plant"] * plant_noise_gain(**asset["plant"], dt=dt)[0]
+    if role == SENSOR:
+        return noise_true[CONTRACTS[module].noise]
+    return float(np.std(signals[_MODULE_OUTPUT[module]])) * 0.01
 
 
 def _snr_against(signals, baseline, asset, module, noise_true) -> float:
@@ -940,28 +990,26 @@ def _twin_file(nominal, noise_true, rng: np.random.Generator, noise_error: float
 def _effect_contribution(asset, nominal, u_cmd, noises, specs, signals, module, t):
     """RMS contribution of the effect to its module's output, the module driven identically."""
     out = _MODULE_OUTPUT[module]
-    clean = {m: {} for m in _MODULE_OUTPUT}
     dt = asset["dt"]
-    if module == "M0":
-        other = _actuator(u_cmd, asset["actuator"]["tau"], dt, noises["actuator"], clean["M0"])
+    role = role_of(module)
+    if role == ACTUATOR:
+        other = _actuator(u_cmd, asset["actuator"]["tau"], dt, noises["actuator"], {})
         return signals[out] - other
-    if module == "M1":
+    if role == PLANT:
         p = asset["plant"]
         other, _ = _plant(signals["u_act"], p["m"], p["c"], p["k"], dt, noises["plant"], {}, len(t))
-        if not specs["M1"]:  # parameter mismatch: compare with the nominal plant
+        if not specs[module]:  # parameter mismatch: compare with the nominal plant
             q = nominal["plant"]
             other, _ = _plant(
                 signals["u_act"], q["m"], q["c"], q["k"], dt, noises["plant"], {}, len(t)
             )
         return signals[out] - other
-    if module in ("M2a", "M2b"):
-        which = "A" if module == "M2a" else "B"
-        s = asset[f"sensor_{which}"]
-        if not specs[module]:
-            s = nominal[f"sensor_{which}"]
-        other = _sensor(signals["x"], s["tau"], s["bias"], dt, noises[which], {}, t)
+    if role == SENSOR:
+        section = CONTRACTS[module].section  # sensor_A: its noise is noises["A"]
+        s = asset[section] if specs[module] else nominal[section]
+        other = _sensor(signals["x"], s["tau"], s["bias"], dt, noises[section[-1]], {}, t)
         return signals[out] - other
-    if module == "M3":
+    if role == FUSION:
         return signals[out] - fuse(signals["y_A"], signals["y_B"], nominal["fusion"]["alpha"])
     k = nominal["kpi"]
     return signals[out] - kpi(signals["x"], signals["v"], k["w1"], k["w2"])

@@ -31,6 +31,7 @@ import pandas as pd
 from dtwin.artifacts import Check
 from dtwin.gap.confidence import FITTING_CASES
 from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED
+from dtwin.gapbench.generator import CASE_EFFECTS
 from dtwin.proportions import wilson_interval
 
 #: The benchmark arm of two effects at once (:mod:`dtwin.gapbench.arms`, case type ``two__a+b``).
@@ -95,31 +96,15 @@ SHRINK_COLUMNS: tuple[str, ...] = ("own_shrink_pct", "raw_shrink_pct", "excess_s
 def _paper_truth(effect: str, params: Mapping[str, Any], key: Mapping[str, Any], dt: float):
     """Return ``(name, true value, value without the effect)`` of a paper-asset case, or None.
 
-    Only where the real form is in the catalogue's family (docs/gap.md §Scores): a cubic
-    stiffness of power exactly 2, a symmetric saturation or dead zone; never a damping power
-    other than 2 or a drift that is not a line.
+    The case effect's own :attr:`~dtwin.gapbench.case_effects.CaseEffect.truth`: only where the
+    real form is in the catalogue's family (docs/gap.md §Scores): a cubic stiffness of power
+    exactly 2, a symmetric saturation or dead zone; never a damping power other than 2 or a
+    drift that is not a line.
     """
-    form = params.get("form")
-    if effect in ("actuator_delay", "sensor_delay"):
-        return "delay", params["delay_samples"] * dt, 0.0
-    if effect == "sensor_scale_error":
-        return "gain", params["gain"], 1.0
-    if effect == "sensor_quantization":
-        return "q", params["q"], 0.0
-    if effect in ("coulomb_friction", "stribeck_friction", "stiction"):
-        return "Fc", params["Fc"], 0.0
-    if effect == "actuator_saturation" and form == "tanh":
-        return "U", params["U"], math.inf
-    if effect == "actuator_saturation" and form == "clip":
-        return "U", params["U_high"], math.inf
-    if effect == "actuator_deadzone" and form in ("symmetric", "smooth"):
-        return "D", params["D_high"], 0.0
-    if effect == "cubic_stiffness" and params.get("power") == 2.0:
-        k = key["asset"]["plant"]["k"]
-        return "k3", params["ratio"] * k / params["x_ref"] ** 2, 0.0
-    if effect == PARAMETER_MISMATCH:
-        return params["param"], params["value"], params["nominal"]
-    return None
+    case_effect = CASE_EFFECTS.get(effect)
+    if case_effect is None or case_effect.truth is None:
+        return None
+    return case_effect.truth(params, key, dt)
 
 
 #: A rig key's effect parameter that sets the effect's size (its catalogue name).

@@ -13,6 +13,7 @@ from dtwin.gap.effects import (
     FRICTION_SMOOTHING,
     SCALAR_OPS,
     Scales,
+    effect_by_name,
     quantization_variance,
 )
 
@@ -181,9 +182,34 @@ def test_every_case_effect_acts_somewhere_in_the_asset():
     from dtwin.gapbench.case_effects import CaseEffect
     from dtwin.gapbench.generator import ARM_EFFECTS, CASE_EFFECTS
 
-    hooks = [f.name for f in fields(CaseEffect) if f.name not in ("name", "draw")]
+    hooks = [f.name for f in fields(CaseEffect) if f.name not in ("name", "draw", "truth")]
     idle = sorted(n for n, e in CASE_EFFECTS.items() if not any(getattr(e, h) for h in hooks))
     assert idle == []
     drawn = {e for effects in ARM_EFFECTS.values() for pair in effects for e in pair.split("+")}
     assert sorted(drawn - {"none"} - set(CASE_EFFECTS)) == []
     assert all(name == effect.name for name, effect in CASE_EFFECTS.items())
+
+
+def test_every_case_effects_truth_is_a_parameter_of_its_answer():
+    """A case effect's scored truth is a parameter the diagnoser fits for the expected answer.
+
+    Each case effect with a ``truth`` is generated in an arm that draws it until a seed gives a
+    form of the catalogue's family (a symmetric saturation, a power-2 stiffness).
+    """
+    from dtwin.gapbench.generator import ARM_EFFECTS, CASE_EFFECTS, generate_case
+    from dtwin.gapbench.scores import true_parameter
+    from dtwin.modules import LINEAR_PARAMS
+
+    scored = [name for name, effect in CASE_EFFECTS.items() if effect.truth is not None]
+    assert len(scored) >= 10
+    for name in scored:
+        arm = next(arm for arm, effects in ARM_EFFECTS.items() if name in effects)
+        for seed in range(20):
+            key = generate_case(name, seed, n_samples=1000, arm=arm).key
+            truth = true_parameter(key, 0.02)
+            if truth is not None:
+                break
+        assert truth is not None, name
+        expected = effect_by_name(key["expected_effect"])
+        fitted = set(expected.params) | set(LINEAR_PARAMS[key["module"]])
+        assert truth[0] in fitted, (name, truth)
