@@ -67,6 +67,10 @@ logger = logging.getLogger(__name__)
 
 _N_REFINE = 3
 _MAX_NFEV = 300
+#: Step tolerance of the least-squares fit, relative, in units of each parameter's typical size:
+#: a fit stops once its step is below ``FIT_XTOL·(FIT_XTOL + ‖z‖)`` (``z = θ/typical``), so
+#: its parameters are known to no better (:mod:`dtwin.gap.intervals`).
+FIT_XTOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -329,7 +333,7 @@ def _scaled_least_squares(residual, start, low, high, typical) -> tuple[np.ndarr
             method="trf",
             max_nfev=_MAX_NFEV,
             ftol=1e-6,
-            xtol=1e-6,
+            xtol=FIT_XTOL,
             gtol=1e-8,
         )
     except (ValueError, FloatingPointError):  # pragma: no cover - defensive

@@ -226,11 +226,15 @@ def answer_intervals(source, chosen, split: Split) -> dict[str, tuple[float, flo
     """Return the 95 % interval of each of the answer's parameters (docs/gap.md §Intervals).
 
     Those of ``params``, and for ``parameter_mismatch`` every re-fitted linear parameter
-    (:func:`dtwin.gap.intervals.parameter_intervals`); empty without a chosen effect.
+    (:func:`dtwin.gap.intervals.parameter_intervals`, with the fit of a candidate whose form
+    nests the answer's as its ``wider``); empty without a chosen effect.
     """
     if chosen is None:
         return {}
     fitted = next(f for f in source.candidates if f.effect.name == chosen.effect)
+    wider = next((f for f in source.candidates if chosen.effect in f.effect.nests), None)
+    if wider is not None:
+        wider = (wider.effect, wider.fit.lin, wider.fit.theta)
     intervals = parameter_intervals(
         source.data,
         fitted.effect,
@@ -238,6 +242,7 @@ def answer_intervals(source, chosen, split: Split) -> dict[str, tuple[float, flo
         fitted.fit.theta,
         split.n_train,
         other_part=(split.n_train, split.n_choose),
+        wider=wider,
     )
     if effect_by_name(chosen.effect).refits_linear:
         return intervals

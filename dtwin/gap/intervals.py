@@ -15,6 +15,14 @@ independent observation, and
 quantile). The Jacobian ``J`` of the residuals is taken by central differences at the fitted
 parameters, over every free parameter of the fit (the linear ones too), so that an effect's
 interval carries its trade-off with the re-fitted linear twin.
+
+Three errors the sandwich does not see are added (docs/gap.md §Intervals): the spread between
+the fits on two parts (``other_part``); the contrast with a wider catalogue form that nests the
+candidate's (``wider``: the narrower form's bias when the real effect needs the wider one); and
+the limit of an input map that the recorded inputs do not reach (:data:`LIMITS`), which the
+data bound only from below. No interval is narrower than the fit's own step tolerance
+(:data:`~dtwin.gap.fit.FIT_XTOL`): a noiseless module fitted exactly leaves residuals at
+rounding level.
 """
 
 from __future__ import annotations
@@ -27,11 +35,11 @@ import numpy as np
 from scipy.stats import t as student_t
 
 from dtwin.gap.effects import Effect
-from dtwin.gap.fit import fit_candidate, linear_typical, training_view
+from dtwin.gap.fit import FIT_XTOL, fit_candidate, linear_typical, training_view
 from dtwin.gap.models import LINEAR_PARAMS, ModuleData, simulate_module
 from dtwin.modules import EULER
 
-__all__ = ["N_BLOCKS", "LEVEL", "fitted_names", "parameter_intervals"]
+__all__ = ["N_BLOCKS", "LEVEL", "LIMITS", "fitted_names", "parameter_intervals"]
 
 #: Contiguous blocks of the training residuals (independent observations of the score).
 N_BLOCKS = 20
@@ -39,6 +47,13 @@ N_BLOCKS = 20
 LEVEL = 0.95
 #: Central-difference step, relative to each parameter's typical size.
 _STEP = 1e-4
+#: ``effect → (parameter, input signal)``: a parameter that is the limit of the effect's input
+#: map as the input grows (a saturation level). A recording determines the map only over the
+#: inputs it holds; beyond them the level is the catalogue form's extrapolation (a tanh
+#: saturation read through the algebraic form overshoots its level by 10–30 % when the input
+#: stays below about twice the level). The data bound it from below only by the largest
+#: ``|map output|`` over the training inputs: the interval's lower end reaches down to that.
+LIMITS: dict[str, tuple[str, str]] = {"actuator_saturation": ("U", "u_cmd")}
 
 
 def fitted_names(
@@ -99,6 +114,65 @@ def _jacobian(residual, theta: np.ndarray, steps: np.ndarray) -> np.ndarray:
     return np.column_stack(columns)
 
 
+def _linearised(data: ModuleData, effect, lin, theta, n_train: int):
+    """Return a fitted candidate's ``(linear, names, θ, typical, r, J)`` over the training part.
+
+    ``names`` are :func:`fitted_names` (linear first), ``θ`` their fitted values, ``r`` the
+    residuals ``(n_train,)`` (NaN where unscored) and ``J`` their central-difference Jacobian
+    ``(n_train, p)`` in units of each parameter's ``typical`` size (``k3 = 1e13`` beside
+    ``m = 1e-3`` stays solvable).
+    """
+    linear, own = fitted_names(data.name, lin, effect)
+    names = [*linear, *own]
+    beta = np.array([float(lin[k]) for k in linear] + [float(v) for v in theta][: len(own)])
+    residual = _residual_fn(data, effect, lin, linear, n_train)
+    typical = _typical(data, lin, effect, names)
+    with np.errstate(all="ignore"):
+        r0 = residual(beta)
+        jac = _jacobian(residual, beta, _STEP * typical) * typical
+    return linear, names, beta, typical, r0, jac
+
+
+def _block_influences(jac: np.ndarray, r0: np.ndarray, n_blocks: int) -> np.ndarray | None:
+    """Return each block's influence ``(JᵀJ)⁻¹·J_bᵀ·r_b`` on the fit, ``(n_blocks, p)``.
+
+    The batch-means sandwich covariance is ``B/(B − p)·Σ_b ψ_b ψ_bᵀ`` of these; None when
+    ``JᵀJ`` is singular or not finite (a parameter the data do not determine).
+    """
+    hessian = jac.T @ jac
+    if not np.all(np.isfinite(hessian)) or np.linalg.cond(hessian) > 1e14:
+        return None
+    bread = np.linalg.inv(hessian)
+    blocks = zip(np.array_split(jac, n_blocks), np.array_split(r0, n_blocks), strict=True)
+    return np.array([bread @ (j.T @ r) for j, r in blocks])
+
+
+def _contrast_bias(names, beta, influence, wide, used, n_blocks: int) -> np.ndarray:
+    """Return the squared bias of each parameter shared with a wider nesting form, else 0.
+
+    ``d = θ − θ_wide`` has, when the narrower form is right, the batch-means variance
+    ``V_d = B/(B − p_wide)·Σ_b (ψ_b − ψ_wide,b)²`` of the two fits' block influences; its
+    excess ``max(d² − V_d, 0)`` estimates the squared bias of the narrower estimate when the
+    real effect needs the wider form (the contrast of Hausman 1978).
+    """
+    _, wide_names, wide_beta, wide_typical, wide_r, wide_jac = wide
+    bias = np.zeros(len(names))
+    if n_blocks <= len(wide_beta) + 1:
+        return bias
+    wide_influence = _block_influences(wide_jac[used], wide_r[used], n_blocks)
+    if wide_influence is None:
+        return bias
+    wide_influence = wide_influence * wide_typical
+    for index, name in enumerate(names):
+        if name in wide_names:
+            other = wide_names.index(name)
+            d = beta[index] - wide_beta[other]
+            blocks = influence[:, index] - wide_influence[:, other]
+            spread = np.sum(blocks**2) * n_blocks / (n_blocks - len(wide_beta))
+            bias[index] = max(d * d - spread, 0.0)
+    return bias
+
+
 def parameter_intervals(
     data: ModuleData,
     effect: Effect | None,
@@ -109,6 +183,7 @@ def parameter_intervals(
     n_blocks: int = N_BLOCKS,
     level: float = LEVEL,
     other_part: tuple[int, int] | None = None,
+    wider: tuple[Effect, Mapping[str, float], Sequence[float]] | None = None,
 ) -> dict[str, tuple[float, float]]:
     """Return the ``level`` interval of every free parameter of a fitted candidate.
 
@@ -132,6 +207,12 @@ def parameter_intervals(
         again: half the squared difference of the two fits is added to each variance (the
         spread a statistical interval misses when the catalogue form only approximates the
         effect or the excitation differs between parts).
+    wider : (Effect, mapping, sequence of float), optional
+        A wider catalogue form that nests this one (:attr:`Effect.nests`: Stribeck friction
+        for Coulomb friction) as fitted: ``(effect, lin, theta)``. Both estimate a parameter
+        they share when the narrower form is right; only the wider one does when the real
+        effect needs it. The contrast's excess over its own variance is added to the
+        variance (:func:`_contrast_bias`), so the interval is a mean-squared-error one.
 
     Returns
     -------
@@ -144,38 +225,38 @@ def parameter_intervals(
     The sandwich covariance with batch means of the module docstring; units are the
     parameters' own.
     """
-    linear, own = fitted_names(data.name, lin, effect)
-    names = [*linear, *own]
-    beta = np.array([float(lin[k]) for k in linear] + [float(v) for v in theta][: len(own)])
-    residual = _residual_fn(data, effect, lin, linear, n_train)
-    typical = _typical(data, lin, effect, names)
-    with np.errstate(all="ignore"):
-        r0 = residual(beta)
-        # in units of each parameter's typical size: k3 = 1e13 beside m = 1e-3 stays solvable
-        jac = _jacobian(residual, beta, _STEP * typical) * typical
+    linear, names, beta, typical, r0, jac = _linearised(data, effect, lin, theta, n_train)
     used = np.isfinite(r0) & np.all(np.isfinite(jac), axis=1)
-    r0, jac = r0[used], jac[used]
+    if wider is not None:
+        wide = _linearised(data, *wider, n_train)
+        used &= np.isfinite(wide[4]) & np.all(np.isfinite(wide[5]), axis=1)
     p = len(beta)
-    n_blocks = min(n_blocks, len(r0) // max(2 * p, 1))
-    if n_blocks <= p + 1:
+    n_blocks = min(n_blocks, int(np.sum(used)) // max(2 * p, 1))
+    influence = _block_influences(jac[used], r0[used], n_blocks) if n_blocks > p + 1 else None
+    if influence is None:
         return {}
-    hessian = jac.T @ jac
-    if not np.all(np.isfinite(hessian)) or np.linalg.cond(hessian) > 1e14:
-        return {}
-    bread = np.linalg.inv(hessian)
-    blocks = zip(np.array_split(jac, n_blocks), np.array_split(r0, n_blocks), strict=True)
-    scores = np.array([j.T @ r for j, r in blocks])
-    meat = scores.T @ scores * n_blocks / (n_blocks - p)
-    variance = np.maximum(np.diag(bread @ meat @ bread), 0.0) * typical**2
+    influence = influence * typical  # parameters' own units, (n_blocks, p)
+    variance = np.sum(influence**2, axis=0) * n_blocks / (n_blocks - p)
     if other_part is not None:
         variance = variance + 0.5 * (beta - _refit(data, effect, lin, other_part, linear)) ** 2
+    if wider is not None:
+        variance = variance + _contrast_bias(names, beta, influence, wide, used, n_blocks)
     spread = np.sqrt(variance)
     half = student_t.ppf(0.5 + level / 2.0, n_blocks - 1) * spread
-    return {
+    # the fit stops once its step is below FIT_XTOL·(FIT_XTOL + ‖θ/typical‖) in typical units
+    resolution = FIT_XTOL * (FIT_XTOL + np.linalg.norm(beta / typical)) * typical
+    half = np.maximum(half, resolution)
+    intervals = {
         name: (float(value - h), float(value + h))
         for name, value, h in zip(names, beta, half, strict=True)
         if math.isfinite(h)
     }
+    if effect is not None and effect.name in LIMITS and LIMITS[effect.name][0] in intervals:
+        name, signal = LIMITS[effect.name]
+        mapped = effect.input_map(data.inputs[signal][:n_train], beta[len(linear) :], data.dt)
+        low, high = intervals[name]
+        intervals[name] = (min(low, float(np.max(np.abs(mapped)))), high)
+    return intervals
 
 
 def _part(data: ModuleData, start: int, stop: int) -> ModuleData:

@@ -87,8 +87,11 @@ DEFINITIONS: dict[str, str] = {
     "param_intervals": "95 % interval [low, high] of each fitted parameter of the answer "
     "(shown after its value in the first line of report.md): the least-squares fit's sandwich "
     "covariance with the training residuals cut in 20 blocks taken as independent, and a t "
-    "quantile with 19 degrees of freedom; it describes the fit's statistical uncertainty, not "
-    "the error of a catalogue form that only approximates the real effect",
+    "quantile with 19 degrees of freedom; widened by the spread between the fits on the training "
+    "and choosing parts, by the difference from a wider catalogue form that nests the answer's "
+    "(Coulomb friction: Stribeck friction's Fc), down to the largest output of a saturation the "
+    "recorded inputs reach, and never narrower than the fit's step tolerance "
+    "(docs/gap.md §Intervals)",
     "free_run_rms_before, free_run_rms_after": "RMS of recorded − simulated output of the "
     "source module (M1 when the answer is none) over the scoring part, in the recording's units, "
     "the twin run freely from the recorded state at the scoring part's first sample: with the "

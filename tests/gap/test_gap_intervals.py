@@ -1,0 +1,85 @@
+"""The 95 % intervals of a fitted candidate's parameters (dtwin/gap/intervals.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dtwin.gap.effects import Scales, effect_by_name
+from dtwin.gap.fit import FIT_XTOL, fit_candidate
+from dtwin.gap.intervals import LIMITS, parameter_intervals
+from dtwin.gap.models import ModuleData, first_order_lag
+
+
+def _scales(u: np.ndarray, y: np.ndarray, dt: float, noise: float) -> Scales:
+    return Scales(
+        input_max=float(np.max(np.abs(u))),
+        input_std=float(np.std(u)),
+        output_std=float(np.std(y)),
+        velocity_std=0.0,
+        duration=float(len(u) * dt),
+        dt=dt,
+        noise_std=noise,
+        stiffness=1.0,
+        mass=1.0,
+        output_mean=float(np.mean(y)),
+    )
+
+
+def _sensor(noise: float, gain: float = 1.08, n: int = 1500):
+    """Sensor A with a scale error, white noise of std ``noise`` (0: none): data, truth."""
+    dt = 0.02
+    t = np.arange(n) * dt
+    x = np.sin(2 * np.pi * 0.3 * t) + 0.5 * np.sign(np.sin(2 * np.pi * 0.07 * t))
+    y = gain * first_order_lag(x, 0.08, dt, x[0]) + 0.01
+    y = y + noise * np.random.default_rng(3).standard_normal(n)
+    data = ModuleData("M2a", {"x": x}, y, dt, t, scales=_scales(x, y, dt, max(noise, 1e-3)))
+    return data, gain
+
+
+def test_a_noiseless_module_gets_the_fits_step_tolerance_and_holds_the_truth():
+    """Residuals at rounding level give a sandwich interval of ~1e-13: the fit itself is only
+    converged to FIT_XTOL, so the interval is never narrower than that and holds the truth."""
+    effect = effect_by_name("sensor_scale_error")
+    data, gain = _sensor(noise=0.0)
+    fit = fit_candidate(data, effect, {"tau": 0.08, "bias": 0.0}, n_train=750)
+    low, high = parameter_intervals(data, effect, fit.lin, fit.theta, 750)["gain"]
+    assert low <= gain <= high
+    assert FIT_XTOL * gain <= high - low < 1e3 * FIT_XTOL * gain
+
+
+def test_a_wider_forms_contrast_counts_only_beyond_its_own_spread():
+    """The same fit as its own wider form adds nothing (contrast 0, its variance 0); a wider
+    fit off by 3 interval widths with the same block influences adds its full square, so its
+    estimate lies inside the interval."""
+    effect = effect_by_name("sensor_scale_error")
+    data, _ = _sensor(noise=0.03)
+    fit = fit_candidate(data, effect, {"tau": 0.08, "bias": 0.0}, n_train=750)
+    plain = parameter_intervals(data, effect, fit.lin, fit.theta, 750)
+    same = parameter_intervals(
+        data, effect, fit.lin, fit.theta, 750, wider=(effect, fit.lin, fit.theta)
+    )
+    assert same == plain
+    other = fit.theta[0] + 3.0 * (plain["gain"][1] - plain["gain"][0])
+    off = (effect, fit.lin, (other,))
+    wide = parameter_intervals(data, effect, fit.lin, fit.theta, 750, wider=off)
+    assert wide["gain"][0] < plain["gain"][0] and wide["gain"][1] > other
+    assert wide["tau"] == plain["tau"]
+
+
+def test_a_saturation_level_the_input_never_reaches_is_bounded_from_below_by_the_data():
+    """A tanh saturation driven to 0.8 of its level, read through the catalogue's algebraic
+    form: the fitted level overshoots; the interval reaches down to the map's largest output
+    over the recorded inputs, and holds the true level."""
+    effect = effect_by_name("actuator_saturation")
+    assert LIMITS["actuator_saturation"] == ("U", "u_cmd")
+    dt, n, level = 0.01, 3000, 2.0
+    t = np.arange(n) * dt
+    rng = np.random.default_rng(7)
+    u = 0.8 * level * np.sin(2 * np.pi * 0.4 * t + np.sin(2 * np.pi * 0.05 * t))
+    y = first_order_lag(level * np.tanh(u / level), 0.15, dt, 0.0)
+    y = y + 0.002 * rng.standard_normal(n)
+    data = ModuleData("M0", {"u_cmd": u}, y, dt, t, scales=_scales(u, y, dt, 0.002))
+    fit = fit_candidate(data, effect, {"tau": 0.15}, n_train=n // 2)
+    low, high = parameter_intervals(data, effect, fit.lin, fit.theta, n // 2)["U"]
+    reached = np.max(np.abs(effect.input_map(u[: n // 2], fit.theta, dt)))
+    assert low == reached < level <= high
