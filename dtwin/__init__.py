@@ -15,8 +15,7 @@ pays only for the modules it uses.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from dtwin._lazy import lazy_exports
 
 __version__ = "0.1.0"
 
@@ -84,13 +83,4 @@ _EXPORTS: dict[str, str] = {
 }
 
 __all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str) -> Any:
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'dtwin' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -15,8 +15,7 @@ importing one module loads only what it needs.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from dtwin._lazy import lazy_exports
 
 _EXPORTS = {
     "GeneratedCase": "dtwin.gapbench.generator",
@@ -24,13 +23,4 @@ _EXPORTS = {
 }
 
 __all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str) -> Any:
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'dtwin.gapbench' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
