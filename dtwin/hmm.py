@@ -196,18 +196,30 @@ def _em_data(X: np.ndarray) -> EmData:
     return EmData(GAUSSIAN, np.hstack([X, X * X]), X)
 
 
+def _weighted_emissions(
+    X: np.ndarray, weights: np.ndarray, var_floor: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return ``(means, variances, occupancy)``: weighted ML emissions of a start.
+
+    ``X`` is ``(T, D)``, ``weights`` ``(T, K)`` (each sample's weight on each state); means and
+    variances are ``(K, D)``, the variances floored at ``var_floor``; occupancy ``(K,)`` is each
+    state's total weight (NaN emissions where it is 0).
+    """
+    occupancy = weights.sum(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        means = (weights.T @ X) / occupancy[:, None]
+        variances = np.stack(
+            [(weights[:, k] @ (X - means[k]) ** 2) / occupancy[k] for k in range(weights.shape[1])]
+        )
+    return means, np.maximum(variances, var_floor), occupancy
+
+
 def _random_start(
     X: np.ndarray, n_states: int, rng: np.random.Generator, var_floor: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """depmixS4's random start: Dirichlet(0.01) sample weights, weighted ML emissions."""
     weights = rng.dirichlet(np.full(n_states, DIRICHLET_ALPHA), size=len(X))  # (T, K)
-    occupancy = weights.sum(axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        means = (weights.T @ X) / occupancy[:, None]
-        variances = np.stack(
-            [(weights[:, k] @ (X - means[k]) ** 2) / occupancy[k] for k in range(n_states)]
-        )
-    return means, np.maximum(variances, var_floor), occupancy
+    return _weighted_emissions(X, weights, var_floor)
 
 
 def _kmeanspp_start(
@@ -227,13 +239,7 @@ def _kmeanspp_start(
         distance = np.minimum(distance, ((X - X[pick]) ** 2).sum(axis=1))
     nearest = np.argmin([((X - c) ** 2).sum(axis=1) for c in centres], axis=0)
     weights = np.eye(n_states)[nearest]
-    occupancy = weights.sum(axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        means = (weights.T @ X) / occupancy[:, None]
-        variances = np.stack(
-            [(weights[:, k] @ (X - means[k]) ** 2) / occupancy[k] for k in range(n_states)]
-        )
-    return means, np.maximum(variances, var_floor), occupancy
+    return _weighted_emissions(X, weights, var_floor)
 
 
 #: Random starts of :func:`fit_hmm`: depmixS4's (the paper's default) and k-means++.
