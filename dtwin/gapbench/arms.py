@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import lfilter
 
-from dtwin.gapbench.case_effects import CaseEffect, spec_value
+from dtwin.gapbench.case_effects import CaseEffect, log_between, spec_value
 from dtwin.modules import lag_coefficient
 from dtwin.wiring import ACTUATOR, role_of
 
@@ -136,16 +136,12 @@ def unseen_expected(effect: str, module: str) -> str:
     return UNSEEN_FORMS[effect][module]
 
 
-def _log_between(low: float, high: float, level: float) -> float:
-    return float(low * (high / low) ** level)
-
-
 # --- draws: (module, level, rng, scale) -> the real effect's form and parameters ---------------
 
 
 def _draw_stribeck(module, level, rng, scale) -> dict[str, Any]:
     """Stribeck friction: ``(Fc + (Fs − Fc)·exp(−|v/vs|^δ))·sign(v) + c_v·v`` (N)."""
-    fc = _log_between(0.012, 0.2, level) * scale["u_max"]
+    fc = log_between(0.012, 0.2, level) * scale["u_max"]
     return {
         "form": "stribeck",
         "Fc": fc,
@@ -161,7 +157,7 @@ def _draw_smooth_saturation(module, level, rng, scale) -> dict[str, Any]:
 
     Not the catalogue's ``u/(1 + |u/U|^p)^(1/p)`` for any sharpness ``p``, and asymmetric.
     """
-    high = _log_between(1.6, 0.5, level) * scale["u_max"]
+    high = log_between(1.6, 0.5, level) * scale["u_max"]
     low = high * rng.uniform(1.0, 1.4)
     if rng.uniform() < 0.5:
         high, low = low, high
@@ -173,7 +169,7 @@ def _draw_asymmetric_deadzone(module, level, rng, scale) -> dict[str, Any]:
 
     The catalogue's dead zone is symmetric; the generator's default cases stay within 0.6–1.
     """
-    wide = _log_between(0.05, 0.3, level) * scale["u_std"]
+    wide = log_between(0.05, 0.3, level) * scale["u_std"]
     narrow = wide * rng.uniform(0.2, 0.6)
     high, low = (wide, narrow) if rng.uniform() < 0.5 else (narrow, wide)
     return {"form": "asymmetric", "D_high": high, "D_low": low}
@@ -183,7 +179,7 @@ def _draw_quintic(module, level, rng, scale) -> dict[str, Any]:
     """Quintic hardening spring ``ratio·k·x_ref·(x/x_ref)^5`` (N)."""
     return {
         "form": "x^5 hardening",
-        "ratio": _log_between(0.08, 1.0, level),
+        "ratio": log_between(0.08, 1.0, level),
         "x_ref": scale["x_max"],
     }
 
@@ -191,7 +187,7 @@ def _draw_quintic(module, level, rng, scale) -> dict[str, Any]:
 def _draw_jittered_delay(module, level, rng, scale) -> dict[str, Any]:
     """Delay of ``delay_samples`` with i.i.d. jitter uniform in ±``jitter`` samples."""
     low, high = (0.8, 6.0) if role_of(module) == ACTUATOR else (4.0, 15.0)
-    delay = _log_between(low, high, level)
+    delay = log_between(low, high, level)
     jitter = rng.uniform(0.25, 0.75) * min(delay, 2.0)
     return {
         "form": "jittered",
@@ -203,19 +199,19 @@ def _draw_jittered_delay(module, level, rng, scale) -> dict[str, Any]:
 
 def _draw_backlash(module, level, rng, scale) -> dict[str, Any]:
     """Backlash (play) of half-width ``b`` on the actuator's command (u units)."""
-    return {"form": "play operator", "b": _log_between(0.03, 0.3, level) * scale["u_std"]}
+    return {"form": "play operator", "b": log_between(0.03, 0.3, level) * scale["u_std"]}
 
 
 def _draw_rate_limit(module, level, rng, scale) -> dict[str, Any]:
     """Rate limit ``rate`` (u units per second) on the actuator's command."""
-    return {"form": "slew limit", "rate": _log_between(25.0, 2.5, level) * scale["u_std"]}
+    return {"form": "slew limit", "rate": log_between(25.0, 2.5, level) * scale["u_std"]}
 
 
 def _draw_hysteresis(module, level, rng, scale) -> dict[str, Any]:
     """Sensor hysteresis: an offset ``±H`` that follows the direction of motion over ``width``."""
     return {
         "form": "Duhem",
-        "H": _log_between(1.5, 8.0, level) * scale["sigma"],
+        "H": log_between(1.5, 8.0, level) * scale["sigma"],
         "width": rng.uniform(0.05, 0.25) * scale["x_std"],
     }
 
@@ -224,7 +220,7 @@ def _draw_cogging(module, level, rng, scale) -> dict[str, Any]:
     """Cogging: a force ``A·sin(2π·x/period + phase)`` periodic in the position (N)."""
     return {
         "form": "sinusoidal in x",
-        "A": _log_between(0.02, 0.25, level) * scale["u_max"],
+        "A": log_between(0.02, 0.25, level) * scale["u_max"],
         "period": rng.uniform(0.2, 0.5) * scale["x_std"],
         "phase": rng.uniform(0.0, 2 * math.pi),
     }
@@ -232,7 +228,7 @@ def _draw_cogging(module, level, rng, scale) -> dict[str, Any]:
 
 def _draw_stiction(module, level, rng, scale) -> dict[str, Any]:
     """Stiction: breakaway force ``Fs``, sliding friction ``Fc = ratio·Fs`` (N)."""
-    fs = _log_between(0.02, 0.25, level) * scale["u_max"]
+    fs = log_between(0.02, 0.25, level) * scale["u_max"]
     return {"form": "stick-slip", "Fs": fs, "Fc": fs * rng.uniform(0.2, 0.5)}
 
 

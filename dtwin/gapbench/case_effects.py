@@ -21,13 +21,25 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["CaseEffect", "Draw", "Truth", "spec_value"]
+__all__ = ["CaseEffect", "Draw", "Truth", "log_between", "spec_value"]
 
 #: ``draw(module, level, rng, scale) -> spec``: the real effect's form and parameters.
 #: ``level`` in [0, 1] maps the strength log-uniformly (0: barely above the noise, 1: strong);
 #: ``scale`` holds the clean run's signal sizes (``u_max``, ``u_std``, ``x_max``, ``x_std``,
 #: ``v_max``, ``v_std``, ``sigma``: the sensor's noise standard deviation).
 Draw = Callable[[str, float, np.random.Generator, Mapping[str, float]], dict[str, Any]]
+
+
+def log_between(low: float, high: float, level: float) -> float:
+    """Return ``low·(high/low)^level``: a draw's strength ``level`` in [0, 1] mapped log-uniformly.
+
+    Examples
+    --------
+    >>> log_between(1.0, 100.0, 0.5)
+    10.0
+    """
+    return float(low * (high / low) ** level)
+
 
 #: ``truth(spec, key, dt) -> (name, true value, value without the effect)`` or None: the
 #: catalogue parameter that sets the drawn effect's size, in the catalogue's name and units

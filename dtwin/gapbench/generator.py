@@ -54,7 +54,7 @@ from dtwin.gapbench.arms import (
     split_case_type,
     unseen_expected,
 )
-from dtwin.gapbench.case_effects import CaseEffect, spec_value
+from dtwin.gapbench.case_effects import CaseEffect, log_between, spec_value
 from dtwin.modules import (
     CONTRACTS,
     Step,
@@ -161,10 +161,6 @@ class GeneratedCase:
     key: dict[str, Any] = field(repr=False)
 
 
-def _log_between(low: float, high: float, level: float) -> float:
-    return float(low * (high / low) ** level)
-
-
 def _ar1(rng: np.random.Generator, n: int, sigma: float, phi: float) -> np.ndarray:
     white = rng.standard_normal(n)
     out = np.empty(n)
@@ -180,8 +176,8 @@ def _draw_saturation(module, level, rng, scale) -> dict[str, Any]:
     form = str(rng.choice(["tanh", "clip", "asymmetric_clip"]))
     umax = scale["u_max"]
     if form == "tanh":
-        return {"form": form, "U": _log_between(2.0, 0.55, level) * umax}
-    high = _log_between(0.9, 0.4, level) * umax
+        return {"form": form, "U": log_between(2.0, 0.55, level) * umax}
+    high = log_between(0.9, 0.4, level) * umax
     low = high if form == "clip" else high * rng.uniform(1.1, 1.6)
     return {"form": form, "U_high": high, "U_low": low}
 
@@ -189,24 +185,24 @@ def _draw_saturation(module, level, rng, scale) -> dict[str, Any]:
 def _draw_deadzone(module, level, rng, scale) -> dict[str, Any]:
     """Return an ``actuator_deadzone``: half-widths ``D_high``, ``D_low`` (u units)."""
     form = str(rng.choice(["symmetric", "asymmetric", "smooth"]))
-    width = _log_between(0.05, 0.3, level) * scale["u_std"]
+    width = log_between(0.05, 0.3, level) * scale["u_std"]
     ratio = rng.uniform(0.6, 1.0) if form == "asymmetric" else 1.0
     return {"form": form, "D_high": width, "D_low": width * ratio}
 
 
 def _draw_actuator_delay(module, level, rng, scale) -> dict[str, Any]:
     """Return an ``actuator_delay`` of 0.8–6 samples (fractional)."""
-    return {"form": "fractional", "delay_samples": _log_between(0.8, 6.0, level)}
+    return {"form": "fractional", "delay_samples": log_between(0.8, 6.0, level)}
 
 
 def _draw_sensor_delay(module, level, rng, scale) -> dict[str, Any]:
     """Return a ``sensor_delay`` of 4–15 samples (fractional)."""
-    return {"form": "fractional", "delay_samples": _log_between(4.0, 15.0, level)}
+    return {"form": "fractional", "delay_samples": log_between(4.0, 15.0, level)}
 
 
 def _draw_friction(module, level, rng, scale) -> dict[str, Any]:
     """Return a ``coulomb_friction``: Stribeck or Coulomb + viscous (``Fc``, ``Fs`` in N)."""
-    fc = _log_between(0.012, 0.2, level) * scale["u_max"]
+    fc = log_between(0.012, 0.2, level) * scale["u_max"]
     form = str(rng.choice(["stribeck", "coulomb_viscous"]))
     return {
         "form": form,
@@ -222,7 +218,7 @@ def _draw_stiffness(module, level, rng, scale) -> dict[str, Any]:
     power = float(rng.choice([2.0, rng.uniform(1.6, 2.4)]))
     # softening is capped so that the spring stays stiff over the whole run
     ratio = (
-        _log_between(0.06, 0.8, level) if rng.uniform() < 0.75 else -_log_between(0.04, 0.2, level)
+        log_between(0.06, 0.8, level) if rng.uniform() < 0.75 else -log_between(0.04, 0.2, level)
     )
     return {
         "form": f"|x|^{power:.2f} hardening" if ratio > 0 else f"|x|^{power:.2f} softening",
@@ -235,25 +231,25 @@ def _draw_stiffness(module, level, rng, scale) -> dict[str, Any]:
 def _draw_damping(module, level, rng, scale) -> dict[str, Any]:
     """Return a ``quadratic_damping``: ``ratio·c·v_ref·|v/v_ref|^power``, power 1.7–2.3."""
     power = float(rng.uniform(1.7, 2.3))
-    ratio = _log_between(0.15, 3.0, level)
+    ratio = log_between(0.15, 3.0, level)
     return {"form": f"|v|^{power:.2f}", "power": power, "ratio": ratio, "v_ref": scale["v_max"]}
 
 
 def _draw_quantization(module, level, rng, scale) -> dict[str, Any]:
     """Return a ``sensor_quantization`` with step ``q`` of 3–10 noise standard deviations."""
-    return {"form": "round after noise", "q": _log_between(3.0, 10.0, level) * scale["sigma"]}
+    return {"form": "round after noise", "q": log_between(3.0, 10.0, level) * scale["sigma"]}
 
 
 def _draw_scale_error(module, level, rng, scale) -> dict[str, Any]:
     """Return a ``sensor_scale_error``: a gain 6–35 % away from 1."""
     sign = 1 if rng.uniform() < 0.5 else -1
-    return {"form": "gain", "gain": 1 + sign * _log_between(0.06, 0.35, level)}
+    return {"form": "gain", "gain": 1 + sign * log_between(0.06, 0.35, level)}
 
 
 def _draw_bias_drift(module, level, rng, scale) -> dict[str, Any]:
     """Return a ``sensor_bias_drift`` of ``total`` (2.5–15 σ) with a non-linear shape."""
     form = str(rng.choice(["power", "exponential", "linear_plus_wander"]))
-    total = _log_between(2.5, 15.0, level) * scale["sigma"] * (1 if rng.uniform() < 0.5 else -1)
+    total = log_between(2.5, 15.0, level) * scale["sigma"] * (1 if rng.uniform() < 0.5 else -1)
     return {
         "form": form,
         "total": total,
@@ -266,7 +262,7 @@ def _draw_interference(module, level, rng, scale) -> dict[str, Any]:
     """Return a ``sensor_interference``: a sinusoid of 1.5–6 σ at 0.8–8 Hz."""
     return {
         "form": "sinusoid",
-        "amplitude": _log_between(1.5, 6.0, level) * scale["sigma"],
+        "amplitude": log_between(1.5, 6.0, level) * scale["sigma"],
         "freq_hz": rng.uniform(0.8, 8.0),
         "phase": rng.uniform(0, 2 * np.pi),
     }
@@ -275,9 +271,7 @@ def _draw_interference(module, level, rng, scale) -> dict[str, Any]:
 def _draw_stiffness_change(module, level, rng, scale) -> dict[str, Any]:
     """Return a ``stiffness_change``: k times ``factor`` from ``at_frac`` of the run on."""
     factor = (
-        _log_between(1.25, 2.5, level)
-        if rng.uniform() < 0.7
-        else 1 / _log_between(1.25, 2.0, level)
+        log_between(1.25, 2.5, level) if rng.uniform() < 0.7 else 1 / log_between(1.25, 2.0, level)
     )
     return {"form": "step in k", "factor": factor, "at_frac": rng.uniform(0.35, 0.65)}
 
@@ -288,13 +282,13 @@ def _draw_mismatch(module, level, rng, scale) -> dict[str, Any]:
     name = names if isinstance(names, str) else str(rng.choice(names))
     sign = 1 if rng.uniform() < 0.5 else -1
     if name == "bias":
-        delta = sign * _log_between(1.5, 10.0, level) * scale["sigma"]
+        delta = sign * log_between(1.5, 10.0, level) * scale["sigma"]
         return {"form": "offset", "section": section, "param": name, "delta": delta}
     if name == "alpha":
-        delta = sign * _log_between(0.06, 0.35, level)
+        delta = sign * log_between(0.06, 0.35, level)
         return {"form": "offset", "section": section, "param": name, "delta": delta}
     low, high = (0.4, 2.0) if name == "tau" and role_of(module) == SENSOR else (0.15, 0.6)
-    factor = (1 + _log_between(low, high, level)) ** sign
+    factor = (1 + log_between(low, high, level)) ** sign
     return {"form": "factor", "section": section, "param": name, "factor": factor}
 
 
