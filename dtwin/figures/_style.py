@@ -58,6 +58,7 @@ __all__ = [
     "tex",
     "axis_label",
     "unitless",
+    "label_cells",
     "apply_style",
     "new_figure",
     "panel_title",
@@ -257,6 +258,26 @@ def new_figure(height: float, width: float = FULL_WIDTH) -> Figure:
 def panel_title(ax: Axes, letter: str, text: str = "", **kwargs: Any) -> None:
     """Title ``ax`` with a bold panel letter and an optional short description, left-aligned."""
     ax.set_title(rf"$\mathbf{{{letter}}}$  {text}".rstrip(), loc="left", **kwargs)
+
+
+def label_cells(ax: Axes, values: Any, fmt: str, dark: Any, fontsize: float) -> None:
+    """Write each heatmap cell's value at its centre: white on a dark cell, black elsewhere.
+
+    ``values`` (numbers, formatted with ``fmt``, e.g. ``"{:.1f}"``) and ``dark`` (booleans)
+    have the heatmap's shape ``(n_rows, n_columns)``; cell ``(i, j)`` sits at ``x = j, y = i``,
+    as ``imshow`` draws it.
+    """
+    for i, row in enumerate(values):
+        for j, value in enumerate(row):
+            ax.text(
+                j,
+                i,
+                fmt.format(value),
+                ha="center",
+                va="center",
+                fontsize=fontsize,
+                color="white" if dark[i][j] else "black",
+            )
 
 
 def _save_file(figure: Figure, path: str | os.PathLike, tight: bool, dpi: float | None) -> None:

@@ -13,7 +13,14 @@ from matplotlib.figure import Figure
 
 from dtwin.artifacts import Check, FigureArtifact, validity_finite, validity_probabilities
 from dtwin.claim_criteria import PERSISTENCE_DWELL_S, persistence_floor, regimes_are_persistent
-from dtwin.figures._style import STATE_COLORS, new_figure, panel_title, tex, unitless
+from dtwin.figures._style import (
+    STATE_COLORS,
+    label_cells,
+    new_figure,
+    panel_title,
+    tex,
+    unitless,
+)
 from dtwin.reference.crosscheck_result import CrosscheckResult
 from dtwin.state_tables import posterior_matrix
 
@@ -72,16 +79,7 @@ def _means_table(ax: Axes, summary: Mapping[str, Any], labels: list[str]) -> Non
         range(len(labels)), [f"{k}  $A_{{kk}}$ {p:.3f}" for k, p in zip(labels, stay, strict=True)]
     )
     ax.grid(False)
-    for (i, j), value in np.ndenumerate(values):
-        ax.text(
-            j,
-            i,
-            f"{value:.1f}",
-            ha="center",
-            va="center",
-            fontsize=7,
-            color="white" if abs(value) > 0.6 * limit else "black",
-        )
+    label_cells(ax, values, "{:.1f}", np.abs(values) > 0.6 * limit, fontsize=7)
 
 
 def plot_hmm_posteriors(states: pd.DataFrame, summary: Mapping[str, Any]) -> Figure:

@@ -19,6 +19,7 @@ from dtwin.figures._style import (
     OURS_COLOR,
     R_COLOR,
     REGIME_COLORS,
+    label_cells,
     new_figure,
     panel_title,
     unitless,
@@ -97,16 +98,7 @@ def _draw_confusion(
     ax.set_xlabel("actual regime")
     ax.set_ylabel("predicted (Viterbi, mapped)")
     ax.grid(False)
-    for (i, j), count in np.ndenumerate(matrix):
-        ax.text(
-            j,
-            i,
-            f"{count:.0f}",
-            ha="center",
-            va="center",
-            fontsize=7.5,
-            color="white" if recall[i, j] > 0.5 else "black",
-        )
+    label_cells(ax, matrix, "{:.0f}", recall > 0.5, fontsize=7.5)
     words = ("acc", "F1", "κ")
     keys = ("accuracy", "macro_f1", "kappa")
     ours = ", ".join(f"{w} {scenario[k]:.3f}" for w, k in zip(words, keys, strict=True))
