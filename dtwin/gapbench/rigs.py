@@ -26,16 +26,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 from scipy.signal import lfilter
 
 from dtwin._validation import DtwinValueError
+from dtwin.gap.effects import effect_by_name
 from dtwin.gapbench.generator import GeneratedCase, accepted_effects, generate_case
 
 __all__ = [
     "RIG_EFFECTS",
+    "RIG_FORCES",
+    "RigForce",
     "RIG_PREFIX",
     "RIG_SAMPLES",
     "HARD_RIG_EFFECTS",
@@ -58,13 +62,6 @@ HARD_RIG_PREFIX = "hardrig_"
 #: Fewest and most samples of a harder rig recording (a few periods of its resonance).
 HARD_RIG_SAMPLES = (3000, 20000)
 _SUBSTEPS = 10
-#: Strength range (relative to the linear force it competes with) at magnitude 0 and 1.
-_STRENGTH = {
-    "coulomb_friction": (0.04, 0.3),  # Fc over std(u)
-    "cubic_stiffness": (0.08, 0.6),  # k3·x_rms² over k
-    "quadratic_damping": (0.2, 1.5),  # c2·v_rms over c
-    "stribeck_friction": (0.04, 0.3),  # Fc over std(u); the breakaway Fs is 1.5–3 Fc
-}
 
 
 def _log_uniform(rng: np.random.Generator, low: float, high: float) -> float:
@@ -78,7 +75,7 @@ def _draw_rig(rng: np.random.Generator, effect: str, samples_per_period: float |
     rate = _log_uniform(rng, 20.0, 20000.0)  # Hz
     dt = 1.0 / rate
     omega = 2 * math.pi / (samples_per_period * dt)
-    integrating = effect != "cubic_stiffness" and rng.uniform() < 0.3
+    integrating = not _needs_spring(effect) and rng.uniform() < 0.3
     closed = integrating or (samples_per_period >= 15 and rng.uniform() < 0.35)
     if closed and samples_per_period < 15:  # a digital PD loop needs ≥ 15 samples per period
         samples_per_period = max(_log_uniform(rng, 15.0, 1000.0), samples_per_period)
@@ -116,7 +113,7 @@ def _draw_hard_rig(rng: np.random.Generator, effect: str, samples_per_period: fl
     """Draw the harder family's rig: lightly damped, a few periods, held input, coloured noise."""
     drawn = _log_uniform(rng, 3.0, 1000.0)
     samples_per_period = drawn if samples_per_period is None else float(samples_per_period)
-    integrating = effect != "cubic_stiffness" and rng.uniform() < 0.4
+    integrating = not _needs_spring(effect) and rng.uniform() < 0.4
     closed = integrating or (samples_per_period >= 15 and rng.uniform() < 0.35)
     if closed and samples_per_period < 15:
         samples_per_period = max(_log_uniform(rng, 15.0, 1000.0), samples_per_period)
@@ -185,20 +182,51 @@ def _rig_stribeck(strength, rig, u_std, x_rms, v_rms):
     return stribeck, {"Fc": fc, "Fs": fs, "vs": vs}
 
 
-#: The rig families' withheld forces, by effect: ``law(strength, rig, u_std, x_rms, v_rms) ->
-#: (F(x, v) in N, its parameters in physical units)``; ``none`` has no force.
-RIG_FORCES = {
-    "coulomb_friction": _rig_coulomb,
-    "cubic_stiffness": _rig_cubic,
-    "quadratic_damping": _rig_quadratic_damping,
-    "stribeck_friction": _rig_stribeck,
+@dataclass(frozen=True)
+class RigForce:
+    """One withheld force of the rig families, in one place.
+
+    Attributes
+    ----------
+    law : callable
+        ``law(strength, rig, u_std, x_rms, v_rms) -> (F(x, v) in N, its parameters in physical
+        units)``.
+    strength : (float, float)
+        Strength (relative to the linear force it competes with) at magnitude 0 and 1.
+    size : str
+        The parameter that sets the effect's size, in the catalogue's name (what the benchmark
+        scores, :func:`dtwin.gapbench.scores.true_parameter`).
+    spring : bool
+        The force scales with the spring ``k``: an integrating rig (``k = 0``) cannot carry it,
+        so such a case never draws one.
+    """
+
+    law: Callable[..., tuple[Callable[[float, float], float], dict[str, float]]]
+    strength: tuple[float, float]
+    size: str
+    spring: bool = False
+
+
+#: The rig families' withheld forces, by effect; ``none`` has no force.
+RIG_FORCES: dict[str, RigForce] = {
+    "coulomb_friction": RigForce(_rig_coulomb, (0.04, 0.3), "Fc"),  # Fc over std(u)
+    "cubic_stiffness": RigForce(_rig_cubic, (0.08, 0.6), "k3", spring=True),  # k3·x_rms² over k
+    "quadratic_damping": RigForce(_rig_quadratic_damping, (0.2, 1.5), "c2"),  # c2·v_rms over c
+    # Fc over std(u); the breakaway Fs is 1.5–3 Fc
+    "stribeck_friction": RigForce(_rig_stribeck, (0.04, 0.3), "Fc"),
 }
+
+
+def _needs_spring(effect: str) -> bool:
+    """Return whether ``effect``'s force scales with the spring (:attr:`RigForce.spring`)."""
+    force = RIG_FORCES.get(effect)
+    return force is not None and force.spring
 
 
 def _force_law(effect: str, strength: float, rig: dict, u_std: float, x_rms: float, v_rms: float):
     """Return the withheld force ``F(x, v)`` (N) and its parameters in physical units."""
-    law = RIG_FORCES.get(effect)
-    return (None, {}) if law is None else law(strength, rig, u_std, x_rms, v_rms)
+    force = RIG_FORCES.get(effect)
+    return (None, {}) if force is None else force.law(strength, rig, u_std, x_rms, v_rms)
 
 
 def _integrate(rig: dict, drive: _Drive, force, n: int, noise: np.ndarray) -> np.ndarray:
@@ -414,12 +442,12 @@ def generate_hard_rig_case(
 def _generate(rig, rng, effect, seed, magnitude, n) -> GeneratedCase:
     """Simulate a drawn rig with its effect and return the case in recording units."""
     magnitude = float(rng.uniform()) if magnitude is None else float(magnitude)
-    low, high = _STRENGTH.get(effect, (0.0, 0.0))
+    low, high = RIG_FORCES[effect].strength if effect in RIG_FORCES else (0.0, 0.0)
     strength = low * (high / low) ** magnitude if high else 0.0
     states, force, noise, params, linear = _run(rig, seed + 1, effect, strength, n)
     u_rec, x_rec = _to_recording_units(rig, rng, force, states[:, 0] + noise)
-    if effect == "cubic_stiffness":  # the spring's centre: the recorded position's offset
-        params["x0"] = rig["x_offset_phys"]
+    if effect in RIG_FORCES and "x0" in effect_by_name(effect).params:
+        params["x0"] = rig["x_offset_phys"]  # the catalogue form's centre: the position's offset
     t = np.arange(n) * rig["dt"]
     recording = pd.DataFrame({"t": t, "u_act": u_rec, "x": x_rec})
     contribution = float(np.std(states[:, 0] - linear[:, 0]))

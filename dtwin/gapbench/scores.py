@@ -32,6 +32,7 @@ from dtwin.artifacts import Check
 from dtwin.gap.confidence import FITTING_CASES
 from dtwin.gap.effects import NONE, PARAMETER_MISMATCH, UNEXPLAINED
 from dtwin.gapbench.generator import CASE_EFFECTS
+from dtwin.gapbench.rigs import RIG_FORCES
 from dtwin.proportions import wilson_interval
 
 #: The benchmark arm of two effects at once (:mod:`dtwin.gapbench.arms`, case type ``two__a+b``).
@@ -107,15 +108,6 @@ def _paper_truth(effect: str, params: Mapping[str, Any], key: Mapping[str, Any],
     return case_effect.truth(params, key, dt)
 
 
-#: A rig key's effect parameter that sets the effect's size (its catalogue name).
-_RIG_PARAMETER = {
-    "coulomb_friction": "Fc",
-    "stribeck_friction": "Fc",
-    "cubic_stiffness": "k3",
-    "quadratic_damping": "c2",
-}
-
-
 def true_parameter(key: Mapping[str, Any], dt: float) -> tuple[str, float, float] | None:
     """Return the true parameter that sets the effect's size, in the catalogue's name and units.
 
@@ -135,7 +127,7 @@ def true_parameter(key: Mapping[str, Any], dt: float) -> tuple[str, float, float
     """
     effect, params = key["effect"], key.get("params") or {}
     if key.get("family") == "rig":
-        name = _RIG_PARAMETER.get(effect)
+        name = RIG_FORCES[effect].size if effect in RIG_FORCES else None
         return (name, float(params[name]), 0.0) if name in params else None
     truth = _paper_truth(effect, params, key, dt)
     return None if truth is None else (truth[0], float(truth[1]), float(truth[2]))

@@ -10,7 +10,12 @@ import pytest
 from dtwin._validation import DtwinValueError
 from dtwin.gap.effects import ARRAY_OPS, SCALAR_OPS, effect_by_name
 from dtwin.gapbench.generator import accepted_effects, generate_case
-from dtwin.gapbench.rigs import HARD_RIG_EFFECTS, generate_any_case, generate_hard_rig_case
+from dtwin.gapbench.rigs import (
+    HARD_RIG_EFFECTS,
+    RIG_FORCES,
+    generate_any_case,
+    generate_hard_rig_case,
+)
 
 
 def test_stribeck_friction_is_coulomb_without_a_bump_and_breaks_away_at_rest():
@@ -239,3 +244,13 @@ def test_a_calibrated_rig_fits_its_input_delay_with_the_effect():
     result = diagnose(recording, twin_from_mapping(case.twin, dt=recording.dt), calibrate=True)
     assert (result.module, result.effect) == ("M1", "coulomb_friction")
     assert result.params["Fc"] == pytest.approx(case.key["params"]["Fc"], rel=0.1)
+
+
+def test_every_rig_force_sizes_itself_by_a_parameter_of_its_catalogue_effect():
+    """A rig force's scored size is a parameter of its catalogue effect, named by its law."""
+    rig = {"plant": {"m": 1.0, "c": 0.3, "k": 4.0}, "breakaway": 2.0, "stribeck_velocity": 0.1}
+    for name, force in RIG_FORCES.items():
+        _, params = force.law(0.1, rig, 1.0, 1.0, 1.0)
+        assert force.size in params
+        assert force.size in effect_by_name(name).params
+        assert force.strength[0] < force.strength[1]
