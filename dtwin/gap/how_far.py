@@ -21,7 +21,7 @@ import numpy as np
 
 from dtwin.gap.confidence import calibrated_confidence
 from dtwin.gap.effects import NONE, UNEXPLAINED, effect_by_name
-from dtwin.gap.intervals import parameter_intervals
+from dtwin.gap.intervals import parameter_intervals, smoothed_fit
 from dtwin.gap.localise import ModuleModel, normalised_rms, run_chain, upstream_modules
 from dtwin.gap.models import simulate_module
 from dtwin.gap.recording import DERIVED_INPUTS, Recording
@@ -227,7 +227,8 @@ def answer_intervals(source, chosen, split: Split) -> dict[str, tuple[float, flo
 
     Those of ``params``, and for ``parameter_mismatch`` every re-fitted linear parameter
     (:func:`dtwin.gap.intervals.parameter_intervals`, with the fit of a candidate whose form
-    nests the answer's as its ``wider``); empty without a chosen effect.
+    nests the answer's as its ``wider``, else the answer's form made smooth,
+    :func:`~dtwin.gap.intervals.smoothed_fit`); empty without a chosen effect.
     """
     if chosen is None:
         return {}
@@ -235,6 +236,9 @@ def answer_intervals(source, chosen, split: Split) -> dict[str, tuple[float, flo
     wider = next((f for f in source.candidates if chosen.effect in f.effect.nests), None)
     if wider is not None:
         wider = (wider.effect, wider.fit.lin, wider.fit.theta)
+    else:
+        fit = fitted.fit
+        wider = smoothed_fit(source.data, fitted.effect, fit.lin, fit.theta, split.n_train)
     intervals = parameter_intervals(
         source.data,
         fitted.effect,

@@ -18,7 +18,8 @@ interval carries its trade-off with the re-fitted linear twin.
 
 Three errors the sandwich does not see are added (docs/gap.md §Intervals): the spread between
 the fits on two parts (``other_part``); the contrast with a wider catalogue form that nests the
-candidate's (``wider``: the narrower form's bias when the real effect needs the wider one); and
+candidate's, or with the candidate's form made smooth (:data:`SMOOTHED`) when none does
+(``wider``: the narrower form's bias when the real effect needs the wider one); and
 the limit of an input map that the recorded inputs do not reach (:data:`LIMITS`), which the
 data bound only from below. No interval is narrower than the fit's own step tolerance
 (:data:`~dtwin.gap.fit.FIT_XTOL`): a noiseless module fitted exactly leaves residuals at
@@ -34,12 +35,20 @@ from dataclasses import replace
 import numpy as np
 from scipy.stats import t as student_t
 
-from dtwin.gap.effects import Effect
+from dtwin.gap.effects import Effect, effect_by_name, soft_saturation
 from dtwin.gap.fit import FIT_XTOL, fit_candidate, linear_typical, training_view
 from dtwin.gap.models import LINEAR_PARAMS, ModuleData, simulate_module
 from dtwin.modules import EULER
 
-__all__ = ["N_BLOCKS", "LEVEL", "LIMITS", "fitted_names", "parameter_intervals"]
+__all__ = [
+    "N_BLOCKS",
+    "LEVEL",
+    "LIMITS",
+    "SMOOTHED",
+    "fitted_names",
+    "parameter_intervals",
+    "smoothed_fit",
+]
 
 #: Contiguous blocks of the training residuals (independent observations of the score).
 N_BLOCKS = 20
@@ -54,6 +63,53 @@ _STEP = 1e-4
 #: stays below about twice the level). The data bound it from below only by the largest
 #: ``|map output|`` over the training inputs: the interval's lower end reaches down to that.
 LIMITS: dict[str, tuple[str, str]] = {"actuator_saturation": ("U", "u_cmd")}
+#: Sharpness starts of a :data:`SMOOTHED` form's fit (with the answer's own parameters).
+_SHARPNESS_STARTS = (4.0, 12.0, 40.0)
+
+
+def _soft_deadzone_input(u: np.ndarray, theta: Sequence[float], dt: float) -> np.ndarray:
+    """Return ``u − u/(1 + |u/D|^p)^(1/p)``: the input less the catalogue's saturation at ±D."""
+    return u - soft_saturation(u, theta[0], theta[1])
+
+
+def _soft_deadzone() -> Effect:
+    """Return the dead zone with a sharpness ``p``: the catalogue's hard one as ``p → ∞``."""
+    hard = effect_by_name("actuator_deadzone")
+    saturation = effect_by_name("actuator_saturation")
+    return replace(
+        hard,
+        name="soft_deadzone",
+        params=("D", "p"),
+        units=("input units", "1"),
+        formula="u -> u − u/(1 + |u/D|^p)^(1/p)  (dead zone ±D, sharpness p)",
+        bounds=lambda s: [(1e-6 * s.input_max, 0.9 * s.input_max), saturation.bounds(s)[1]],
+        typical=lambda s: [hard.typical(s)[0], saturation.typical(s)[1]],
+        input_map=_soft_deadzone_input,
+    )
+
+
+#: ``effect → wider form`` fitted for the interval alone where no catalogue candidate nests the
+#: answer's form: the catalogue's form with a sharpness, the catalogue's own as its limit (a dead
+#: zone whose edges are rounded is read by the hard one with ``D`` 2–5 % low). Its extra
+#: parameter follows the answer's; :func:`parameter_intervals` contrasts the shared ones.
+SMOOTHED: dict[str, Effect] = {"actuator_deadzone": _soft_deadzone()}
+
+
+def smoothed_fit(
+    data: ModuleData, effect: Effect, lin: Mapping[str, float], theta: Sequence[float], n_train: int
+) -> tuple[Effect, dict[str, float], tuple[float, ...]] | None:
+    """Return the :data:`SMOOTHED` wider form of ``effect`` fitted from the answer's fit.
+
+    ``(effect, lin, theta)`` as ``parameter_intervals(wider=...)`` takes it; None when the
+    effect has no such form. The fit starts from the answer's parameters with each sharpness
+    of ``_SHARPNESS_STARTS`` and frees the same linear parameters as the answer's fit.
+    """
+    wide = SMOOTHED.get(effect.name)
+    if wide is None:
+        return None
+    starts = [[*theta, sharpness] for sharpness in _SHARPNESS_STARTS]
+    fit = fit_candidate(data, wide, lin, n_train=n_train, starts=starts)
+    return wide, dict(fit.lin), tuple(fit.theta)
 
 
 def fitted_names(

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from dtwin.gap.effects import Scales, effect_by_name
 from dtwin.gap.fit import FIT_XTOL, fit_candidate
-from dtwin.gap.intervals import LIMITS, parameter_intervals
+from dtwin.gap.intervals import LIMITS, SMOOTHED, parameter_intervals, smoothed_fit
 from dtwin.gap.models import ModuleData, first_order_lag
 
 
@@ -83,3 +84,33 @@ def test_a_saturation_level_the_input_never_reaches_is_bounded_from_below_by_the
     low, high = parameter_intervals(data, effect, fit.lin, fit.theta, n // 2)["U"]
     reached = np.max(np.abs(effect.input_map(u[: n // 2], fit.theta, dt)))
     assert low == reached < level <= high
+
+
+def _deadzone_case(smooth: bool, width: float = 0.2, n: int = 3000):
+    """The actuator behind a dead zone of half-width ``width``, hard or ``u − D·tanh(u/D)``."""
+    dt = 0.01
+    t = np.arange(n) * dt
+    u = np.sin(2 * np.pi * 0.4 * t + np.sin(2 * np.pi * 0.05 * t))
+    hard = np.sign(u) * np.maximum(np.abs(u) - width, 0.0)
+    mapped = u - width * np.tanh(u / width) if smooth else hard
+    y = first_order_lag(mapped, 0.15, dt, 0.0) + 0.002 * np.random.default_rng(5).standard_normal(n)
+    return ModuleData("M0", {"u_cmd": u}, y, dt, t, scales=_scales(u, y, dt, 0.002))
+
+
+def test_a_rounded_dead_zone_read_as_the_hard_one_is_covered_through_its_smoothed_form():
+    """Rounded edges bias the hard form's D low beyond its statistical interval; the smoothed
+    form (the input less the catalogue's saturation) estimates it, and the contrast covers the
+    truth. A hard dead zone's smoothed fit is as sharp as it may be, and adds nothing."""
+    effect = effect_by_name("actuator_deadzone")
+    for smooth in (True, False):
+        data = _deadzone_case(smooth)
+        fit = fit_candidate(data, effect, {"tau": 0.15}, n_train=1500)
+        plain = parameter_intervals(data, effect, fit.lin, fit.theta, 1500)["D"]
+        wider = smoothed_fit(data, effect, fit.lin, fit.theta, 1500)
+        assert wider is not None and wider[0] is SMOOTHED["actuator_deadzone"]
+        low, high = parameter_intervals(data, effect, fit.lin, fit.theta, 1500, wider=wider)["D"]
+        assert low <= 0.2 <= high
+        if smooth:
+            assert not plain[0] <= 0.2 <= plain[1]
+        else:
+            assert (low, high) == pytest.approx(plain, rel=1e-3)
