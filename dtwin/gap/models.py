@@ -29,7 +29,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.signal import lfilter, savgol_filter
 
-from dtwin.exact_plant import exact_plant_response, free_response_basis, hold_matrices
+from dtwin.exact_plant import (
+    exact_plant_response,
+    force_substeps,
+    free_response_basis,
+    hold_matrices,
+)
 from dtwin.gap.effects import (
     ARRAY_OPS,
     FRICTION_SMOOTHING,
@@ -273,9 +278,10 @@ def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float, *
     """Return the candidate's plant force ``F(x, v)``, or None.
 
     With ``arrays`` it takes numpy arrays (ufuncs) and carries the same law on Python floats as
-    its ``scalar`` attribute (:data:`dtwin.exact_plant.SCALAR_WINDOWS`) and, for a law the
-    compiled loop knows, its name and parameters as its ``law`` attribute
-    (:mod:`dtwin._force_kernels`).
+    its ``scalar`` attribute (:data:`dtwin.exact_plant.SCALAR_WINDOWS`), its largest velocity
+    slope as its ``slope`` attribute (:func:`_velocity_slope`, which sets the exact plant's
+    sub-steps) and, for a law the compiled loop knows, its name and parameters as its ``law``
+    attribute (:mod:`dtwin._force_kernels`).
     """
     if effect is None or effect.stage != "force":
         return None
@@ -285,8 +291,28 @@ def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float, *
         force = effect.force_law(theta, velocity_std, ARRAY_OPS)
         force.scalar = effect.force_law(theta, velocity_std, SCALAR_OPS)
         force.law = _known_law(effect, theta, velocity_std)
+        force.slope = _velocity_slope(force, velocity_std)
         return force
     return effect.force_law(theta, velocity_std, SCALAR_OPS)
+
+
+def _velocity_slope(force, velocity_std: float) -> float:
+    """Return the force's largest ``|∂F/∂v|`` at ``x = 0`` over ``|v| ≤ 4·std(v)``.
+
+    Input units per velocity unit, by differences on a grid of 401 velocities over that range
+    and 201 within five friction smoothings of rest (:data:`FRICTION_SMOOTHING`), fine enough
+    for a friction's smoothed sign; 0 for a force that does not depend on the velocity.
+    """
+    spread = max(float(velocity_std), 1e-300)
+    near = 5.0 * FRICTION_SMOOTHING * spread
+    grid = np.unique(
+        np.concatenate([np.linspace(-4.0, 4.0, 401) * spread, np.linspace(-near, near, 201)])
+    )
+    with np.errstate(all="ignore"):
+        values = np.asarray(force(np.zeros_like(grid), grid), dtype=float)
+        slopes = np.abs(np.diff(values) / np.diff(grid))
+    slopes = slopes[np.isfinite(slopes)]
+    return float(slopes.max()) if len(slopes) else 0.0
 
 
 def _known_law(effect: Effect, theta: Sequence[float], velocity_std: float):
@@ -511,6 +537,8 @@ def _exact_plant(data, lin, u, force, stop, segments):
         windows = [(a, b) for a, b in windows if b - a > warmup]
         x_start, v_start = _window_states(data, u, m, c, k, windows, warmup, drive)
 
+    substeps = force_substeps(force.slope, m, data.dt) if force is not None else 1
+
     def run(x_from, v_from):
         return exact_plant_response(
             u,
@@ -524,6 +552,7 @@ def _exact_plant(data, lin, u, force, stop, segments):
             hold=data.discretisation,
             force=force,
             drive=drive,
+            substeps=substeps,
         )
 
     out = run(x_start, v_start)

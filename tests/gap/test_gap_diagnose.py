@@ -109,7 +109,9 @@ def _rig(
 ) -> pd.DataFrame:
     """A continuous plant in volts at 500 Hz: gain, offsets, an input delay, noise.
 
-    The plant is exact for the input held between samples (a digital controller's output);
+    The plant is exact for the input held between samples (a digital controller's output),
+    its friction stepped 16 times per sample (one step per sample is off by more than the
+    noise: the friction's smoothing, 0.005, is below the velocity change of a sample);
     ``process`` is an acceleration noise per sample. The data noise floor of an exactly
     discretised plant counts measurement noise only (docs/gap.md §Noise floors), so a large
     process noise reads as a gap unless the twin file gives ``noise.plant``.
@@ -131,6 +133,7 @@ def _rig(
         v_start=np.zeros(n),
         hold="zoh",
         force=(lambda x, v: friction * np.tanh(v / 0.005)) if friction else None,
+        substeps=16,
     )
     volts = 2.5 + 1.8 * x + 0.002 * rng.standard_normal(n)
     return pd.DataFrame({"t": np.round(t, 4), "u_act": u, "x": volts})

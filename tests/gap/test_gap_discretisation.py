@@ -337,3 +337,68 @@ def test_a_long_window_fit_spreads_over_the_whole_training_part():
     assert segments[0][0] < 0.1 * n_train and segments[-1][1] > 0.9 * n_train
     assert sum(b - a for a, b in segments) <= MAX_FIT_SAMPLES + fit_data.horizon // 2  # a tail
     assert all(b - a > 2 * warmup_samples(fit_data.horizon) for a, b in segments)
+
+
+@pytest.mark.parametrize("hold", EXACT_HOLDS)
+def test_substepped_force_keeps_the_holds_linear_part_at_the_samples(hold):
+    """With a zero force the sub-stepped loop is the sample-level hold's linear filter."""
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=300)
+    start = dict(x_start=rng.normal(size=300), v_start=rng.normal(size=300))
+    windows = [(0, 100), (100, 300)]
+    linear = exact_plant_response(u, 1.0, 0.3, 40.0, 0.3, windows=windows, hold=hold, **start)
+    looped = exact_plant_response(
+        u,
+        1.0,
+        0.3,
+        40.0,
+        0.3,
+        windows=windows,
+        hold=hold,
+        force=lambda x, v: 0.0 * v,
+        substeps=8,
+        **start,
+    )
+    np.testing.assert_allclose(looped, linear, rtol=1e-9, atol=1e-9)
+
+
+def test_substeps_bring_a_coarsely_sampled_friction_to_the_continuous_plant():
+    """A friction's smoothed sign at 6 samples per period: 16 sub-steps, not one step per sample.
+
+    The reference integrates ``m·ẍ = u − c·ẋ − k·x − Fc·tanh(ẋ/δ)`` with the input held over
+    each sample (Radau, tolerance 1e-10); ``δ`` is far below the velocity change of a sample,
+    so the force changes sign inside the sample that holds a reversal.
+    """
+    from dtwin.exact_plant import force_substeps
+
+    m, period, zeta = 1.0, 1.0, 0.1
+    omega = 2 * np.pi / period
+    k, c, dt = m * omega**2, 2 * zeta * m * omega, period / 6
+    rng = np.random.default_rng(4)
+    n = 40
+    u = rng.normal(size=n) * k * 0.5
+    friction, smoothing = 0.3 * k * 0.5, 0.01
+    law = lambda x, v: friction * np.tanh(v / smoothing)  # noqa: E731
+    state, reference = np.array([0.0, 0.0]), [0.0]
+    for j in range(n - 1):
+        sol = solve_ivp(
+            lambda s, y, f=u[j]: [y[1], (f - c * y[1] - k * y[0] - law(0.0, y[1])) / m],
+            (0.0, dt),
+            state,
+            method="Radau",
+            rtol=1e-10,
+            atol=1e-12,
+        )
+        state = sol.y[:, -1]
+        reference.append(state[0])
+    reference = np.array(reference)
+    substeps = force_substeps(friction / smoothing, m, dt)
+    assert substeps == 16
+    common = dict(windows=[(0, n)], x_start=np.zeros(n), v_start=np.zeros(n), hold=ZOH, force=law)
+    errors = [
+        np.sqrt(
+            np.mean((exact_plant_response(u, m, c, k, dt, **common, substeps=s) - reference) ** 2)
+        )
+        for s in (1, substeps)
+    ]
+    assert errors[1] < 0.2 * errors[0]
