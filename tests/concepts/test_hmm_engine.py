@@ -169,10 +169,12 @@ def test_a_fresh_process_loads_the_kernels_from_the_cache():
         "from dtwin import _em_kernels as k; k.warm_up(); "
         "print(sum(sum(f.stats.cache_misses.values()) for f in (k.em, k.viterbi, k.score)))"
     )
-    for _ in range(2):  # the first run may fill the cache (a fresh checkout without make)
+    for _ in range(2):  # a second run only if the first filled the cache (no make venv)
         out = subprocess.run(
             [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO
         )
+        if out.stdout.strip() == "0":
+            break
     assert out.stdout.strip() == "0"
 
 
