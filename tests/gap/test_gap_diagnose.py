@@ -190,6 +190,21 @@ def test_free_run_rms_is_null_for_an_integrating_plant():
     assert payload["free_run_rms_before"] is None
 
 
+@pytest.fixture
+def cli_without_figure(monkeypatch):
+    """``dtwin diagnose`` writes its report without ``gap.png`` (``write_report(figure=False)``).
+
+    For tests that read the CLI's answer or its stderr only: drawing the figure costs
+    0.3-0.6 CPU s a report. test_cli_writes_a_valid_report keeps checking the figure is drawn.
+    """
+    import functools
+
+    import dtwin.gap.report
+
+    no_figure = functools.partial(dtwin.gap.report.write_report, figure=False)
+    monkeypatch.setattr(dtwin.gap.report, "write_report", no_figure)
+
+
 def test_cli_writes_a_valid_report(tmp_path, capsys):
     case = generate_case("actuator_deadzone", 1, magnitude=0.8, n_samples=1500)
     case.recording.to_csv(tmp_path / "rec.csv", index=False, float_format="%.12g")
@@ -206,7 +221,7 @@ def test_cli_writes_a_valid_report(tmp_path, capsys):
     assert main([*argv, "--out", str(out)]) == 0  # re-running replaces its own folder
 
 
-def test_a_long_run_shows_its_steps_on_stderr(tmp_path, capsys, monkeypatch):
+def test_a_long_run_shows_its_steps_on_stderr(tmp_path, capsys, monkeypatch, cli_without_figure):
     """Issue 25 item 8: on a terminal, a line per step once a run has taken PROGRESS_AFTER s."""
     import dtwin.cli
 
@@ -310,7 +325,9 @@ def test_own_twin_reads_none_on_its_own_asset_for_20_seeds(which):
     assert used == {"euler"}
 
 
-def test_cli_reads_none_on_the_pipelines_asset_with_the_config_twin_section(tmp_path):
+def test_cli_reads_none_on_the_pipelines_asset_with_the_config_twin_section(
+    tmp_path, cli_without_figure
+):
     """The README's steps: config's twin section as TWIN.yaml, the physics table as recording."""
     _own_recording(CONFIG["simulation"]["seed"]).to_csv(tmp_path / "physics.csv", index=False)
     for which, twin in OWN_TWINS.items():
