@@ -366,8 +366,9 @@ def test_substeps_bring_a_coarsely_sampled_friction_to_the_continuous_plant():
     """A friction's smoothed sign at 6 samples per period: 16 sub-steps, not one step per sample.
 
     The reference integrates ``m·ẍ = u − c·ẋ − k·x − Fc·tanh(ẋ/δ)`` with the input held over
-    each sample (Radau, tolerance 1e-10); ``δ`` is far below the velocity change of a sample,
-    so the force changes sign inside the sample that holds a reversal.
+    each sample (Radau, tolerance 1e-8: within 3e-10 of the reference at 1e-10, against rms
+    errors of 0.098 and 0.0037); ``δ`` is far below the velocity change of a sample, so the
+    force changes sign inside the sample that holds a reversal.
     """
     from dtwin.exact_plant import force_substeps
 
@@ -386,8 +387,8 @@ def test_substeps_bring_a_coarsely_sampled_friction_to_the_continuous_plant():
             (0.0, dt),
             state,
             method="Radau",
-            rtol=1e-10,
-            atol=1e-12,
+            rtol=1e-8,
+            atol=1e-10,
         )
         state = sol.y[:, -1]
         reference.append(state[0])
