@@ -19,7 +19,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
 
 from dtwin.gap.effects import (
     UNEXPLAINED,
@@ -32,7 +31,6 @@ from dtwin.gap.effects import (
 from dtwin.gap.fit import CandidateFit, fit_candidate, refit_delay
 from dtwin.gap.localise import normalised_rms
 from dtwin.gap.models import simulate_module
-from dtwin.gap.noise import effective_samples
 from dtwin.gap.results import CandidateReport, GapSettings
 from dtwin.gap.where import ModuleWork, Split
 from dtwin.wiring import PLANT
@@ -44,7 +42,6 @@ __all__ = [
     "NEST_EVIDENCE",
     "shrink_pct",
     "fit_candidates",
-    "nested_test",
     "score_candidates",
     "linear_refit_gap",
     "choose",
@@ -263,52 +260,6 @@ def score_candidates(work: ModuleWork, split: Split, settings: GapSettings):
     return sorted(reports, key=lambda r: r.score)
 
 
-def nested_test(work: ModuleWork, split: Split, settings: GapSettings) -> str | None:
-    """Return why a module within its noise threshold has a gap after all, or None.
-
-    The nested test (docs/gap.md §Where) for a module calibrated from data: every candidate is
-    fitted on the training part (appended to ``work.candidates``) and compared on the choosing
-    part with the linear twin, the better of the calibrated one and the same one re-fitted by
-    the candidates' own fit (so that a candidate's gain is not a better fit of the linear part):
-    ``T = n_eff·ln(gap_linear²/gap_candidate²)``, ``n_eff`` the choosing part's effective
-    sample size, is the likelihood ratio of the nested models. The module has a gap when the
-    best-scored candidate (:func:`score_candidates`, nested forms as in :func:`choose`) reaches
-    ``χ²_p(1 − significance/K)`` (``p`` its effect parameters, ``K`` the candidates: a test of
-    size ``significance`` over all of them) and removes at least ``min_gap`` of the linear
-    twin's error, ``√(gap_linear² − gap_candidate²) ≥ min_gap``, the excess the threshold asks
-    for too. Unlike the threshold, this test needs no noise level: both models see the same
-    noise.
-    """
-    fit_candidates(work, split)
-    ranked = score_candidates(work, split, settings)
-    if not ranked:
-        return None
-    best = _plain_over_nesting(ranked)
-    fitted = next(c for c in work.candidates if c.effect.name == best.effect)
-    refit = fit_candidate(work.data, None, work.lin_base, n_train=split.n_train)
-    refit_gap = normalised_rms(
-        work.data.output, simulate_module(work.data, refit.lin), split.choose, work.norm
-    )
-    linear = min(work.gap_before, _finite(refit_gap))
-    gap = fitted.gap_choose
-    if not (math.isfinite(gap) and 0 < gap < linear):
-        return None
-    n_eff = effective_samples(work.floor.acf, split.n_choose - split.n_train)
-    statistic = n_eff * math.log(linear**2 / gap**2)
-    n_params = max(fitted.effect.n_params, 1)
-    critical = float(chi2.ppf(1.0 - settings.significance / len(ranked), n_params))
-    removed = math.sqrt(linear**2 - gap**2)
-    if statistic < critical or removed < settings.min_gap:
-        return None
-    return (
-        f"gap {work.gap_cal:.3g} within the noise threshold {work.threshold:.3g}, but "
-        f"{best.effect} lowers the linear twin's choosing-part gap {linear:.3g} to {gap:.3g}: "
-        f"likelihood ratio {statistic:.1f} over n_eff {n_eff:.0f} >= chi2_{n_params} "
-        f"{critical:.1f} (size {settings.significance:g} over {len(ranked)} candidates; "
-        f"removes {removed:.3g} >= min_gap)"
-    )
-
-
 def choose(flagged: list[ModuleWork], ranked: Mapping[str, list], settings: GapSettings):
     """Return ``(source, chosen)``: the source module's work and its winning candidate.
 
@@ -323,8 +274,7 @@ def choose(flagged: list[ModuleWork], ranked: Mapping[str, list], settings: GapS
         if not ranked[source.name]:
             return source, None
         best = _plain_over_nesting(ranked[source.name])
-        # a module flagged by the nested test has its gap because this candidate passed it
-        chosen = best if source.nested is not None or _clears_bar(best, settings) else None
+        chosen = best if _clears_bar(best, settings) else None
     return source, chosen
 
 
