@@ -92,16 +92,31 @@ def test_integrating_plant_and_windows_restart_from_the_given_state(hold):
 
 
 @pytest.mark.parametrize("hold", EXACT_HOLDS)
-def test_force_loop_equals_the_linear_filter_for_a_zero_force(hold):
-    rng = np.random.default_rng(2)
+@pytest.mark.parametrize(
+    ("dt", "substeps", "seed", "rtol", "atol"),
+    [(0.05, 1, 2, 1e-10, 1e-12), (0.3, 8, 3, 1e-9, 1e-9)],
+    ids=["one_step", "substepped"],
+)
+def test_force_loop_equals_the_linear_filter_for_a_zero_force(hold, dt, substeps, seed, rtol, atol):
+    """With a zero force the loop (one step or sub-steps per sample) is the hold's linear filter."""
+    rng = np.random.default_rng(seed)
     u = rng.normal(size=300)
     start = dict(x_start=rng.normal(size=300), v_start=rng.normal(size=300))
     windows = [(0, 100), (100, 300)]
-    linear = exact_plant_response(u, 1.0, 0.3, 40.0, 0.05, windows=windows, hold=hold, **start)
+    linear = exact_plant_response(u, 1.0, 0.3, 40.0, dt, windows=windows, hold=hold, **start)
     looped = exact_plant_response(
-        u, 1.0, 0.3, 40.0, 0.05, windows=windows, hold=hold, force=lambda x, v: 0.0, **start
+        u,
+        1.0,
+        0.3,
+        40.0,
+        dt,
+        windows=windows,
+        hold=hold,
+        force=lambda x, v: 0.0 * v,
+        substeps=substeps,
+        **start,
     )
-    np.testing.assert_allclose(looped, linear, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(looped, linear, rtol=rtol, atol=atol)
 
 
 @pytest.mark.parametrize("k3", [30.0, -3e4])  # a stiffening spring; one that diverges
@@ -337,29 +352,6 @@ def test_a_long_window_fit_spreads_over_the_whole_training_part():
     assert segments[0][0] < 0.1 * n_train and segments[-1][1] > 0.9 * n_train
     assert sum(b - a for a, b in segments) <= MAX_FIT_SAMPLES + fit_data.horizon // 2  # a tail
     assert all(b - a > 2 * warmup_samples(fit_data.horizon) for a, b in segments)
-
-
-@pytest.mark.parametrize("hold", EXACT_HOLDS)
-def test_substepped_force_keeps_the_holds_linear_part_at_the_samples(hold):
-    """With a zero force the sub-stepped loop is the sample-level hold's linear filter."""
-    rng = np.random.default_rng(3)
-    u = rng.normal(size=300)
-    start = dict(x_start=rng.normal(size=300), v_start=rng.normal(size=300))
-    windows = [(0, 100), (100, 300)]
-    linear = exact_plant_response(u, 1.0, 0.3, 40.0, 0.3, windows=windows, hold=hold, **start)
-    looped = exact_plant_response(
-        u,
-        1.0,
-        0.3,
-        40.0,
-        0.3,
-        windows=windows,
-        hold=hold,
-        force=lambda x, v: 0.0 * v,
-        substeps=8,
-        **start,
-    )
-    np.testing.assert_allclose(looped, linear, rtol=1e-9, atol=1e-9)
 
 
 def test_substeps_bring_a_coarsely_sampled_friction_to_the_continuous_plant():
