@@ -301,7 +301,7 @@ def test_no_code_compares_with_a_module_name():
     found = [
         f"{path.relative_to(REPO).as_posix()}:{node.lineno}"
         for package in ROLE_DISPATCHED
-        for path in sorted((LIBRARY / package).glob("*.py"))
+        for path in sorted((LIBRARY / package).rglob("*.py"))
         for node in ast.walk(ast.parse(path.read_text()))
         if isinstance(node, ast.Compare)
         and any(_names_a_module(side) for side in (node.left, *node.comparators))

@@ -38,7 +38,7 @@ import pandas as pd
 
 from dtwin._validation import DtwinValueError, require_in_range
 from dtwin.command import make_command, time_axis
-from dtwin.gap.effects import EFFECTS, NONE, PARAMETER_MISMATCH, UNEXPLAINED, fractional_delay
+from dtwin.gap.effects import CATALOGUE_CASES, EFFECTS, NONE, UNEXPLAINED
 from dtwin.gap.noise import plant_noise_gain
 from dtwin.gapbench.arms import (
     ARM_CASE_EFFECTS,
@@ -54,7 +54,7 @@ from dtwin.gapbench.arms import (
     split_case_type,
     unseen_expected,
 )
-from dtwin.gapbench.case_effects import CaseEffect, log_between, spec_value
+from dtwin.gapbench.case_effects import CaseEffect, log_between
 from dtwin.modules import (
     CONTRACTS,
     Step,
@@ -130,13 +130,6 @@ NOMINAL_TWIN: dict[str, Any] = {
     "noise": {"actuator": 0.005, "plant": 0.04, "sensor_A": 0.03, "sensor_B": 0.02},
 }
 
-#: Per module: its twin section and the parameter(s) a ``parameter_mismatch`` may change (a
-#: single name is taken without a random draw).
-_MISMATCH_PARAMS = {
-    name: (c.section, c.params[0] if len(c.params) == 1 else c.params)
-    for name, c in CONTRACTS.items()
-}
-
 
 @dataclass(frozen=True)
 class GeneratedCase:
@@ -171,93 +164,6 @@ def _ar1(rng: np.random.Generator, n: int, sigma: float, phi: float) -> np.ndarr
     return sigma * out
 
 
-def _draw_saturation(module, level, rng, scale) -> dict[str, Any]:
-    """Return an ``actuator_saturation``: tanh (``U``) or clip (``U_high``, ``U_low``), u units."""
-    form = str(rng.choice(["tanh", "clip", "asymmetric_clip"]))
-    umax = scale["u_max"]
-    if form == "tanh":
-        return {"form": form, "U": log_between(2.0, 0.55, level) * umax}
-    high = log_between(0.9, 0.4, level) * umax
-    low = high if form == "clip" else high * rng.uniform(1.1, 1.6)
-    return {"form": form, "U_high": high, "U_low": low}
-
-
-def _draw_deadzone(module, level, rng, scale) -> dict[str, Any]:
-    """Return an ``actuator_deadzone``: half-widths ``D_high``, ``D_low`` (u units)."""
-    form = str(rng.choice(["symmetric", "asymmetric", "smooth"]))
-    width = log_between(0.05, 0.3, level) * scale["u_std"]
-    ratio = rng.uniform(0.6, 1.0) if form == "asymmetric" else 1.0
-    return {"form": form, "D_high": width, "D_low": width * ratio}
-
-
-def _draw_actuator_delay(module, level, rng, scale) -> dict[str, Any]:
-    """Return an ``actuator_delay`` of 0.8–6 samples (fractional)."""
-    return {"form": "fractional", "delay_samples": log_between(0.8, 6.0, level)}
-
-
-def _draw_sensor_delay(module, level, rng, scale) -> dict[str, Any]:
-    """Return a ``sensor_delay`` of 4–15 samples (fractional)."""
-    return {"form": "fractional", "delay_samples": log_between(4.0, 15.0, level)}
-
-
-def _draw_friction(module, level, rng, scale) -> dict[str, Any]:
-    """Return a ``coulomb_friction``: Stribeck or Coulomb + viscous (``Fc``, ``Fs`` in N)."""
-    fc = log_between(0.012, 0.2, level) * scale["u_max"]
-    form = str(rng.choice(["stribeck", "coulomb_viscous"]))
-    return {
-        "form": form,
-        "Fc": fc,
-        "Fs": fc * rng.uniform(1.2, 2.0) if form == "stribeck" else fc,
-        "vs": rng.uniform(0.05, 0.3) * scale["v_std"],
-        "extra_c": rng.uniform(0.0, 0.05) if form == "coulomb_viscous" else 0.0,
-    }
-
-
-def _draw_stiffness(module, level, rng, scale) -> dict[str, Any]:
-    """Return a ``cubic_stiffness``: ``ratio·k·x_ref·|x/x_ref|^(power+1)``, power near 2."""
-    power = float(rng.choice([2.0, rng.uniform(1.6, 2.4)]))
-    # softening is capped so that the spring stays stiff over the whole run
-    ratio = (
-        log_between(0.06, 0.8, level) if rng.uniform() < 0.75 else -log_between(0.04, 0.2, level)
-    )
-    return {
-        "form": f"|x|^{power:.2f} hardening" if ratio > 0 else f"|x|^{power:.2f} softening",
-        "power": power,
-        "ratio": ratio,
-        "x_ref": scale["x_max"],
-    }
-
-
-def _draw_damping(module, level, rng, scale) -> dict[str, Any]:
-    """Return a ``quadratic_damping``: ``ratio·c·v_ref·|v/v_ref|^power``, power 1.7–2.3."""
-    power = float(rng.uniform(1.7, 2.3))
-    ratio = log_between(0.15, 3.0, level)
-    return {"form": f"|v|^{power:.2f}", "power": power, "ratio": ratio, "v_ref": scale["v_max"]}
-
-
-def _draw_quantization(module, level, rng, scale) -> dict[str, Any]:
-    """Return a ``sensor_quantization`` with step ``q`` of 3–10 noise standard deviations."""
-    return {"form": "round after noise", "q": log_between(3.0, 10.0, level) * scale["sigma"]}
-
-
-def _draw_scale_error(module, level, rng, scale) -> dict[str, Any]:
-    """Return a ``sensor_scale_error``: a gain 6–35 % away from 1."""
-    sign = 1 if rng.uniform() < 0.5 else -1
-    return {"form": "gain", "gain": 1 + sign * log_between(0.06, 0.35, level)}
-
-
-def _draw_bias_drift(module, level, rng, scale) -> dict[str, Any]:
-    """Return a ``sensor_bias_drift`` of ``total`` (2.5–15 σ) with a non-linear shape."""
-    form = str(rng.choice(["power", "exponential", "linear_plus_wander"]))
-    total = log_between(2.5, 15.0, level) * scale["sigma"] * (1 if rng.uniform() < 0.5 else -1)
-    return {
-        "form": form,
-        "total": total,
-        "power": rng.uniform(0.6, 1.6),
-        "tau_frac": rng.uniform(0.4, 1.5),
-    }
-
-
 def _draw_interference(module, level, rng, scale) -> dict[str, Any]:
     """Return a ``sensor_interference``: a sinusoid of 1.5–6 σ at 0.8–8 Hz."""
     return {
@@ -274,22 +180,6 @@ def _draw_stiffness_change(module, level, rng, scale) -> dict[str, Any]:
         log_between(1.25, 2.5, level) if rng.uniform() < 0.7 else 1 / log_between(1.25, 2.0, level)
     )
     return {"form": "step in k", "factor": factor, "at_frac": rng.uniform(0.35, 0.65)}
-
-
-def _draw_mismatch(module, level, rng, scale) -> dict[str, Any]:
-    """Return a ``parameter_mismatch``: one nominal parameter of ``module`` offset or scaled."""
-    section, names = _MISMATCH_PARAMS[module]
-    name = names if isinstance(names, str) else str(rng.choice(names))
-    sign = 1 if rng.uniform() < 0.5 else -1
-    if name == "bias":
-        delta = sign * log_between(1.5, 10.0, level) * scale["sigma"]
-        return {"form": "offset", "section": section, "param": name, "delta": delta}
-    if name == "alpha":
-        delta = sign * log_between(0.06, 0.35, level)
-        return {"form": "offset", "section": section, "param": name, "delta": delta}
-    low, high = (0.4, 2.0) if name == "tau" and role_of(module) == SENSOR else (0.15, 0.6)
-    factor = (1 + log_between(low, high, level)) ** sign
-    return {"form": "factor", "section": section, "param": name, "factor": factor}
 
 
 def _draw_effect(effect, module, level, rng, scale) -> dict[str, Any]:
@@ -312,49 +202,7 @@ def _draw_effect(effect, module, level, rng, scale) -> dict[str, Any]:
     return CASE_EFFECTS[effect].draw(module, level, rng, scale)
 
 
-# --- the real forms of the generator's own effects (the arms' are in arms.py) ----------------
-
-
-def _saturation(u, spec, dt):
-    """``actuator_saturation``: tanh (``U``) or clip (``U_high``, ``U_low``), u units."""
-    if spec["form"] == "tanh":
-        return spec["U"] * np.tanh(u / spec["U"])
-    return np.clip(u, -spec["U_low"], spec["U_high"])
-
-
-def _deadzone(u, spec, dt):
-    """``actuator_deadzone``: half-widths ``D_high``, ``D_low``, or a smooth one (u units)."""
-    high, low = spec["D_high"], spec["D_low"]
-    if spec["form"] == "smooth":
-        return u - high * np.tanh(u / high)
-    return np.where(u > high, u - high, np.where(u < -low, u + low, 0.0))
-
-
-def _delayed(u, spec, dt=None):
-    """Return the signal delayed by ``delay_samples`` (fractional; actuator or sensor)."""
-    return fractional_delay(u, spec["delay_samples"])
-
-
-def _friction(spec, c, k, min_smoothing=0.0):
-    """Stribeck or Coulomb + viscous friction; its sign smoothed over ``10⁻³·vs`` or more."""
-    fc, fs, vs, extra = spec["Fc"], spec["Fs"], spec["vs"], spec["extra_c"]
-    smooth = max(1e-3 * vs, min_smoothing)
-
-    def friction(xp, vp):
-        level = fc + (fs - fc) * math.exp(-((vp / vs) ** 2))
-        return level * math.tanh(vp / smooth) + extra * vp
-
-    return friction
-
-
-def _stiffness(spec, c, k, min_smoothing=0.0):
-    ratio, ref, power = spec["ratio"], spec["x_ref"], spec["power"]
-    return lambda xp, vp: ratio * k * ref * math.copysign(abs(xp / ref) ** (power + 1), xp)
-
-
-def _damping(spec, c, k, min_smoothing=0.0):
-    ratio, ref, power = spec["ratio"], spec["v_ref"], spec["power"]
-    return lambda xp, vp: ratio * c * ref * math.copysign(abs(vp / ref) ** power, vp)
+# --- the real forms of the out-of-list effects (the catalogue's sit in dtwin/gap/effects/) ------
 
 
 def _stiffness_change(u, m, c, k, dt, noise, spec, n):
@@ -374,120 +222,22 @@ def _stiffness_change(u, m, c, k, dt, noise, spec, n):
     return np.concatenate([x, x2[1:]]), np.concatenate([v, v2[1:]])
 
 
-def _scale_error(lag, spec):
-    return spec["gain"] * lag
-
-
-def _bias_drift(y, spec, t, x):
-    """Return the reading plus a drift of ``total`` over the run, shaped by ``form``."""
-    s = t / t[-1]
-    if spec["form"] == "power":
-        shape = s ** spec["power"]
-    elif spec["form"] == "exponential":
-        shape = (1 - np.exp(-s / spec["tau_frac"])) / (1 - math.exp(-1 / spec["tau_frac"]))
-    else:
-        shape = 0.8 * s + 0.2 * np.sin(2 * np.pi * 0.7 * s) ** 2
-    return y + spec["total"] * shape
-
-
 def _interference(y, spec, t, x):
     return y + spec["amplitude"] * np.sin(2 * np.pi * spec["freq_hz"] * t + spec["phase"])
 
 
-def _quantization(y, spec, t, x):
-    return spec["q"] * np.round(y / spec["q"])
-
-
-def _apply_mismatch(asset: dict, nominal, true_effect: dict) -> None:
-    """Change the asset's parameter named in a ``parameter_mismatch`` draw (in place).
-
-    Also records the parameter's new ``value`` and its ``nominal`` one in ``true_effect``.
-    """
-    section, name = true_effect["section"], true_effect["param"]
-    before = asset[section][name]
-    if "factor" in true_effect:
-        asset[section][name] = before * true_effect["factor"]
-    else:
-        asset[section][name] = before + true_effect["delta"]
-        if name == "alpha":
-            asset[section][name] = min(max(asset[section][name], 0.0), 1.0)
-    true_effect["value"] = asset[section][name]
-    true_effect["nominal"] = nominal[section][name]
-
-
-# --- the true catalogue parameter of each drawn form (docs/gap.md §Scores) -----------------
-
-
-def _delay_truth(spec, key, dt):
-    """Return a delay's truth in s (it is drawn in samples)."""
-    return "delay", spec["delay_samples"] * dt, 0.0
-
-
-def _saturation_truth(spec, key, dt):
-    """Return a symmetric saturation's level ``U`` (tanh or clip); None if asymmetric."""
-    if spec.get("form") == "tanh":
-        return "U", spec["U"], math.inf
-    if spec.get("form") == "clip":
-        return "U", spec["U_high"], math.inf
-    return None
-
-
-def _deadzone_truth(spec, key, dt):
-    """Return a symmetric dead zone's half-width ``D``; None for an asymmetric one."""
-    if spec.get("form") in ("symmetric", "smooth"):
-        return "D", spec["D_high"], 0.0
-    return None
-
-
-def _stiffness_truth(spec, key, dt):
-    """Return a stiffness of power exactly 2 as the catalogue's ``k3``; None otherwise."""
-    if spec.get("power") == 2.0:
-        k = key["asset"]["plant"]["k"]
-        return "k3", spec["ratio"] * k / spec["x_ref"] ** 2, 0.0
-    return None
-
-
-def _mismatch_truth(spec, key, dt):
-    """Return the changed parameter, its true value and its nominal one."""
-    return spec["param"], spec["value"], spec["nominal"]
-
-
-#: Every case effect (the generator's and the arms'), by name: its draw and real form.
+#: Every case effect by name: the catalogue's (:data:`dtwin.gap.effects.CATALOGUE_CASES`, each
+#: in its effect's module), the out-of-list ones and the arms'; its draw and real form.
 CASE_EFFECTS: dict[str, CaseEffect] = {
-    effect.name: effect
-    for effect in (
-        CaseEffect(
-            "actuator_saturation", _draw_saturation, actuator=_saturation, truth=_saturation_truth
-        ),
-        CaseEffect("actuator_deadzone", _draw_deadzone, actuator=_deadzone, truth=_deadzone_truth),
-        CaseEffect("actuator_delay", _draw_actuator_delay, actuator=_delayed, truth=_delay_truth),
-        CaseEffect(
-            "sensor_delay",
-            _draw_sensor_delay,
-            sensor_input=_delayed,
-            continuous_delay=True,
-            truth=_delay_truth,
-        ),
-        CaseEffect("coulomb_friction", _draw_friction, force=_friction, truth=spec_value("Fc")),
-        CaseEffect("cubic_stiffness", _draw_stiffness, force=_stiffness, truth=_stiffness_truth),
-        CaseEffect("quadratic_damping", _draw_damping, force=_damping),
-        CaseEffect(
-            "sensor_quantization", _draw_quantization, reading=_quantization, truth=spec_value("q")
-        ),
-        CaseEffect(
-            "sensor_scale_error",
-            _draw_scale_error,
-            sensor_gain=_scale_error,
-            truth=spec_value("gain", without=1.0),
-        ),
-        CaseEffect("sensor_bias_drift", _draw_bias_drift, reading=_bias_drift),
-        CaseEffect("sensor_interference", _draw_interference, reading=_interference),
-        CaseEffect("stiffness_change", _draw_stiffness_change, plant=_stiffness_change),
-        CaseEffect(
-            PARAMETER_MISMATCH, _draw_mismatch, asset=_apply_mismatch, truth=_mismatch_truth
-        ),
-        *ARM_CASE_EFFECTS.values(),
-    )
+    **CATALOGUE_CASES,
+    **{
+        effect.name: effect
+        for effect in (
+            CaseEffect("sensor_interference", _draw_interference, reading=_interference),
+            CaseEffect("stiffness_change", _draw_stiffness_change, plant=_stiffness_change),
+            *ARM_CASE_EFFECTS.values(),
+        )
+    },
 }
 
 

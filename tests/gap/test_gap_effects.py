@@ -1,4 +1,4 @@
-"""Unit tests of the effect catalogue's helpers (dtwin/gap/effects.py)."""
+"""Unit tests of the effect catalogue (dtwin/gap/effects/, one module per effect), its helpers."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import pytest
 
 from dtwin.gap.effects import (
     ARRAY_OPS,
+    EFFECT_MODULES,
     EFFECTS,
     FRICTION_SMOOTHING,
     SCALAR_OPS,
@@ -158,6 +159,48 @@ def test_a_force_effects_compiled_law_is_its_array_law(effect):
     np.testing.assert_allclose(
         [scalars(a, b) for a, b in zip(x, v, strict=True)], arrays, rtol=1e-12
     )
+
+
+def test_the_catalogue_is_every_effect_module_of_the_package():
+    """An effect's module that is not listed in EFFECT_MODULES would never be a candidate."""
+    from pathlib import Path
+
+    import dtwin.gap.effects as package
+
+    files = sorted(p.stem for p in Path(package.__file__).parent.glob("[!_]*.py"))
+    assert sorted(module.EFFECT.name for module in EFFECT_MODULES) == files
+    assert [module.EFFECT for module in EFFECT_MODULES] == list(EFFECTS)
+
+
+@pytest.mark.parametrize("module", EFFECT_MODULES, ids=lambda m: m.EFFECT.name)
+def test_each_effect_is_one_module_holding_its_fitted_form_and_its_case(module):
+    """Adding an effect is one module of dtwin/gap/effects/ plus its test: it holds both sides.
+
+    The module is named after its effect and holds its ``EFFECT`` (what the diagnoser fits) and
+    its ``CASE`` (what the benchmark draws and the real form it acts in, named alike); an effect
+    that only widens another has none. A case's truth round-trips: a generated case of the
+    effect sits in one of its modules and reads back as a parameter the diagnoser fits for it.
+    """
+    from dtwin.gapbench.generator import CASE_EFFECTS, generate_case
+    from dtwin.gapbench.scores import true_parameter
+    from dtwin.modules import LINEAR_PARAMS
+
+    effect, case = module.EFFECT, module.CASE
+    assert module.__name__.rsplit(".", 1)[1] == effect.name
+    assert (case is None) == bool(effect.nests)
+    if case is None:
+        return
+    assert case.name == effect.name and CASE_EFFECTS[effect.name] is case
+    if case.truth is None:
+        return
+    for seed in range(20):
+        key = generate_case(effect.name, seed, n_samples=1000).key
+        truth = true_parameter(key, 0.02)
+        if truth is not None:
+            break
+    assert truth is not None
+    assert key["module"] in effect.modules
+    assert truth[0] in set(effect.params) | set(LINEAR_PARAMS[key["module"]])
 
 
 def test_the_benchmark_draws_every_catalogue_effect_in_its_modules():
