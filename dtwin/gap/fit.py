@@ -610,6 +610,10 @@ def _calibrate_plant(data: ModuleData, n_train: int, near: int | None) -> dict[s
                 lin, _ = loop_prediction_error_fit(
                     x, u, data.dt, data.discretisation, [lin, *arx], horizon
                 )
+                # the offset by output error, the dynamics fixed: its regressor (the plant's
+                # response to a constant) holds no fed-back noise, and a noise model with a
+                # root near 1 leaves it unidentified in the prediction-error cost
+                lin = fit_candidate(data, None, lin, n_train=n_train, free=["u_offset"]).lin
             return lin
     candidates = []
     factor = 1

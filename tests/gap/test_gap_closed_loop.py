@@ -153,6 +153,26 @@ def test_a_calibrated_plant_in_a_pd_loop_is_consistent_with_white_or_coloured_no
     _assert_integrating_plant(result.modules["M1"].lin_used)
 
 
+@pytest.mark.slow
+def test_a_loop_whose_noise_model_takes_a_unit_root_keeps_its_offset():
+    """Harder Coulomb rig 84007 (integrating, PD loop, noise pole 0.81).
+
+    The loop fit's whitening filter takes a root at 1.00001, a difference that leaves the force
+    offset unidentified: it read 1074 for a true −570 (2.9 times ``Fc`` away), the windows'
+    position drifted to 31 times its spread and the floor read from them hid the friction
+    (``none``). Re-fitted by output error with the dynamics fixed, the offset is within
+    0.1 ``Fc`` of the truth and the friction is found.
+    """
+    from dtwin.gapbench.rigs import generate_hard_rig_case
+
+    case = generate_hard_rig_case("coulomb_friction", 84007)
+    assert case.key["integrating"] and case.key["closed_loop"]
+    result = _diagnose(case)
+    offset = result.modules["M1"].lin_used["u_offset"]
+    assert offset == pytest.approx(case.key["u_offset"], abs=0.1 * case.key["params"]["Fc"])
+    assert (result.module, result.effect) == ("M1", "coulomb_friction")
+
+
 def test_an_open_loop_recording_is_calibrated_without_the_loop_fit(monkeypatch):
     """Below the feedback threshold calibration is output error as before, untouched."""
     import dtwin.gap.fit as fit
