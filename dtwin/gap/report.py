@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -23,6 +23,9 @@ from dtwin.gap.effects import NONE, UNEXPLAINED, effect_by_name
 from dtwin.gap.results import Diagnosis
 from dtwin.gap.which import required_share
 from dtwin.wiring import PLANT, only_module
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -298,10 +301,31 @@ def render_markdown(diagnosis: Diagnosis, figure_name: str | None = "gap.png") -
     return "\n".join(lines) + "\n"
 
 
+#: ``gap.png``'s resolution, dots per inch: 1500 x 420 pixels for the figure's 15 x 4.2 inches.
+GAP_PNG_DPI = 100
+
+
 def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
+    """Draw ``gap.png`` to ``paths``: where (local vs chain gap), which (candidates), how far.
+
+    In matplotlib's default style at :data:`GAP_PNG_DPI`, whatever style the process set before
+    (the paper figures' :func:`dtwin.figures._style.apply_style` sets 300 dpi and print-size
+    fonts), so the report looks the same from the CLI and from any other caller. Laid out once
+    (``tight_layout``) and saved at the figure's own size: one draw, no second one to crop.
+    """
     import matplotlib.pyplot as plt
 
     from dtwin.figures._style import save_figure
+
+    with plt.style.context("default"):
+        fig = _gap_figure(d)
+        fig.tight_layout()
+        save_figure(fig, paths, tight=False, dpi=GAP_PNG_DPI)
+
+
+def _gap_figure(d: Diagnosis) -> Figure:
+    """Return ``gap.png``'s figure (three panels and a title), drawn in the current style."""
+    import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), gridspec_kw={"width_ratios": [1.2, 1, 1.6]})
     names = [n for n, m in d.modules.items() if m.status != "skipped"]
@@ -358,8 +382,7 @@ def _draw_figure(d: Diagnosis, paths: list[Path]) -> None:
         "(excess gap beyond a linear re-fit removed, scoring part)",
     )
     fig.suptitle(title, fontsize=13, fontweight="bold")
-    fig.tight_layout()
-    save_figure(fig, paths)
+    return fig
 
 
 def write_report(
