@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 import subprocess
@@ -197,8 +198,6 @@ def cli_without_figure(monkeypatch):
     For tests that read the CLI's answer or its stderr only: drawing the figure costs
     0.3-0.6 CPU s a report. test_cli_writes_a_valid_report keeps checking the figure is drawn.
     """
-    import functools
-
     import dtwin.gap.report
 
     no_figure = functools.partial(dtwin.gap.report.write_report, figure=False)
@@ -361,24 +360,28 @@ def _own_effect_answers(effect: str, seeds) -> list[tuple[bool, bool]]:
     The generator runs the same Euler asset as the pipeline (nominal = config's twin section,
     1000 samples, the generator's miscalibration and coloured noise).
     """
-    rights = []
-    for seed in seeds:
-        case = generate_case(
-            effect, seed, magnitude=0.8, nominal=OWN_TWINS["silent"], n_samples=1000
+    return [_own_effect_rights(effect, seed) for seed in seeds]
+
+
+@functools.cache
+def _own_effect_rights(effect: str, seed: int) -> tuple[bool, bool]:
+    """One seed of :func:`_own_effect_answers`, diagnosed once per test process.
+
+    The 20-seed test (slow, so `make test` runs it first) and the per-effect test (seeds 0
+    and 1) ask for the same diagnoses; both are in this file, so on one pytest-xdist worker.
+    """
+    case = generate_case(effect, seed, magnitude=0.8, nominal=OWN_TWINS["silent"], n_samples=1000)
+    recording = recording_from_frame(case.recording)
+    row = []
+    for declared in (True, False):
+        content = dict(case.twin["twin"])
+        if not declared:
+            content.pop("discretisation")
+        result = diagnose(recording, twin_from_mapping(content))
+        row.append(  # a friction with a breakaway force is right under either name
+            result.module == case.key["module"] and result.effect in case.key["accepted_effects"]
         )
-        recording = recording_from_frame(case.recording)
-        row = []
-        for declared in (True, False):
-            content = dict(case.twin["twin"])
-            if not declared:
-                content.pop("discretisation")
-            result = diagnose(recording, twin_from_mapping(content))
-            row.append(  # a friction with a breakaway force is right under either name
-                result.module == case.key["module"]
-                and result.effect in case.key["accepted_effects"]
-            )
-        rights.append(tuple(row))
-    return rights
+    return tuple(row)
 
 
 @pytest.mark.parametrize("effect", sorted(IN_LIST_EFFECTS))
