@@ -6,7 +6,8 @@ Outputs: ``folder`` = results/gap/cases/{scatteritem}/ with one sub-folder per c
 ``recording.csv`` (t in s, signals in the twin's units), ``twin.yaml`` (the nominal twin, noise
 levels right to ±10 %), ``key.json`` (the truth; the diagnoser never reads it).
 Params: ``cases`` (this chunk's case names), ``benchmark`` = config ``gap.benchmark``
-(``effects``, ``first_seed``, ``miscalibration``, ``noise_error``).
+(``effects``, ``first_seed``, ``miscalibration``, ``noise_error``), ``twin`` = config ``twin``
+(the nominal twin of every paper-asset case).
 """
 
 from dtwin._script import start_rule
@@ -19,4 +20,9 @@ from pathlib import Path
 from dtwin.gapbench.batch import write_case_folder
 
 for case in snakemake.params.cases:
-    write_case_folder(case, snakemake.params.benchmark, Path(snakemake.output.folder) / case)
+    write_case_folder(
+        case,
+        snakemake.params.benchmark,
+        snakemake.params.twin,
+        Path(snakemake.output.folder) / case,
+    )

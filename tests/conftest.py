@@ -14,7 +14,9 @@ and changed in turn); the files go out in the order of their first test, and
 
 from __future__ import annotations
 
+import copy
 import os
+from functools import cache
 from pathlib import Path
 
 import pandas as pd
@@ -62,10 +64,25 @@ REPO = Path(__file__).resolve().parents[1]
 REFERENCE = REPO / "config" / "reference"
 
 
+@cache
+def _read_config() -> dict:
+    return yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+
+
+def read_config() -> dict:
+    """A fresh copy of config/config.yaml, the one source of the paper's numbers in the tests."""
+    return copy.deepcopy(_read_config())
+
+
+def paper_twin() -> dict:
+    """config/config.yaml's ``twin:`` section: the paper's twin, the generator's nominal twin."""
+    return read_config()["twin"]
+
+
 @pytest.fixture(scope="session")
 def config() -> dict:
     """The default config/config.yaml."""
-    return yaml.safe_load((REPO / "config" / "config.yaml").read_text())
+    return read_config()
 
 
 @pytest.fixture(scope="session")

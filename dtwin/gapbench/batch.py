@@ -28,6 +28,7 @@ __all__ = ["diagnose_case_folder", "write_case_folder"]
 def write_case_folder(
     case: str,
     benchmark: Mapping[str, Any],
+    nominal: Mapping[str, Any],
     folder: str | os.PathLike,
 ) -> None:
     """Generate one withheld-effect case and write its three files into ``folder``.
@@ -40,6 +41,8 @@ def write_case_folder(
     benchmark : mapping
         The ``gap.benchmark`` config section (``effects``, ``first_seed``, ``miscalibration``,
         ``noise_error``).
+    nominal : mapping
+        The nominal twin of a paper-asset case: config ``twin`` (a rig family's case has its own).
     folder : path
         Created if missing; ``recording.csv``, ``twin.yaml`` and ``key.json`` are each written
         atomically.
@@ -53,6 +56,7 @@ def write_case_folder(
         spec["seed"],
         miscalibration=benchmark["miscalibration"],
         noise_error=benchmark["noise_error"],
+        nominal=nominal,
     )
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)

@@ -83,7 +83,7 @@ __all__ = [
     "OUT_OF_LIST_EFFECTS",
     "ALL_CASE_EFFECTS",
     "ARM_EFFECTS",
-    "NOMINAL_TWIN",
+    "NOMINAL_KEYS",
     "GeneratedCase",
     "generate_case",
     "case_spec",
@@ -118,17 +118,25 @@ _EFFECT_MODULES: dict[str, tuple[str, ...]] = {
     **NEAR_CATALOGUE,
 }
 
-#: The paper's twin (r_notes.md §1), the nominal twin of every generated case.
-NOMINAL_TWIN: dict[str, Any] = {
-    "dt": 0.02,
-    "actuator": {"tau": 0.15},
-    "plant": {"m": 1.0, "c": 0.4, "k": 4.0},
-    "sensor_A": {"tau": 0.08, "bias": 0.0},
-    "sensor_B": {"tau": 0.25, "bias": 0.01},
-    "fusion": {"alpha": 0.6},
-    "kpi": {"w1": 1.0, "w2": 0.2},
-    "noise": {"actuator": 0.005, "plant": 0.04, "sensor_A": 0.03, "sensor_B": 0.02},
-}
+#: The keys of the nominal twin a case is generated from, in the order of its twin file: ``dt``,
+#: every module's section and ``noise`` (others, such as ``discretisation``, are left out: the
+#: asset is the paper's explicit-Euler simulator and its twin file says so).
+NOMINAL_KEYS: tuple[str, ...] = ("dt", *(c.section for c in CONTRACTS.values()), "noise")
+
+
+def _nominal_twin(nominal: Mapping[str, Any]) -> dict[str, Any]:
+    """Return a copy of the nominal twin's :data:`NOMINAL_KEYS`, in the mapping's own order.
+
+    Raises :class:`~dtwin._validation.DtwinValueError` naming a missing key.
+    """
+    missing = [key for key in NOMINAL_KEYS if key not in nominal]
+    if missing:
+        raise DtwinValueError(f"nominal twin lacks {', '.join(missing)} (needs {NOMINAL_KEYS})")
+    return {
+        k: (dict(v) if isinstance(v, Mapping) else v)
+        for k, v in nominal.items()
+        if k in NOMINAL_KEYS
+    }
 
 
 @dataclass(frozen=True)
@@ -403,7 +411,7 @@ def generate_case(
     n_samples: int | None = None,
     miscalibration: float = 0.03,
     noise_error: float = 0.10,
-    nominal: Mapping[str, Any] | None = None,
+    nominal: Mapping[str, Any],
     arm: str = DEFAULT_ARM,
 ) -> GeneratedCase:
     """Generate one recording of the asset with a withheld effect.
@@ -425,8 +433,10 @@ def generate_case(
         Largest relative error of the twin's ``m, c, k`` and time constants.
     noise_error : float, default 0.10
         Largest relative error of the noise levels written into the twin file.
-    nominal : mapping, optional
-        The nominal twin (default :data:`NOMINAL_TWIN`; all sections and ``noise`` needed).
+    nominal : mapping
+        The nominal twin: the ``twin:`` section of ``config/config.yaml`` (the paper's, which
+        the rule ``gap_cases`` passes) or of a twin file; :data:`NOMINAL_KEYS` are needed, other
+        keys are ignored.
     arm : str, default "default"
         The benchmark arm (:data:`dtwin.gapbench.arms.ARMS`), or ``"default"``.
 
@@ -436,7 +446,11 @@ def generate_case(
 
     Examples
     --------
-    >>> case = generate_case("coulomb_friction", 3, magnitude=0.8, n_samples=1000)
+    >>> from pathlib import Path
+    >>> import yaml, dtwin
+    >>> config = Path(dtwin.__file__).parents[1] / "config" / "config.yaml"
+    >>> paper = yaml.safe_load(config.read_text())["twin"]
+    >>> case = generate_case("coulomb_friction", 3, magnitude=0.8, n_samples=1000, nominal=paper)
     >>> case.recording.shape, case.key["module"], case.key["expected_effect"]
     ((1000, 9), 'M1', 'coulomb_friction')
     """
@@ -444,9 +458,7 @@ def generate_case(
     rng = np.random.default_rng(seed)
     # the arms' own draws come from a second stream: the default cases keep their bits
     arm_rng = np.random.default_rng([int(seed), 16])
-    nominal = {
-        k: (dict(v) if isinstance(v, Mapping) else v) for k, v in (nominal or NOMINAL_TWIN).items()
-    }
+    nominal = _nominal_twin(nominal)
     level = (
         float(rng.uniform())
         if magnitude is None

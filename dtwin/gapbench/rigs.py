@@ -509,8 +509,8 @@ def generate_any_case(case_type: str, seed: int, **paper_options) -> GeneratedCa
     """Generate a benchmark case: a rig family's (``rig_``, ``hardrig_``), else the paper asset.
 
     A paper-asset case type may carry an arm (``no_noise__none``, dtwin/gapbench/arms.py).
-    ``paper_options`` go to :func:`dtwin.gapbench.generator.generate_case` (``miscalibration``,
-    ``noise_error``); the rig family has none.
+    ``paper_options`` go to :func:`dtwin.gapbench.generator.generate_case` (``nominal``, the
+    nominal twin, is needed; ``miscalibration``, ``noise_error``); the rig family has none.
     """
     if case_type.startswith(RIG_PREFIX):
         return generate_rig_case(case_type[len(RIG_PREFIX) :], seed)

@@ -34,7 +34,7 @@ from hypothesis import strategies as st
 
 from dtwin.cli import main
 from dtwin.gapbench.generator import ALL_CASE_EFFECTS, generate_case
-from tests.conftest import n_examples
+from tests.conftest import n_examples, paper_twin
 
 #: Derandomized deep examples per CI run (each takes about one second).
 CI_EXAMPLES = 24
@@ -102,7 +102,7 @@ def hostile_cases(draw):
     effect = draw(st.sampled_from(ALL_CASE_EFFECTS))
     seed = draw(st.integers(0, 10_000))
     n_rows = draw(st.sampled_from([250, 400, 700]))
-    case = generate_case(effect, seed, n_samples=n_rows)
+    case = generate_case(effect, seed, n_samples=n_rows, nominal=paper_twin())
     rng = np.random.default_rng(seed)
     columns = list(draw(st.sampled_from(COLUMN_SETS)))
     frame = case.recording[["t", *columns]].copy()
@@ -154,7 +154,7 @@ def memory_mb(field: str = "VmHWM") -> float:
 
 def spiked_case() -> tuple:
     """The issue's spike: 9.1e11 in x of a full generated case."""
-    case = generate_case("none", 1, n_samples=260)
+    case = generate_case("none", 1, n_samples=260, nominal=paper_twin())
     frame = case.recording.copy()
     frame.loc[0, "x"] = 9.1e11
     return frame, case.twin, [], "spike 9.1e11 in x at row 1"
@@ -162,7 +162,7 @@ def spiked_case() -> tuple:
 
 def dead_sensor_case() -> tuple:
     """An output that is zero throughout (it once read `none` with 8 overflow warnings)."""
-    case = generate_case("none", 2, n_samples=260)
+    case = generate_case("none", 2, n_samples=260, nominal=paper_twin())
     frame = case.recording.drop(columns="v").copy()
     frame["y_B"] = 0.0
     return frame, case.twin, [], "y_B zero throughout"
@@ -217,7 +217,7 @@ def test_a_flagged_calibrated_kpi_module_is_diagnosed(tmp_path):
     Found by this fuzz (exit 3: the best of no candidate); a located gap no candidate can
     explain is ``unexplained``.
     """
-    case = generate_case("none", 1, n_samples=250)
+    case = generate_case("none", 1, n_samples=250, nominal=paper_twin())
     frame = case.recording[["t", "x", "z"]].copy()
     frame["x"] += 0.5
     frame.to_csv(tmp_path / "rec.csv", index=False)

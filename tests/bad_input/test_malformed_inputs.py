@@ -31,20 +31,11 @@ from dtwin.cli import main
 from dtwin.gap.recording import OUTLIER_GAP, outlier_mask, read_recording, recording_from_frame
 from dtwin.gapbench.generator import generate_case
 from dtwin.params import command_params_from_mapping, twin_params_from_mapping
-from tests.conftest import REPO, n_examples
+from tests.conftest import REPO, n_examples, paper_twin
 
 SIGNALS = ["u_cmd", "u_act", "x", "y_A", "y_B", "y_fused", "z"]
-TWIN = {
-    "twin": {
-        "dt": 0.02,
-        "actuator": {"tau": 0.15},
-        "plant": {"m": 1.0, "c": 0.4, "k": 4.0},
-        "sensor_A": {"tau": 0.08, "bias": 0.0},
-        "sensor_B": {"tau": 0.25, "bias": 0.01},
-        "fusion": {"alpha": 0.6},
-        "kpi": {"w1": 1.0, "w2": 0.2},
-    }
-}
+#: The paper's twin without its noise levels and discretisation (a twin file may omit both).
+TWIN = {"twin": {k: v for k, v in paper_twin().items() if k not in ("noise", "discretisation")}}
 
 cell = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True, width=32),
@@ -227,7 +218,7 @@ def test_a_warning_while_diagnosing_becomes_a_report_note_not_terminal_output(
         return real(*args, **kwargs)
 
     monkeypatch.setattr(module, "diagnose", diagnose_with_a_warning)
-    case = generate_case("none", 5, n_samples=300)
+    case = generate_case("none", 5, n_samples=300, nominal=paper_twin())
     case.recording.to_csv(tmp_path / "rec.csv", index=False)
     (tmp_path / "twin.yaml").write_text(yaml.safe_dump(case.twin))
     args = ["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "twin.yaml")]
@@ -250,7 +241,7 @@ EMPS = REPO.parent / "shared" / "realdata" / "emps"
 @pytest.mark.parametrize("size", [1e3, 1e6, 1e9, 1e12, 1e15])
 def test_a_spike_of_any_size_in_any_column_is_refused_naming_column_row_and_size(column, size):
     """The issue's spikes gave `unexplained`, `none` or an internal error by size; now one rule."""
-    frame = generate_case("none", 3, n_samples=300).recording
+    frame = generate_case("none", 3, n_samples=300, nominal=paper_twin()).recording
     spread = float(np.ptp(frame[column]))
     frame.loc[41, column] += size * spread
     with pytest.raises(DtwinValueError) as error:
@@ -280,7 +271,9 @@ def test_a_value_just_inside_the_gap_passes_and_just_beyond_is_refused(sign):
 )
 def test_a_dead_output_channel_is_refused_like_a_constant_input(tmp_path, module, output):
     """An output zero throughout read `none` (the twin "matched" a dead sensor): now exit 2."""
-    frame = generate_case("none", 4, n_samples=300).recording.drop(columns="v")
+    frame = generate_case("none", 4, n_samples=300, nominal=paper_twin()).recording.drop(
+        columns="v"
+    )
     frame[output] = 0.0
     if output == "x":  # x is also an input (M2a, M2b, M4): keep only M1 to test its output
         frame = frame[["t", "u_act", "x"]]

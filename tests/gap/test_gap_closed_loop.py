@@ -20,6 +20,7 @@ from dtwin.gap.closed_loop import (
 )
 from dtwin.gapbench.generator import generate_case
 from dtwin.gapbench.rigs import generate_rig_case
+from tests.conftest import paper_twin
 
 
 def _integrator_records(closed: bool, seed: int = 4, n: int = 4000) -> tuple[np.ndarray, ...]:
@@ -48,7 +49,7 @@ def test_the_statistic_tells_a_pd_loop_from_the_same_plant_in_open_loop():
 
 
 def test_the_paper_asset_and_an_open_loop_rig_are_not_read_as_loops():
-    paper = generate_case("none", 5000).recording
+    paper = generate_case("none", 5000, nominal=paper_twin()).recording
     assert loop_statistic(paper["u_act"].to_numpy(), paper["x"].to_numpy()) < FEEDBACK_THRESHOLD
     rig = generate_rig_case("none", 15006)  # 60 samples per period, open loop
     assert not rig.key["closed_loop"]

@@ -27,6 +27,7 @@ from dtwin.gap import (
 from dtwin.gap.effects import EFFECT_NAMES
 from dtwin.gapbench import generate_case
 from dtwin.gapbench.generator import IN_LIST_EFFECTS
+from tests.conftest import paper_twin
 
 ROOT = Path(__file__).resolve().parents[2]
 SCHEMA = json.loads((ROOT / "workflow/schemas/diagnosis.schema.json").read_text())
@@ -51,7 +52,9 @@ CASES = [
 
 
 def _diagnose_case(effect, module, seed, **kwargs):
-    case = generate_case(effect, seed, magnitude=0.8, module=module, n_samples=1500)
+    case = generate_case(
+        effect, seed, magnitude=0.8, module=module, n_samples=1500, nominal=paper_twin()
+    )
     twin = twin_from_mapping(case.twin)
     kwargs.setdefault("discretisation", twin_discretisation(case.twin))
     result = diagnose(recording_from_frame(case.recording), twin, **kwargs)
@@ -82,7 +85,7 @@ def test_none_on_a_clean_case():
 
 
 def test_partial_recording_diagnoses_m1_alone():
-    case = generate_case("coulomb_friction", 1, magnitude=0.8, n_samples=1500)
+    case = generate_case("coulomb_friction", 1, magnitude=0.8, n_samples=1500, nominal=paper_twin())
     frame = case.recording[["t", "u_act", "x"]]
     twin = twin_from_mapping(case.twin)
     result = diagnose(recording_from_frame(frame), twin, discretisation="euler")
@@ -95,7 +98,7 @@ def test_partial_recording_diagnoses_m1_alone():
 
 
 def test_calibrate_fits_the_linear_twin_first():
-    case = generate_case("cubic_stiffness", 1, magnitude=0.8, n_samples=1500)
+    case = generate_case("cubic_stiffness", 1, magnitude=0.8, n_samples=1500, nominal=paper_twin())
     frame = case.recording[["t", "u_act", "x"]]
     twin = twin_from_mapping({"dt": 0.02})  # no nominal parameters: calibrated from data
     # the asset is the paper's Euler simulator, as the generator's own twin files say
@@ -205,7 +208,9 @@ def cli_without_figure(monkeypatch):
 
 
 def test_cli_writes_a_valid_report(tmp_path, capsys):
-    case = generate_case("actuator_deadzone", 1, magnitude=0.8, n_samples=1500)
+    case = generate_case(
+        "actuator_deadzone", 1, magnitude=0.8, n_samples=1500, nominal=paper_twin()
+    )
     case.recording.to_csv(tmp_path / "rec.csv", index=False, float_format="%.12g")
     (tmp_path / "twin.yaml").write_text(yaml.safe_dump(case.twin))
     out = tmp_path / "out"
@@ -224,7 +229,7 @@ def test_a_long_run_shows_its_steps_on_stderr(tmp_path, capsys, monkeypatch, cli
     """Issue 25 item 8: on a terminal, a line per step once a run has taken PROGRESS_AFTER s."""
     import dtwin.cli
 
-    case = generate_case("coulomb_friction", 1, magnitude=0.8, n_samples=1500)
+    case = generate_case("coulomb_friction", 1, magnitude=0.8, n_samples=1500, nominal=paper_twin())
     case.recording.to_csv(tmp_path / "rec.csv", index=False)
     (tmp_path / "twin.yaml").write_text(yaml.safe_dump(case.twin))
     argv = ["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "twin.yaml")]
@@ -268,7 +273,7 @@ def test_schema_lists_every_effect_name():
 @pytest.mark.parametrize("seed", [2, 4, 5, 6])
 def test_quantizer_on_a_sensor_with_coloured_noise_is_named(seed):
     """Seeds the Gaussian score missed (docs/gap.md §Which): lag-1 noise correlation 0.17–0.55."""
-    case = generate_case("sensor_quantization", seed)
+    case = generate_case("sensor_quantization", seed, nominal=paper_twin())
     module = case.key["module"]
     assert case.key["noise_ar1_phi"][module[-1].upper()] > 0.15  # coloured, as the issue asks
     twin = twin_from_mapping(case.twin)

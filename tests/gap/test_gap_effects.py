@@ -17,6 +17,7 @@ from dtwin.gap.effects import (
     effect_by_name,
     quantization_variance,
 )
+from tests.conftest import paper_twin
 
 
 def test_quantization_variance_is_continuous_across_the_closed_form_threshold():
@@ -194,7 +195,7 @@ def test_each_effect_is_one_module_holding_its_fitted_form_and_its_case(module):
     if case.truth is None:
         return
     for seed in range(20):
-        key = generate_case(effect.name, seed, n_samples=1000).key
+        key = generate_case(effect.name, seed, n_samples=1000, nominal=paper_twin()).key
         truth = true_parameter(key, 0.02)
         if truth is not None:
             break
@@ -248,7 +249,7 @@ def test_every_case_effects_truth_is_a_parameter_of_its_answer():
     for name in scored:
         arm = next(arm for arm, effects in ARM_EFFECTS.items() if name in effects)
         for seed in range(20):
-            key = generate_case(name, seed, n_samples=1000, arm=arm).key
+            key = generate_case(name, seed, n_samples=1000, arm=arm, nominal=paper_twin()).key
             truth = true_parameter(key, 0.02)
             if truth is not None:
                 break

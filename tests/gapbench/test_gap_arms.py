@@ -23,15 +23,16 @@ from dtwin.gapbench.arms import (
     split_case_type,
     stiction_plant,
 )
-from dtwin.gapbench.generator import ARM_EFFECTS, NOMINAL_TWIN, case_spec, generate_case
+from dtwin.gapbench.generator import ARM_EFFECTS, case_spec, generate_case
 from dtwin.gapbench.rigs import generate_any_case
 from dtwin.modules import plant_response
+from tests.conftest import paper_twin
 
 N = 1200
 
 
 def _case(case_type, seed=3, **kwargs):
-    return generate_case(case_type, seed, n_samples=N, **kwargs)
+    return generate_case(case_type, seed, n_samples=N, **kwargs, nominal=paper_twin())
 
 
 def test_every_arm_case_type_generates_with_its_arm_in_the_key():
@@ -91,12 +92,13 @@ def test_continuous_asset_is_converged_and_is_not_the_twins_recursion():
     u = np.sin(np.arange(600) * 0.05) + np.sign(np.sin(np.arange(600) * 0.011))
     zeros = np.zeros(600)
     runs = [
-        continuous_chain(u, NOMINAL_TWIN, None, zeros, zeros, {"A": 0.0, "B": 0.0}, substeps=s)
+        continuous_chain(u, paper_twin(), None, zeros, zeros, {"A": 0.0, "B": 0.0}, substeps=s)
         for s in (20, 40)
     ]
     assert np.max(np.abs(runs[0]["x"] - runs[1]["x"])) < 1e-6 * np.max(np.abs(runs[1]["x"]))
-    p = NOMINAL_TWIN["plant"]
-    x_rec = plant_response(runs[1]["u_act"], p["m"], p["c"], p["k"], NOMINAL_TWIN["dt"]).x
+    twin = paper_twin()
+    p = twin["plant"]
+    x_rec = plant_response(runs[1]["u_act"], p["m"], p["c"], p["k"], twin["dt"]).x
     assert np.max(np.abs(x_rec - runs[1]["x"])) > 1e-3 * np.max(np.abs(runs[1]["x"]))
 
 
@@ -214,13 +216,15 @@ def test_a_data_floor_whose_process_noise_is_not_identified_never_overrules_the_
     assert reconcile_noise_floor(twin, loud) is twin
     identified = []
     for case_type in ("none", "noisy_x__none"):
-        rec = generate_case(case_type, 54002 - 53000, n_samples=3000).recording
+        rec = generate_case(
+            case_type, 54002 - 53000, n_samples=3000, nominal=paper_twin()
+        ).recording
         floor = data_noise_floor(
             "M1",
             {"u_act": rec["u_act"].to_numpy()},
             rec["x"].to_numpy(),
             None,
-            dict(NOMINAL_TWIN["plant"]),
+            paper_twin()["plant"],
             0.02,
         )
         identified.append(floor.identified)
@@ -270,7 +274,9 @@ def test_a_true_plant_behind_a_noisy_position_is_within_its_noise(seed):
     from dtwin.gap import diagnose, twin_discretisation, twin_from_mapping
     from dtwin.gap.recording import recording_from_frame
 
-    case = generate_any_case("noisy_x__none", seed, miscalibration=0.0, noise_error=0.0)
+    case = generate_any_case(
+        "noisy_x__none", seed, miscalibration=0.0, noise_error=0.0, nominal=paper_twin()
+    )
     recording = recording_from_frame(case.recording)
     twin = twin_from_mapping(case.twin, dt=recording.dt)
     result = diagnose(recording, twin, discretisation=twin_discretisation(case.twin))
@@ -287,7 +293,7 @@ def test_a_quantizer_is_named_without_noise_levels_in_the_twin(seed):
     from dtwin.gap import diagnose, twin_discretisation, twin_from_mapping
     from dtwin.gap.recording import recording_from_frame
 
-    case = generate_any_case("no_noise__sensor_quantization", seed)
+    case = generate_any_case("no_noise__sensor_quantization", seed, nominal=paper_twin())
     recording = recording_from_frame(case.recording)
     twin = twin_from_mapping(case.twin, dt=recording.dt)
     result = diagnose(recording, twin, discretisation=twin_discretisation(case.twin))
@@ -309,7 +315,9 @@ def _diagnose_case(case_type: str, seed: int):
     from dtwin.gap import diagnose, twin_discretisation, twin_from_mapping
     from dtwin.gap.recording import recording_from_frame
 
-    case = generate_any_case(case_type, seed, miscalibration=0.03, noise_error=0.10)
+    case = generate_any_case(
+        case_type, seed, miscalibration=0.03, noise_error=0.10, nominal=paper_twin()
+    )
     recording = recording_from_frame(case.recording)
     twin = twin_from_mapping(case.twin, dt=recording.dt)
     return case, diagnose(recording, twin, discretisation=twin_discretisation(case.twin))
@@ -389,7 +397,7 @@ def test_a_second_module_with_its_own_gap_is_said_to_need_a_second_effect():
     from dtwin.gap.recording import recording_from_frame
     from dtwin.gap.report import diagnosis_to_dict, render_markdown
 
-    case = generate_any_case("two__coulomb_friction+sensor_bias_drift", 0)
+    case = generate_any_case("two__coulomb_friction+sensor_bias_drift", 0, nominal=paper_twin())
     recording = recording_from_frame(case.recording)
     twin = twin_from_mapping(case.twin, dt=recording.dt)
     result = diagnose(recording, twin, discretisation=twin_discretisation(case.twin))

@@ -7,6 +7,7 @@ import json
 import yaml
 
 from dtwin.gapbench.batch import diagnose_case_folder, write_case_folder
+from tests.conftest import paper_twin
 
 BENCHMARK = {
     "effects": ["none", "coulomb_friction"],
@@ -18,7 +19,7 @@ DIAGNOSE = {"train_frac": 0.5, "calibrate": False}
 
 
 def test_a_benchmark_diagnosis_writes_the_json_and_report_but_no_figure(tmp_path):
-    write_case_folder("coulomb_friction_00", BENCHMARK, tmp_path / "case")
+    write_case_folder("coulomb_friction_00", BENCHMARK, paper_twin(), tmp_path / "case")
     assert sorted(p.name for p in (tmp_path / "case").iterdir()) == [
         "key.json",
         "recording.csv",

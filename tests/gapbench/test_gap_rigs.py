@@ -16,6 +16,7 @@ from dtwin.gapbench.rigs import (
     generate_any_case,
     generate_hard_rig_case,
 )
+from tests.conftest import paper_twin
 
 
 def test_stribeck_friction_is_coulomb_without_a_bump_and_breaks_away_at_rest():
@@ -42,7 +43,9 @@ def test_a_breakaway_friction_is_right_under_either_friction_name():
     ]
     assert accepted_effects("coulomb_friction", {"Fc": 1.0, "Fs": 1.0}) == ["coulomb_friction"]
     assert accepted_effects("cubic_stiffness", {}) == ["cubic_stiffness"]
-    key = generate_case("unseen__stiction", 3, n_samples=1200, magnitude=0.7).key
+    key = generate_case(
+        "unseen__stiction", 3, n_samples=1200, magnitude=0.7, nominal=paper_twin()
+    ).key
     assert key["expected_effect"] == "stribeck_friction"
     assert "coulomb_friction" in key["accepted_effects"]
 

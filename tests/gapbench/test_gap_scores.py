@@ -27,12 +27,15 @@ from dtwin.gapbench.scores import (
     score_cases,
     true_parameter,
 )
+from tests.conftest import paper_twin
 
 NONLINEAR_PLANT = ("coulomb_friction", "cubic_stiffness", "quadratic_damping")
 
 
 def _diagnosed(effect, module, seed, magnitude):
-    case = generate_case(effect, seed, magnitude=magnitude, module=module, n_samples=1500)
+    case = generate_case(
+        effect, seed, magnitude=magnitude, module=module, n_samples=1500, nominal=paper_twin()
+    )
     recording = recording_from_frame(case.recording)
     discretisation = twin_discretisation(case.twin)
     result = diagnose(recording, twin_from_mapping(case.twin), discretisation=discretisation)

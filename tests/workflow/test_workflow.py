@@ -21,7 +21,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from tests.conftest import REPO
+from tests.conftest import REPO, paper_twin
 
 pytestmark = pytest.mark.slow
 
@@ -88,6 +88,8 @@ AFTER_RESIDUALS = AFTER_FAULTS | {
 SWEEP = {"sweep_chunk", "fig11_sensitivity"}
 #: The claims across random draws (they rerun the whole single-draw pipeline).
 DRAWS = {"claims_draws", "bic_draws", "fig12_claims_across_draws"}
+#: The gap benchmark: its cases are generated from config ``twin`` (the paper's nominal twin).
+GAP = {"gap_cases", "gap_diagnoses", "gap_benchmark"}
 
 
 def small_sweep(config: dict) -> None:
@@ -313,6 +315,7 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
         *AFTER_RESIDUALS,
         *SWEEP,
         *DRAWS,
+        *GAP,
     }
     edit_config(workflow_copy, lambda c: c["twin"]["plant"].update(k=4.0))
     edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.5))
@@ -550,7 +553,9 @@ def test_each_config_seed_gives_byte_identical_draws_and_another_seed_different_
         "simulation.seed": physics,
         "faults.seed": faulted,
         "hmm.seed": em_fit,
-        "gap case seed": lambda seed: generate_case("coulomb_friction", seed).recording,
+        "gap case seed": lambda seed: (
+            generate_case("coulomb_friction", seed, nominal=paper_twin()).recording
+        ),
     }
     for name, draw in draws.items():
         first, again, other = (csv_bytes(draw(seed)) for seed in (11, 11, 12))

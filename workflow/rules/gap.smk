@@ -12,6 +12,7 @@ rule gap_cases:
     params:
         cases=gap_cases_of_chunk,
         benchmark=config["gap"]["benchmark"],
+        twin=config["twin"],
     log:
         "logs/gap_cases/{scatteritem}.log",
     benchmark:
