@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from dtwin.gap.effects._base import Bounds, Scales
+from dtwin.gap.effects._base import Bounds, Effect, Scales
 
 __all__ = [
     "MAX_DELAY_SAMPLES",
@@ -24,6 +24,7 @@ __all__ = [
     "delay_starts",
     "delayed",
     "delay_truth",
+    "delay_effect",
 ]
 
 
@@ -59,6 +60,31 @@ def delay_bounds(s: Scales) -> Bounds:
 
 def delay_starts(s: Scales) -> list[list[float]]:
     return [[(d + 0.5) * s.dt] for d in range(MAX_DELAY_SAMPLES)]
+
+
+def delay_typical(s: Scales) -> list[float]:
+    """Return a delay's typical size: one sample, s."""
+    return [s.dt]
+
+
+def delay_effect(name: str, modules: tuple[str, ...], formula: str) -> Effect:
+    """Return the :class:`Effect` of an extra fractional delay of a module's input (``delay``, s).
+
+    Bounds 0 to :data:`MAX_DELAY_SAMPLES` samples, a start in every whole sample; the two delay
+    effects differ only in their name, modules and formula.
+    """
+    return Effect(
+        name,
+        modules,
+        ("delay",),
+        ("s",),
+        "delay",
+        formula,
+        delay_bounds,
+        delay_starts,
+        delay_typical,
+        input_map=delay_input,
+    )
 
 
 def delayed(u, spec, dt=None):

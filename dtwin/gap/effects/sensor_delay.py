@@ -11,24 +11,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from dtwin.gap.effects._base import Effect
 from dtwin.gap.effects._case import CaseEffect, log_between
-from dtwin.gap.effects._delay import delay_bounds, delay_input, delay_starts, delay_truth, delayed
+from dtwin.gap.effects._delay import delay_effect, delay_truth, delayed
 
 __all__ = ["EFFECT", "CASE"]
 
 
-EFFECT = Effect(
-    "sensor_delay",
-    ("M2a", "M2b"),
-    ("delay",),
-    ("s",),
-    "delay",
-    "x[k] -> x[k − delay/dt]  (fractional, linear interpolation)",
-    delay_bounds,
-    delay_starts,
-    lambda s: [s.dt],
-    input_map=delay_input,
+EFFECT = delay_effect(
+    "sensor_delay", ("M2a", "M2b"), "x[k] -> x[k − delay/dt]  (fractional, linear interpolation)"
 )
 
 
