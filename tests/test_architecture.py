@@ -20,10 +20,11 @@ Layers of ``dtwin/`` (who may import whom, directly or through any chain of dtwi
   may import the diagnoser, never a stage, figure or reference module. No other layer imports it.
 
 Every forbidden dtwin name is checked against each file's imports and those of every dtwin
-module it reaches; a forbidden third-party package (``yaml``, Snakemake, hmmlearn, scipy.signal)
-against the file's own imports, since one deeper down may be imported lazily (what a rule's
-script loads at run time is measured by tests/workflow/test_import_budget.py). A compute rule
-(a script that publishes no artifact) never reaches a figure module, so a label edit in a
+module it reaches (a name a package re-exports lazily, dtwin/_lazy.py, counts as an import of
+the module that defines it); a forbidden third-party package (``yaml``, Snakemake, hmmlearn,
+scipy.signal) against the file's own imports, since one deeper down may be imported lazily (what
+a rule's script loads at run time is measured by tests/workflow/test_import_budget.py). A compute
+rule (a script that publishes no artifact) never reaches a figure module, so a label edit in a
 figure reruns that figure and ``claims`` only. The library carries no issue numbers and no
 dated measurements (history lives in commit messages).
 """
@@ -150,7 +151,22 @@ def module_files(name: str) -> list[Path]:
         for candidate in (stem.with_suffix(".py"), stem / "__init__.py"):
             if candidate.is_file():
                 found.append(candidate)
-    return found
+    package = REPO.joinpath(*parts[:-1]) / "__init__.py"
+    exported = lazy_exports(package).get(parts[-1]) if package.is_file() else None
+    return found + module_files(exported) if exported else found
+
+
+@cache
+def lazy_exports(package: Path) -> dict[str, str]:
+    """The names a package re-exports lazily (its ``_EXPORTS``, dtwin/_lazy.py): name → module.
+
+    ``from dtwin import fit_hmm`` runs dtwin/hmm.py on first use, so it counts as importing it.
+    """
+    for node in ast.parse(package.read_text()).body:
+        target = node.targets[0] if isinstance(node, ast.Assign) else getattr(node, "target", None)
+        if isinstance(target, ast.Name) and target.id == "_EXPORTS":
+            return ast.literal_eval(node.value)
+    return {}
 
 
 @cache
@@ -165,6 +181,13 @@ def reached(path: Path) -> frozenset[Path]:
                     seen.add(found)
                     pending.append(found)
     return frozenset(seen)
+
+
+def test_a_lazily_re_exported_name_counts_as_an_import_of_its_module(tmp_path):
+    """A figure importing ``fit_hmm`` through dtwin's lazy re-exports reaches dtwin/hmm.py."""
+    figure = tmp_path / "figure.py"
+    figure.write_text("from dtwin import fit_hmm\nfrom dtwin.gapbench import generate_case\n")
+    assert {LIBRARY / "hmm.py", LIBRARY / "gapbench" / "generator.py"} <= reached(figure)
 
 
 def _forbidden_imports(path: Path, layer: str) -> list[str]:
