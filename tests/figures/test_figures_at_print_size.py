@@ -11,6 +11,8 @@ through each artifact's JSON. The inputs are random but seeded; the values are n
 
 from __future__ import annotations
 
+import functools
+
 import matplotlib
 
 matplotlib.use("Agg")
@@ -284,12 +286,19 @@ def test_every_published_figure_has_a_fast_reader_test():
     assert published <= set(FIGURES), sorted(published - set(FIGURES))
 
 
+@functools.cache
+def checks_of(name: str) -> tuple:
+    """The reader checks of a fresh draw of ``FIGURES[name]``, drawn once per test process:
+    the reader test and the publishing test (which runs after it, in this file) both read them."""
+    figure = FIGURES[name]()
+    checks = tuple(reader_checks(figure))
+    plt.close(figure)
+    return checks
+
+
 @pytest.mark.parametrize("name", sorted(FIGURES))
 def test_figure_passes_the_reader_checks(name):
-    figure = FIGURES[name]()
-    checks = reader_checks(figure)
-    plt.close(figure)
-    for check in checks:
+    for check in checks_of(name):
         assert check.passed, (check.id, check.observed)
 
 
@@ -303,7 +312,7 @@ def test_publishing_lays_out_once_and_draws_the_pdf_where_the_png_is(tmp_path, m
     72 dpi, where the text boxes snap to coarser pixels and the panels move by up to 6.5 pt
     (Figs. 3, 9 and the gap benchmark: 1.9, 2.0 and 3.6 pt).
     """
-    expected_checks = reader_checks(FIGURES[name]())
+    expected_checks = checks_of(name)
     expected = tmp_path / "reference.png"
     save_figure(FIGURES[name](), [expected], tight=False, dpi=PNG_DPI)
 
