@@ -27,6 +27,7 @@ from threadpoolctl import threadpool_limits
 from dtwin._validation import DtwinTypeError, DtwinValueError, require_in_range
 from dtwin.exact_plant import EXACT_HOLDS
 from dtwin.gap.closed_loop import causal_holds
+from dtwin.gap.effects import effects_for_module
 from dtwin.gap.how_far import (
     answer_intervals,
     chain_before_after,
@@ -46,7 +47,7 @@ from dtwin.gap.where import (
     check_inputs_vary,
     module_notes,
 )
-from dtwin.gap.which import choose, fit_candidates, other_gaps, score_candidates
+from dtwin.gap.which import choose, fit_candidates, nested_test, other_gaps, score_candidates
 from dtwin.modules import EULER
 from dtwin.params import TwinParams
 from dtwin.wiring import MODULES
@@ -240,6 +241,17 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
     for work in flagged:
         progress.info("%s: fitting the candidate effects", work.name)
         fit_candidates(work, split)
+    for work in works.values():
+        if (
+            work.calibrated
+            and work not in flagged
+            and effects_for_module(work.name, include_mismatch=False)
+        ):
+            progress.info("%s: the nested test of the candidate effects", work.name)
+            work.nested = nested_test(work, split, settings)
+            if work.nested is not None:
+                flagged.append(work)
+                notes.append(f"{work.name}: {work.nested}")
     ranked = {w.name: score_candidates(w, split, settings) for w in flagged}
     source, chosen = choose(flagged, ranked, settings)
 

@@ -238,6 +238,7 @@ def fit_candidate(
     free: Sequence[str] | None = None,
     lin_bounds: Mapping[str, tuple[float, float]] | None = None,
     starts: Sequence[Sequence[float]] | None = None,
+    n_refine: int = _N_REFINE,
 ) -> CandidateFit:
     """Fit a module's linear parameters and an effect's parameters on the training part.
 
@@ -259,6 +260,8 @@ def fit_candidate(
     starts : sequence of sequence of float, optional
         The effect parameters' starting points (each with ``lin_start``); default
         ``effect.starts(scales)``.
+    n_refine : int, default 3
+        How many of the starts, the lowest-cost first, are refined by least squares.
 
     Returns
     -------
@@ -298,7 +301,7 @@ def fit_candidate(
         return CandidateFit(lin_start, (), 0, float(np.sqrt(np.mean(r**2))) * scale)
     costs = [float(np.sum(residual(x0) ** 2)) for x0 in starts]
     best_x, best_cost = starts[int(np.argmin(costs))], min(costs)
-    for index in np.argsort(costs)[:_N_REFINE]:
+    for index in np.argsort(costs)[:n_refine]:
         result = _scaled_least_squares(residual, starts[index], low, high, x_scale)
         if result is None:
             logger.debug("fit of %s failed from start %d", effect, index)

@@ -96,6 +96,8 @@ def _status(work: ModuleWork, flagged, source, chain_gap: float | None) -> tuple
     """Return ``(status, reason)`` of an analysed module (docs/gap.md §Statuses)."""
     if work in flagged:
         status = "source" if work is source else "gap"
+        if work.nested is not None:
+            return status, work.nested
         return status, (
             f"gap {work.gap_cal:.3g} after in-tolerance calibration exceeds the noise "
             f"threshold {work.threshold:.3g}"

@@ -141,7 +141,9 @@ class ModuleWork:
     scoring after in-band calibration (``gap_cal``), the noise floors and the threshold;
     :func:`~dtwin.gap.which.fit_candidates` appends ``candidates``;
     :func:`add_reference_gaps` sets ``reference_gap``; ``tried`` maps each discretisation
-    family tried to its training gap (None when the twin file declares one).
+    family tried to its training gap (None when the twin file declares one); ``nested`` is the
+    reason a module within its noise threshold has a gap after all, by the nested test
+    (:func:`~dtwin.gap.which.nested_test`), else None.
     """
 
     name: str
@@ -162,6 +164,7 @@ class ModuleWork:
     candidates: list[FittedCandidate] = field(default_factory=list)
     reference_gap: float | None = None
     tried: dict[str, float] | None = None
+    nested: str | None = None
 
 
 def nominal_lin(name: str, twin: TwinParams) -> dict[str, float] | None:

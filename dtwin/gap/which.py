@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from scipy.stats import chi2
 
 from dtwin.gap.effects import (
     UNEXPLAINED,
@@ -28,9 +29,9 @@ from dtwin.gap.effects import (
     quantization_variance,
     quantizer_log_density,
 )
-from dtwin.gap.fit import CandidateFit, fit_candidate, refit_delay
+from dtwin.gap.fit import CandidateFit, fit_candidate, refit_delay, training_view
 from dtwin.gap.localise import normalised_rms
-from dtwin.gap.models import simulate_module
+from dtwin.gap.models import ModuleData, simulate_module
 from dtwin.gap.results import CandidateReport, GapSettings
 from dtwin.gap.where import ModuleWork, Split
 from dtwin.wiring import PLANT
@@ -42,6 +43,11 @@ __all__ = [
     "NEST_EVIDENCE",
     "shrink_pct",
     "fit_candidates",
+    "NESTED_PART_SAMPLES",
+    "NESTED_MAX_ORDER",
+    "module_part",
+    "whitening_filter",
+    "nested_test",
     "score_candidates",
     "linear_refit_gap",
     "choose",
@@ -95,25 +101,29 @@ def _effect_params(effect: Effect | None, fit: CandidateFit, nominal, tol) -> di
     return beyond
 
 
-def fit_candidates(work: ModuleWork, split: Split) -> None:
+def fit_candidates(work: ModuleWork, split: Split, *, quick: bool = False) -> None:
     """Fit every candidate of the module on the training part; append them to ``work``.
 
     ``parameter_mismatch`` comes first and the effects start from its re-fitted linear twin;
     each candidate's gaps on the choosing and the scoring part are kept (docs/gap.md §Which).
+    ``quick`` (the nested test's screening fit): each candidate refined from its best start
+    only, and a calibrated plant's delay not searched again.
     """
     start = work.lin_base
     fits: dict[str, CandidateFit] = {}
+    refine = {"n_refine": 1} if quick else {}  # the fit's default: its three best starts
     for effect in effects_for_module(work.name, include_mismatch=not work.calibrated):
         plain = fits.get(effect.nests[0]) if effect.nests and effect.nested_starts else None
         if plain is None:
-            fitted = fit_candidate(work.data, effect, start, n_train=split.n_train)
+            fitted = fit_candidate(work.data, effect, start, n_train=split.n_train, **refine)
         else:  # a wider form starts from the form it contains, as fitted (docs/gap.md §Which)
             scales = work.data.scales
             starts = effect.nested_starts(plain.theta, scales) + effect.starts(scales)
             fitted = fit_candidate(
-                work.data, effect, plain.lin, n_train=split.n_train, starts=starts
+                work.data, effect, plain.lin, n_train=split.n_train, starts=starts, **refine
             )
-        if work.calibrated and work.data.role == PLANT:  # its delay was chosen without the effect
+        # a calibrated plant's delay was chosen without the effect
+        if work.calibrated and work.data.role == PLANT and not quick:
             fitted = refit_delay(work.data, effect, fitted, split.n_train)
         if effect.refits_linear:
             start = fitted.lin  # the effects start from the re-fitted linear twin
@@ -235,6 +245,186 @@ def score_candidates(work: ModuleWork, split: Split, settings: GapSettings):
     return sorted(reports, key=lambda r: r.score)
 
 
+#: Most samples of the training part, and of the choosing part, the nested test uses: on a
+#: longer recording it fits and compares over the contiguous stretch of at most twice this many
+#: samples around their boundary, so its memory and CPU do not grow with the recording.
+NESTED_PART_SAMPLES = 10_000
+#: Highest order of the autoregressive noise model that whitens the nested test's errors.
+NESTED_MAX_ORDER = 8
+
+
+def module_part(data: ModuleData, start: int, stop: int) -> ModuleData:
+    """Return the module's recorded signals over samples ``start … stop−1`` (each such a slice).
+
+    Every model starts from the recorded state at the part's first sample, as at a recording's
+    first sample; the scales stay the whole recording's, restarts inside the part move with it.
+    """
+    cut = slice(start, stop)
+
+    def part(values):
+        return None if values is None else values[cut]
+
+    return replace(
+        data,
+        inputs={name: values[cut] for name, values in data.inputs.items()},
+        output=data.output[cut],
+        t=data.t[cut],
+        velocity=part(data.velocity),
+        position=part(data.position),
+        restarts=tuple(r - start for r in data.restarts if start < r < stop),
+    )
+
+
+def _lagged(residual: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(rows, lags)``: the samples whose ``order`` predecessors are all finite.
+
+    ``rows`` are sample indices, ``lags`` shape ``(len(rows), order)`` their values at lags
+    1 … ``order``.
+    """
+    finite = np.isfinite(residual)
+    run = np.convolve(finite.astype(float), np.ones(order + 1))[: len(residual)]
+    rows = np.flatnonzero(run >= order + 1 - 0.5)
+    lags = np.zeros((len(rows), order))
+    for lag in range(1, order + 1):
+        lags[:, lag - 1] = residual[rows - lag]
+    return rows, lags
+
+
+def whitening_filter(residual: np.ndarray, max_order: int = NESTED_MAX_ORDER) -> np.ndarray:
+    """Return the monic whitening filter ``[1, a₁, …, a_p]`` of an AR(p) model of a residual.
+
+    Parameters
+    ----------
+    residual : array, shape (n,)
+        An error series, NaN where unscored (a window's warm-up): only stretches of finite
+        samples are used.
+    max_order : int
+        Highest order tried.
+
+    Returns
+    -------
+    numpy.ndarray, shape (p + 1,)
+        ``e[k] + a₁·e[k−1] + … + a_p·e[k−p]`` is the model's innovation; ``p`` minimises BIC
+        ``n·ln σ̂²_p + p·ln n`` over the same samples for every order (least squares,
+        ``p = 0``: white).
+    """
+    residual = np.asarray(residual, dtype=float)
+    rows, lags = _lagged(residual, max_order)
+    if len(rows) <= 10 * (max_order + 1):
+        return np.array([1.0])
+    target = residual[rows]
+    best, best_bic = np.array([1.0]), len(rows) * math.log(max(float(target @ target), 1e-300))
+    for order in range(1, max_order + 1):
+        coeffs, *_ = np.linalg.lstsq(lags[:, :order], target, rcond=None)
+        error = target - lags[:, :order] @ coeffs
+        bic = len(rows) * math.log(max(float(error @ error), 1e-300)) + order * math.log(len(rows))
+        if bic < best_bic:
+            best, best_bic = np.concatenate([[1.0], -coeffs]), bic
+    return best
+
+
+def _whitened(residual: np.ndarray, whiten: np.ndarray) -> np.ndarray:
+    """Return the innovations ``Σ a_i·e[k−i]`` of ``residual`` (NaN without ``p`` finite lags)."""
+    order = len(whiten) - 1
+    rows, lags = _lagged(np.asarray(residual, dtype=float), order)
+    out = np.full(len(residual), np.nan)
+    out[rows] = residual[rows] + lags @ whiten[1:]
+    return out
+
+
+def nested_test(work: ModuleWork, split: Split, settings: GapSettings) -> str | None:
+    """Return why a module within its noise threshold has a gap after all, or None.
+
+    The nested test (docs/gap.md §Where) for a module calibrated from data: every candidate is
+    fitted on the training part and compared on the choosing part with the linear twin, the
+    better of the calibrated one and the same one re-fitted by the candidates' own fit (so
+    that a candidate's gain is not a better fit of the linear part). Both errors are whitened by
+    the AR noise model of the calibrated twin's training error (:func:`whitening_filter`), so
+    that ``T = n·ln(Σε_linear²/Σε_candidate²)`` over the ``n`` whitened choosing samples is the
+    likelihood ratio of the nested Gaussian models with coloured noise. The module has a gap
+    when the best-scored candidate (:func:`score_candidates`, nested forms as in
+    :func:`choose`) reaches ``χ²_p(1 − significance/K)`` (``p`` its effect parameters, ``K``
+    the candidates: a test of size ``significance`` over all of them) and removes at least
+    ``min_gap`` of the linear twin's error, ``√(gap_linear² − gap_candidate²) ≥ min_gap``.
+
+    On a recording with more than :data:`NESTED_PART_SAMPLES` training or choosing samples
+    the candidates are fitted and compared on the contiguous part of at most that many of each
+    around their boundary (:func:`module_part`, windowed as the fit sees it:
+    :func:`~dtwin.gap.fit.training_view`); only when the test finds a gap are they fitted
+    again on the whole training part, every start refined (the test's own fits refine the best
+    start only: ``fit_candidates(quick=True)``), into ``work.candidates``.
+    """
+    start = max(0, split.n_train - NESTED_PART_SAMPLES)
+    stop = min(split.n_choose, split.n_train + NESTED_PART_SAMPLES)
+    if start == 0 and stop == split.n_choose:
+        part, part_split = replace(work, candidates=[]), split
+    else:
+        # windowed as the fit sees a long window (a recording's window may outlast the part)
+        data = training_view(module_part(work.data, start, stop), split.n_train - start)[0]
+        part_split = Split(split.n_train - start, stop - start, stop - start)
+        simulated = simulate_module(data, work.lin_base)
+        part = replace(
+            work,
+            data=data,
+            sim_before=simulated,
+            gap_before=normalised_rms(data.output, simulated, part_split.choose, work.norm),
+            gap_scored=math.nan,
+            candidates=[],
+        )
+    fit_candidates(part, part_split, quick=True)
+    ranked = score_candidates(part, part_split, settings)
+    if not ranked:
+        return None
+    best = _plain_over_nesting(ranked)
+    fitted = next(c for c in part.candidates if c.effect.name == best.effect)
+    output, choose = part.data.output, part_split.choose
+    whiten = whitening_filter((output - part.sim_before)[: part_split.n_train])
+    refit = fit_candidate(part.data, None, part.lin_base, n_train=part_split.n_train)
+    errors = [
+        (output - prediction)[choose]
+        for prediction in (
+            fitted.predicted,
+            part.sim_before,
+            simulate_module(part.data, refit.lin),
+        )
+    ]
+    innovations = np.stack([_whitened(error, whiten) for error in errors])
+    scored = np.all(np.isfinite(innovations), axis=0)
+    n_scored = int(np.count_nonzero(scored))
+    if n_scored < 2 * len(whiten):
+        return None
+    sums = np.sum(innovations[:, scored] ** 2, axis=1)
+    gaps = [float(np.sqrt(np.mean(e[scored] ** 2))) / work.norm for e in errors]
+    linear = 1 + int(np.argmin(sums[1:]))
+    if not 0 < sums[0] < sums[linear]:
+        return None
+    statistic = n_scored * math.log(sums[linear] / sums[0])
+    n_params = max(fitted.effect.n_params, 1)
+    critical = float(chi2.ppf(1.0 - settings.significance / len(ranked), n_params))
+    removed = math.sqrt(max(gaps[linear] ** 2 - gaps[0] ** 2, 0.0))
+    logger.debug(
+        "%s nested test: %s T %.2f (critical %.2f, n %d, AR(%d)), removes %.4g",
+        work.name,
+        best.effect,
+        statistic,
+        critical,
+        n_scored,
+        len(whiten) - 1,
+        removed,
+    )
+    if statistic < critical or removed < settings.min_gap:
+        return None
+    fit_candidates(work, split)  # the answer's candidates: every start refined, whole part
+    return (
+        f"gap {work.gap_cal:.3g} within the noise threshold {work.threshold:.3g}, but "
+        f"{best.effect} lowers the linear twin's choosing-part gap {gaps[linear]:.3g} to "
+        f"{gaps[0]:.3g}: likelihood ratio {statistic:.1f} over {n_scored} samples whitened by "
+        f"an AR({len(whiten) - 1}) noise model >= chi2_{n_params} {critical:.1f} (size "
+        f"{settings.significance:g} over {len(ranked)} candidates; removes {removed:.3g} "
+        f">= min_gap)"
+    )
+
+
 def choose(flagged: list[ModuleWork], ranked: Mapping[str, list], settings: GapSettings):
     """Return ``(source, chosen)``: the source module's work and its winning candidate.
 
@@ -249,7 +439,8 @@ def choose(flagged: list[ModuleWork], ranked: Mapping[str, list], settings: GapS
         if not ranked[source.name]:
             return source, None
         best = _plain_over_nesting(ranked[source.name])
-        chosen = best if _clears_bar(best, settings) else None
+        # a module flagged by the nested test has its gap because this candidate passed it
+        chosen = best if source.nested is not None or _clears_bar(best, settings) else None
     return source, chosen
 
 

@@ -31,7 +31,7 @@ def _report(effect: str, params: dict, share: float, score: float, weight: float
 
 
 class _Work:
-    name, gap_cal, threshold = "M1", 0.1, 0.02
+    name, gap_cal, threshold, nested = "M1", 0.1, 0.02, None
 
 
 def _answer(fs: float, stribeck_share: float, coulomb_score: float = 40.0):

@@ -1,0 +1,106 @@
+"""The nested test (docs/gap.md §Where): a likelihood ratio of stated size on coloured noise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+from scipy.stats import chi2
+
+from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping, which
+from dtwin.gap.which import module_part, whitening_filter
+from tests.gap.test_gap_diagnose import _rig
+
+
+def _ar1(pole: float, shape: tuple[int, ...], seed: int) -> np.ndarray:
+    """AR(1) noise of unit innovation, shape ``shape`` (the last axis is time)."""
+    return lfilter([1.0], [1.0, -pole], np.random.default_rng(seed).standard_normal(shape), axis=-1)
+
+
+def test_the_whitening_filter_reads_an_ar1_pole_across_unscored_gaps():
+    noise = _ar1(0.67, (20000,), seed=1)
+    noise[::500] = np.nan  # a window's warm-up is not scored
+    whiten = whitening_filter(noise)
+    assert whiten[0] == 1.0 and whiten[1] == pytest.approx(-0.67, abs=0.03)
+    assert np.all(np.abs(whiten[2:]) < 0.05)
+    assert len(whitening_filter(np.random.default_rng(2).standard_normal(20000))) <= 2
+
+
+def test_the_whitened_ratio_has_its_stated_size_under_coloured_noise():
+    """Noise with pole 0.67 and a least-squares term along a slow direction: T is χ²₁.
+
+    The worst case of the test, in sample (out of sample a spurious term only adds error).
+    Scaled by the effective sample size of a mean square instead, T was 1.9 times too large
+    along such a direction (mean 1.86 here), a size of 5 % (21 of these 400) for a stated 1 %.
+    """
+    n, trials = 3000, 400
+    noise = _ar1(0.67, (trials, n), seed=3)
+    slow = np.sin(2 * np.pi * np.arange(n) / 700.0)
+    statistics = []
+    for error in noise:
+        fitted = error - (error @ slow) / (slow @ slow) * slow  # the candidate's error
+        whiten = whitening_filter(error)
+        linear, candidate = (lfilter(whiten, [1.0], e)[len(whiten) :] for e in (error, fitted))
+        statistics.append(len(linear) * math.log(linear @ linear / (candidate @ candidate)))
+    statistics = np.array(statistics)
+    assert 0.7 < statistics.mean() < 1.4  # χ²₁ has mean 1
+    assert np.count_nonzero(statistics >= chi2.ppf(0.99, 1)) <= 10  # expected 4 of 400
+
+
+@pytest.fixture(scope="module")
+def rig_data():
+    from dtwin.gap.localise import module_inputs
+    from dtwin.gap.models import ModuleData
+
+    frame = _rig(0.0, n=2000)
+    signals = {"u_act": frame["u_act"].to_numpy(), "x": frame["x"].to_numpy()}
+    t = frame["t"].to_numpy()
+    inputs = module_inputs("M1", signals, 0.002)
+    velocity = np.gradient(signals["x"]) / 0.002
+    return ModuleData("M1", inputs, signals["x"], 0.002, t, velocity, restarts=(500, 1500))
+
+
+def test_module_part_slices_every_signal_and_moves_the_restarts(rig_data):
+    part = module_part(rig_data, 400, 1200)
+    assert part.n_samples == 800 and part.t[0] == rig_data.t[400]
+    assert np.array_equal(part.inputs["u_act"], rig_data.inputs["u_act"][400:1200])
+    assert np.array_equal(part.velocity, rig_data.velocity[400:1200])
+    assert part.restarts == (100,) and part.position is None
+
+
+def _noisy_rig(friction: float):
+    """The rig of test_gap_diagnose with 0.03 V more white noise on the position (12,000 samples).
+
+    Its gap threshold then needs an excess of about 0.03 of the signal's spread; Coulomb
+    friction 0.05 and 0.1 leave 0.016 and 0.031 of it (0.2: above the threshold).
+    """
+    frame = _rig(friction)
+    frame["x"] = frame["x"] + 0.03 * np.random.default_rng(7).standard_normal(len(frame))
+    return diagnose(recording_from_frame(frame), twin_from_mapping({"dt": 0.002}))
+
+
+def test_a_faint_friction_within_the_threshold_is_named_and_a_clean_rig_reads_none():
+    faint = _noisy_rig(0.05)
+    plant = faint.modules["M1"]
+    assert (faint.module, faint.effect) == ("M1", "coulomb_friction")
+    assert faint.params["Fc"] == pytest.approx(0.05, rel=0.2)
+    assert "within the noise threshold" in plant.reason and "likelihood ratio" in plant.reason
+    assert _noisy_rig(0.0).effect == "none"
+
+
+def test_a_long_recording_is_tested_on_a_bounded_part(monkeypatch):
+    """Parts of 1,500 samples (of 6,000 training and 3,000 choosing ones): the same answer."""
+    monkeypatch.setattr(which, "NESTED_PART_SAMPLES", 1500)
+    calls, fit = [], which.fit_candidates
+
+    def counted(work, split, **options):
+        calls.append(split)
+        return fit(work, split, **options)
+
+    monkeypatch.setattr(which, "fit_candidates", counted)
+    faint = _noisy_rig(0.1)
+    assert faint.effect == "coulomb_friction" and faint.params["Fc"] == pytest.approx(0.1, rel=0.2)
+    assert (calls[0].n_train, calls[0].n_choose) == (1500, 3000)  # the part: 1,500 of each
+    assert calls[1].n_train == 6000  # found: the answer's fits on the whole training part
