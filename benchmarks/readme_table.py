@@ -46,6 +46,13 @@ def cpu_split(r: dict) -> str:
     if "cold_cores2_cpu_s" not in r:
         return f"{jobs:.1f} CPU s (jobs)"
     snakemake = r["cold_cores2_cpu_s"] - jobs
+    if r.get("served_jobs"):
+        server = r["job_server_cpu_s"]
+        return (
+            f"{r['cold_cores2_cpu_s']:.1f} CPU s (jobs {jobs:.1f}, {r['served_jobs']} of them "
+            f"forked from the job server; its preload {server:.1f}; Snakemake and the jobs' "
+            f"shells {snakemake - server:.1f})"
+        )
     return f"{r['cold_cores2_cpu_s']:.1f} CPU s (jobs {jobs:.1f}, Snakemake {snakemake:.1f})"
 
 

@@ -63,6 +63,13 @@ def render(schema: dict[str, Any], config: dict[str, Any]) -> str:
         node = _resolve(schema, node)
         lines += ["", f"## `{section}`", "", node.get("description", ""), ""]
         lines += ["| key | unit | description | default |", "|---|---|---|---|"]
+        if node.get("type") != "object":  # a run setting of its own, absent from config.yaml
+            default = json.dumps(config[section]) if section in config else "not set"
+            row = (node.get("x-unit", ""), node.get("description", ""), default)
+            lines[-6] = f"## `{section}` (run setting)"
+            lines[-4] = "A setting of how the workflow runs, not of the science."
+            lines.append(f"| `{section}` | " + " | ".join(_cell(cell) for cell in row) + " |")
+            continue
         for key, unit, description, default in _rows(schema, node, config[section], section):
             lines.append(f"| `{key}` | {_cell(unit)} | {_cell(description)} | {_cell(default)} |")
     return "\n".join(lines) + "\n"

@@ -7,8 +7,11 @@ waits for it with :func:`os.wait4` and writes the child's user + system CPU seco
 memory, wall seconds (interpreter start-up and shut-down included, like every child it reaped)
 and end time, then exits with the child's status. The child writes its rule and wildcards (read
 from the ``snakemake`` object) at exit. Any other Python process (Snakemake itself) writes its
-own CPU and that of the children it reaped at exit. Unlike Snakemake's ``benchmark:`` files (a
-sampler that stops after ~15 s and takes no sample at exit) this is the kernel's own account.
+own CPU and that of the children it reaped at exit, except a process forked from it (a child
+of dtwin's job server, which runs a job's script: dtwin/_job_server.py), which writes the
+job's rule and wildcards and its own usage, marked ``served``. Unlike Snakemake's
+``benchmark:`` files (a sampler that stops after ~15 s and takes no sample at exit) this is
+the kernel's own account.
 Without ``DTWIN_CPU_LOG`` this does nothing.
 """
 
@@ -21,6 +24,7 @@ import time
 
 _FOLDER = os.environ.get("DTWIN_CPU_LOG")
 _START = time.perf_counter()
+_PID = os.getpid()
 _JOB_SCRIPT = os.sep + os.path.join(".snakemake", "scripts") + os.sep
 
 
@@ -42,8 +46,14 @@ def _job_identity() -> None:
 
 
 def _process_totals() -> None:
-    """At a non-job process's exit: its own CPU and its reaped children's."""
+    """At a non-job process's exit: its own CPU and its reaped children's; in a child forked
+    from it (a job the job server runs), the job's identity and the child's own usage."""
     own = resource.getrusage(resource.RUSAGE_SELF)
+    if os.getpid() != _PID:
+        _job_identity()
+        record = {"served": True, "cpu_s": _cpu(own), "max_rss_mb": round(own.ru_maxrss / 1024, 1)}
+        _write(f"usage-{os.getpid()}.json", record)
+        return
     children = resource.getrusage(resource.RUSAGE_CHILDREN)
     record = {"argv": sys.argv[:3], "cpu_s": _cpu(own), "children_cpu_s": _cpu(children)}
     _write(f"process-{os.getpid()}.json", record)

@@ -429,10 +429,23 @@ def test_a_library_edit_reruns_the_rules_that_import_it(workflow_copy):
 BATCH_RULES = {"sweep_chunk", "fig11_sensitivity", "gap_cases", "gap_diagnoses", "gap_benchmark"}
 
 
+#: What a rule's log says when the job server (dtwin/_job_server.py) ran the job.
+SERVED = "started (forked from the job server)"
+
+
+def served_rules(workdir: Path) -> set[str]:
+    """Rules whose last job (its log) ran in a child of the job server."""
+    folder = workdir / "logs"
+    logs = [p for p in folder.rglob("*.log") if SERVED in p.read_text(errors="replace")]
+    return {p.relative_to(folder).parts[0].removesuffix(".log") for p in logs}
+
+
 def test_rerun_gives_byte_identical_tables_and_figures(workflow_copy):
     """Every other rule forced to run again (and `claims`, which reads the batches too) gives
     the same bytes in every table, figure and JSON; the batches' own reruns are in the tests
-    named at BATCH_RULES, so they are not run a second time here."""
+    named at BATCH_RULES, so they are not run a second time here. The first run went through
+    the job server (all jobs but those that started before it was ready), the rerun runs each
+    job in its own process (``job_server=False``): the server changes no byte."""
     outputs = sorted((workflow_copy / "results").rglob("*.*")) + sorted(
         (workflow_copy / "paper_figures").glob("*.*")
     )
@@ -444,8 +457,10 @@ def test_rerun_gives_byte_identical_tables_and_figures(workflow_copy):
     assert every_rule > BATCH_RULES
     forced = sorted(every_rule - BATCH_RULES)
     assert planned_rules_of(workflow_copy, "--forcerun", *forced) == set(forced)
+    assert len(served_rules(workflow_copy) & set(forced)) >= len(forced) // 2
     before = {str(path): path.read_bytes() for path in outputs}
-    snakemake(workflow_copy, "--cores", "2", "--forcerun", *forced)
+    snakemake(workflow_copy, "--cores", "2", "--forcerun", *forced, "--config", "job_server=False")
+    assert served_rules(workflow_copy) & set(forced) == set()
     after = {str(path): path.read_bytes() for path in outputs}
     changed = [name for name in before if before[name] != after[name]]
     assert not changed

@@ -3,6 +3,7 @@
 import functools
 import os
 import re
+import sys
 
 import jsonschema
 import yaml
@@ -326,3 +327,64 @@ DRAW_BIC = {
     "n_restarts": config["draws"]["bic"]["n_restarts"],
     "max_restarts": config["draws"]["bic"]["max_restarts"],
 }
+
+
+# --- the warm job server (dtwin/_job_server.py) -------------------------------------------------
+# Started when jobs are about to run on this machine: its process imports what the run's scripts
+# import, then forks one child per job, so each job skips the interpreter's start-up (imports and
+# the EM kernels' cache loads: 0.4-1.4 CPU-s a job). `--config job_server=false` turns it off;
+# jobs on a cluster, or started before the server is ready, run in their own process as before.
+# Besides the dtwin modules the scripts import: Snakemake's script preamble, and what matplotlib
+# loads when a figure is saved.
+JOB_SERVER_PRELOAD = (
+    "snakemake.script",
+    "snakemake.logging",
+    "snakemake.iocontainers",
+    "matplotlib.backends.backend_agg",
+    "matplotlib.backends.backend_pdf",
+    "fontTools.subset",
+)
+# Not preloaded although a script names it: the hmmlearn reference engine (with scikit-learn),
+# which a job imports only if hmm.engine asks for it or the compiled EM falls back.
+JOB_SERVER_SKIP = ("dtwin._em_reference",)
+# Modules whose warm_up() loads their compiled kernels from numba's cache.
+JOB_SERVER_KERNELS = ("dtwin._em_kernels", "dtwin._force_kernels")
+
+
+def job_server_modules(jobs):
+    """The dtwin modules the scripts of ``jobs`` import (dotted names), sorted."""
+    modules = set()
+    for script in {os.path.basename(job.rule.script) for job in jobs if job.rule.script}:
+        for path in dtwin_sources(os.path.join("scripts", script)):
+            modules.add(path[: -len(".py")].replace(os.sep, ".").removesuffix(".__init__"))
+    return sorted(modules.difference(JOB_SERVER_SKIP))
+
+
+def start_job_server():
+    """Start the job server for the jobs this run will run (local runs only)."""
+    if not config.get("job_server", True) or not workflow.local_exec:
+        return
+    from dtwin._job_server import start_server
+
+    modules = job_server_modules(workflow.dag.needrun_jobs())
+    if modules:
+        kernels = [name for name in JOB_SERVER_KERNELS if name in modules]
+        start_server([*modules, *JOB_SERVER_PRELOAD], kernels)
+
+
+def stop_job_server():
+    """Stop the job server, if this run started one."""
+    if "dtwin._job_server" in sys.modules:
+        sys.modules["dtwin._job_server"].stop_server()
+
+
+onstart:
+    start_job_server()
+
+
+onsuccess:
+    stop_job_server()
+
+
+onerror:
+    stop_job_server()
