@@ -18,9 +18,9 @@ interval carries its trade-off with the re-fitted linear twin.
 
 Three errors the sandwich does not see are added (docs/gap.md §Intervals): the spread between
 the fits on two parts (``other_part``); the contrast with a wider catalogue form that nests the
-candidate's, or with the candidate's form made smooth (:data:`SMOOTHED`) when none does
+candidate's, or with the candidate's form made smooth (``Effect.smoothed``) when none does
 (``wider``: the narrower form's bias when the real effect needs the wider one); and
-the limit of an input map that the recorded inputs do not reach (:data:`LIMITS`), which the
+the limit of an input map that the recorded inputs do not reach (``Effect.input_limit``), which the
 data bound only from below. No interval is narrower than the fit's own step tolerance
 (:data:`~dtwin.gap.fit.FIT_XTOL`): a noiseless module fitted exactly leaves residuals at
 rounding level.
@@ -35,7 +35,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.stats import t as student_t
 
-from dtwin.gap.effects import Effect, effect_by_name, soft_saturation
+from dtwin.gap.effects import Effect
 from dtwin.gap.fit import FIT_XTOL, fit_candidate, linear_typical, training_view
 from dtwin.gap.models import LINEAR_PARAMS, ModuleData, simulate_module
 from dtwin.modules import EULER
@@ -43,8 +43,6 @@ from dtwin.modules import EULER
 __all__ = [
     "N_BLOCKS",
     "LEVEL",
-    "LIMITS",
-    "SMOOTHED",
     "fitted_names",
     "parameter_intervals",
     "smoothed_fit",
@@ -56,55 +54,20 @@ N_BLOCKS = 20
 LEVEL = 0.95
 #: Central-difference step, relative to each parameter's typical size.
 _STEP = 1e-4
-#: ``effect → (parameter, input signal)``: a parameter that is the limit of the effect's input
-#: map as the input grows (a saturation level). A recording determines the map only over the
-#: inputs it holds; beyond them the level is the catalogue form's extrapolation (a tanh
-#: saturation read through the algebraic form overshoots its level by 10–30 % when the input
-#: stays below about twice the level). The data bound it from below only by the largest
-#: ``|map output|`` over the training inputs: the interval's lower end reaches down to that.
-LIMITS: dict[str, tuple[str, str]] = {"actuator_saturation": ("U", "u_cmd")}
-#: Sharpness starts of a :data:`SMOOTHED` form's fit (with the answer's own parameters).
+#: Sharpness starts of a smoothed form's fit (with the answer's own parameters).
 _SHARPNESS_STARTS = (4.0, 12.0, 40.0)
-
-
-def _soft_deadzone_input(u: np.ndarray, theta: Sequence[float], dt: float) -> np.ndarray:
-    """Return ``u − u/(1 + |u/D|^p)^(1/p)``: the input less the catalogue's saturation at ±D."""
-    return u - soft_saturation(u, theta[0], theta[1])
-
-
-def _soft_deadzone() -> Effect:
-    """Return the dead zone with a sharpness ``p``: the catalogue's hard one as ``p → ∞``."""
-    hard = effect_by_name("actuator_deadzone")
-    saturation = effect_by_name("actuator_saturation")
-    return replace(
-        hard,
-        name="soft_deadzone",
-        params=("D", "p"),
-        units=("input units", "1"),
-        formula="u -> u − u/(1 + |u/D|^p)^(1/p)  (dead zone ±D, sharpness p)",
-        bounds=lambda s: [(1e-6 * s.input_max, 0.9 * s.input_max), saturation.bounds(s)[1]],
-        typical=lambda s: [hard.typical(s)[0], saturation.typical(s)[1]],
-        input_map=_soft_deadzone_input,
-    )
-
-
-#: ``effect → wider form`` fitted for the interval alone where no catalogue candidate nests the
-#: answer's form: the catalogue's form with a sharpness, the catalogue's own as its limit (a dead
-#: zone whose edges are rounded is read by the hard one with ``D`` 2–5 % low). Its extra
-#: parameter follows the answer's; :func:`parameter_intervals` contrasts the shared ones.
-SMOOTHED: dict[str, Effect] = {"actuator_deadzone": _soft_deadzone()}
 
 
 def smoothed_fit(
     data: ModuleData, effect: Effect, lin: Mapping[str, float], theta: Sequence[float], n_train: int
 ) -> tuple[Effect, dict[str, float], tuple[float, ...]] | None:
-    """Return the :data:`SMOOTHED` wider form of ``effect`` fitted from the answer's fit.
+    """Return the wider form of ``effect`` (``Effect.smoothed``) fitted from the answer's fit.
 
     ``(effect, lin, theta)`` as ``parameter_intervals(wider=...)`` takes it; None when the
     effect has no such form. The fit starts from the answer's parameters with each sharpness
     of ``_SHARPNESS_STARTS`` and frees the same linear parameters as the answer's fit.
     """
-    wide = SMOOTHED.get(effect.name)
+    wide = effect.smoothed
     if wide is None:
         return None
     starts = [[*theta, sharpness] for sharpness in _SHARPNESS_STARTS]
@@ -307,8 +270,8 @@ def parameter_intervals(
         for name, value, h in zip(names, beta, half, strict=True)
         if math.isfinite(h)
     }
-    if effect is not None and effect.name in LIMITS and LIMITS[effect.name][0] in intervals:
-        name, signal = LIMITS[effect.name]
+    if effect is not None and effect.input_limit and effect.input_limit[0] in intervals:
+        name, signal = effect.input_limit
         mapped = effect.input_map(data.inputs[signal][:n_train], beta[len(linear) :], data.dt)
         low, high = intervals[name]
         intervals[name] = (min(low, float(np.max(np.abs(mapped)))), high)

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from dtwin.gap.effects import Scales, effect_by_name
+from dtwin.gap.effects.actuator_deadzone import SOFT_DEADZONE
 from dtwin.gap.fit import FIT_XTOL, fit_candidate
-from dtwin.gap.intervals import LIMITS, SMOOTHED, parameter_intervals, smoothed_fit
+from dtwin.gap.intervals import parameter_intervals, smoothed_fit
 from dtwin.gap.models import ModuleData, first_order_lag
 
 
@@ -72,7 +73,7 @@ def test_a_saturation_level_the_input_never_reaches_is_bounded_from_below_by_the
     form: the fitted level overshoots; the interval reaches down to the map's largest output
     over the recorded inputs, and holds the true level."""
     effect = effect_by_name("actuator_saturation")
-    assert LIMITS["actuator_saturation"] == ("U", "u_cmd")
+    assert effect.input_limit == ("U", "u_cmd")
     dt, n, level = 0.01, 3000, 2.0
     t = np.arange(n) * dt
     rng = np.random.default_rng(7)
@@ -107,7 +108,7 @@ def test_a_rounded_dead_zone_read_as_the_hard_one_is_covered_through_its_smoothe
         fit = fit_candidate(data, effect, {"tau": 0.15}, n_train=1500)
         plain = parameter_intervals(data, effect, fit.lin, fit.theta, 1500)["D"]
         wider = smoothed_fit(data, effect, fit.lin, fit.theta, 1500)
-        assert wider is not None and wider[0] is SMOOTHED["actuator_deadzone"]
+        assert wider is not None and wider[0] is effect.smoothed is SOFT_DEADZONE
         low, high = parameter_intervals(data, effect, fit.lin, fit.theta, 1500, wider=wider)["D"]
         assert low <= 0.2 <= high
         if smooth:

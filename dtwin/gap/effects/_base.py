@@ -165,6 +165,16 @@ class Effect:
     lattice : bool
         The effect puts the output on a lattice (a quantizer): it is fitted on the lattice the
         values sit on and chosen by its own likelihood, not a Gaussian's (docs/gap.md §Which).
+    input_limit : (str, str) or None
+        ``(parameter, input signal)``: a parameter that is the limit of the effect's input map
+        as the input grows (a saturation level). A recording determines the map only over the
+        inputs it holds, so the data bound that parameter from below only by the largest
+        ``|map output|`` over the training inputs; its interval's lower end reaches down to
+        that (:func:`dtwin.gap.intervals.parameter_intervals`).
+    smoothed : Effect or None
+        A wider form fitted for the interval alone where no catalogue candidate nests this one:
+        this form with a sharpness, this form as its limit (a dead zone with rounded edges is
+        read by the hard one with ``D`` 2–5 % low; :func:`dtwin.gap.intervals.smoothed_fit`).
     """
 
     name: str
@@ -185,6 +195,8 @@ class Effect:
     input_map: Callable[[np.ndarray, Sequence[float], float], np.ndarray] | None = None
     output_map: Callable[..., np.ndarray] | None = None
     lattice: bool = False
+    input_limit: tuple[str, str] | None = None
+    smoothed: Effect | None = None
 
     @property
     def n_params(self) -> int:

@@ -9,14 +9,16 @@ the benchmark draws it and its real form (symmetric, asymmetric or smooth).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from dtwin.gap.effects import actuator_saturation
 from dtwin.gap.effects._base import Effect
 from dtwin.gap.effects._case import CaseEffect, log_between
 
-__all__ = ["EFFECT", "CASE", "deadzone"]
+__all__ = ["EFFECT", "CASE", "SOFT_DEADZONE", "deadzone"]
 
 
 def deadzone(u: np.ndarray, width: float) -> np.ndarray:
@@ -28,7 +30,7 @@ def _deadzone_input(u: np.ndarray, theta: Sequence[float], dt: float) -> np.ndar
     return deadzone(u, theta[0])
 
 
-EFFECT = Effect(
+_HARD = Effect(
     "actuator_deadzone",
     ("M0",),
     ("D",),
@@ -40,6 +42,29 @@ EFFECT = Effect(
     lambda s: [0.1 * s.input_max],
     input_map=_deadzone_input,
 )
+
+
+def _soft_deadzone_input(u: np.ndarray, theta: Sequence[float], dt: float) -> np.ndarray:
+    """Return ``u − u/(1 + |u/D|^p)^(1/p)``: the input less the catalogue's saturation at ±D."""
+    return u - actuator_saturation.soft_saturation(u, theta[0], theta[1])
+
+
+_SATURATION = actuator_saturation.EFFECT
+
+#: The dead zone with a sharpness ``p``, the hard one as ``p → ∞``: the wider form its
+#: interval is contrasted with (``Effect.smoothed``).
+SOFT_DEADZONE = replace(
+    _HARD,
+    name="soft_deadzone",
+    params=("D", "p"),
+    units=("input units", "1"),
+    formula="u -> u − u/(1 + |u/D|^p)^(1/p)  (dead zone ±D, sharpness p)",
+    bounds=lambda s: [(1e-6 * s.input_max, 0.9 * s.input_max), _SATURATION.bounds(s)[1]],
+    typical=lambda s: [_HARD.typical(s)[0], _SATURATION.typical(s)[1]],
+    input_map=_soft_deadzone_input,
+)
+
+EFFECT = replace(_HARD, smoothed=SOFT_DEADZONE)
 
 
 def _draw_deadzone(module, level, rng, scale) -> dict[str, Any]:

@@ -43,6 +43,9 @@ EFFECT = Effect(
     lambda s: [[f * s.input_max, p] for f in (0.4, 0.7, 1.0) for p in (3.0, 12.0)],
     lambda s: [s.input_max, 5.0],
     input_map=_saturation_input,
+    # A tanh saturation read through the algebraic form overshoots its level by 10–30 % when
+    # the input stays below about twice the level: the data bound U from below only.
+    input_limit=("U", "u_cmd"),
 )
 
 
