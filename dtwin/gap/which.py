@@ -195,23 +195,6 @@ def _three_shrinks(work: ModuleWork, effect: Effect, gap_after: float, refit: fl
     )
 
 
-def _share_part(work: ModuleWork, split: Split) -> slice:
-    """Return the part a candidate's share of the excess gap is measured on (docs/gap.md §Which).
-
-    The choosing part, unless the module's twin has no excess over its floor there: a module is
-    flagged on the training and choosing parts together (§Where), and a gap that lies in the
-    training part alone left every candidate a share of nothing, 0 %, so the answer was
-    ``unexplained`` whatever the candidates removed (a rig's quadratic damping whose fitted
-    candidate reached 0.0133 on the choosing part, below its floor of 0.0149, where the gap of
-    0.0273 lay in the training part). Then it is those two parts together, where the gap was
-    found.
-    """
-    floor = work.floor.rms / work.norm
-    if work.gap_before > floor:
-        return split.choose
-    return split.decide
-
-
 def score_candidates(work: ModuleWork, split: Split, settings: GapSettings):
     """Return the module's :class:`CandidateReport` list, best (lowest choosing score) first.
 
@@ -220,20 +203,12 @@ def score_candidates(work: ModuleWork, split: Split, settings: GapSettings):
     """
     n_eff = work.n_eff
     floor = work.floor.rms / work.norm
-    share_part = _share_part(work, split)
-    excess_choose = _excess(
-        normalised_rms(work.data.output, work.sim_before, share_part, work.norm), floor
-    )
+    excess_choose = _excess(work.gap_before, floor)
     refit = linear_refit_gap(work)
     tolerance = settings.calibration_tolerance
     reports = []
     for fitted in work.candidates:
         effect, fit, gap = fitted.effect, fitted.fit, fitted.gap_choose
-        gap_share = gap
-        if share_part != split.choose:
-            gap_share = _finite(
-                normalised_rms(work.data.output, fitted.predicted, share_part, work.norm)
-            )
         floor_c = floor
         deviance = math.log(max(gap * gap, 1e-300))  # a Gaussian's, less log(2π) + 1
         if effect.lattice:
@@ -248,7 +223,7 @@ def score_candidates(work: ModuleWork, split: Split, settings: GapSettings):
                 lin=dict(fit.lin),
                 n_params=fit.n_free,
                 choosing_gap=gap,
-                choosing_share_pct=shrink_pct(excess_choose, _excess(gap_share, floor_c)),
+                choosing_share_pct=shrink_pct(excess_choose, _excess(gap, floor_c)),
                 scoring_gap_after=fitted.gap_score,
                 raw_shrink_pct=raw,
                 own_shrink_pct=own,
