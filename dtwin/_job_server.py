@@ -9,7 +9,8 @@ a private folder, ``mkdtemp``, mode 0700, named by :data:`SOCKET_ENV` in the env
 jobs inherit); ``onsuccess`` and ``onerror`` stop it (:func:`stop_server`), and it stops by
 itself when the Snakemake process that started it dies.
 
-Each job still starts as Snakemake starts it: ``python .snakemake/scripts/tmpXXXX.<rule>.py``.
+Each job still starts as Snakemake starts it, ``python .snakemake/scripts/tmp<random>.<rule>.py``
+(the copy of the script Snakemake writes under a random name).
 The first thing the script does (``dtwin._script.start_rule``) is :func:`hand_over`: it sends
 its argv, working folder and environment and passes its stdin, stdout and stderr (SCM_RIGHTS)
 to the server, which forks. The child takes over those descriptors, the folder, the

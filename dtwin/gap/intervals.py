@@ -30,14 +30,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
 
 import numpy as np
 from scipy.stats import t as student_t
 
 from dtwin.gap.effects import Effect
 from dtwin.gap.fit import FIT_XTOL, fit_candidate, linear_typical, training_view
-from dtwin.gap.models import LINEAR_PARAMS, ModuleData, simulate_module
+from dtwin.gap.models import LINEAR_PARAMS, ModuleData, module_part, simulate_module
 from dtwin.modules import EULER
 
 __all__ = [
@@ -278,25 +277,10 @@ def parameter_intervals(
     return intervals
 
 
-def _part(data: ModuleData, start: int, stop: int) -> ModuleData:
-    """Return ``data`` cut to samples ``[start, stop)`` (times kept, restarts shifted)."""
-
-    def cut(values):
-        return None if values is None else values[start:stop]
-
-    return replace(
-        data,
-        inputs={name: values[start:stop] for name, values in data.inputs.items()},
-        output=data.output[start:stop],
-        t=data.t[start:stop],
-        velocity=cut(data.velocity),
-        position=cut(data.position),
-        restarts=tuple(r - start for r in data.restarts if start < r < stop),
-    )
-
-
 def _refit(data, effect, lin, part: tuple[int, int], linear: Sequence[str]) -> np.ndarray:
     """Return the free parameters of the candidate fitted again on samples ``part`` alone."""
     start, stop = part
-    fit = fit_candidate(_part(data, start, stop), effect, lin, n_train=stop - start, free=linear)
+    fit = fit_candidate(
+        module_part(data, start, stop), effect, lin, n_train=stop - start, free=linear
+    )
     return np.array([float(fit.lin[k]) for k in linear] + [float(v) for v in fit.theta])

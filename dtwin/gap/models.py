@@ -24,7 +24,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.signal import lfilter, savgol_filter
@@ -58,6 +58,7 @@ from dtwin.wiring import ACTUATOR, FUSION, KPI, PLANT, SENSOR, role_of
 __all__ = [
     "LINEAR_PARAMS",
     "ModuleData",
+    "module_part",
     "velocity_from_position",
     "plant_windows",
     "plant_horizon",
@@ -130,6 +131,29 @@ class ModuleData:
     def role(self) -> str:
         """The module's role (:data:`dtwin.wiring.ROLES`; ``"plant"`` for M1)."""
         return role_of(self.name)
+
+
+def module_part(data: ModuleData, start: int, stop: int) -> ModuleData:
+    """Return the module's recorded signals over samples ``start … stop−1`` (each such a slice).
+
+    Every model starts from the recorded state at the part's first sample, as at a recording's
+    first sample; the times and scales stay the whole recording's, restarts inside the part
+    move with it.
+    """
+    cut = slice(start, stop)
+
+    def part(values):
+        return None if values is None else values[cut]
+
+    return replace(
+        data,
+        inputs={name: values[cut] for name, values in data.inputs.items()},
+        output=data.output[cut],
+        t=data.t[cut],
+        velocity=part(data.velocity),
+        position=part(data.position),
+        restarts=tuple(r - start for r in data.restarts if start < r < stop),
+    )
 
 
 def velocity_from_position(

@@ -31,7 +31,7 @@ from dtwin.gap.effects import (
 )
 from dtwin.gap.fit import CandidateFit, fit_candidate, refit_delay, training_view
 from dtwin.gap.localise import normalised_rms
-from dtwin.gap.models import ModuleData, simulate_module
+from dtwin.gap.models import module_part, simulate_module
 from dtwin.gap.results import CandidateReport, GapSettings
 from dtwin.gap.where import ModuleWork, Split
 from dtwin.wiring import PLANT
@@ -45,7 +45,6 @@ __all__ = [
     "fit_candidates",
     "NESTED_PART_SAMPLES",
     "NESTED_MAX_ORDER",
-    "module_part",
     "whitening_filter",
     "nested_test",
     "score_candidates",
@@ -253,28 +252,6 @@ NESTED_PART_SAMPLES = 10_000
 NESTED_MAX_ORDER = 8
 
 
-def module_part(data: ModuleData, start: int, stop: int) -> ModuleData:
-    """Return the module's recorded signals over samples ``start … stop−1`` (each such a slice).
-
-    Every model starts from the recorded state at the part's first sample, as at a recording's
-    first sample; the scales stay the whole recording's, restarts inside the part move with it.
-    """
-    cut = slice(start, stop)
-
-    def part(values):
-        return None if values is None else values[cut]
-
-    return replace(
-        data,
-        inputs={name: values[cut] for name, values in data.inputs.items()},
-        output=data.output[cut],
-        t=data.t[cut],
-        velocity=part(data.velocity),
-        position=part(data.position),
-        restarts=tuple(r - start for r in data.restarts if start < r < stop),
-    )
-
-
 def _lagged(residual: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
     """Return ``(rows, lags)``: the samples whose ``order`` predecessors are all finite.
 
@@ -349,7 +326,7 @@ def nested_test(work: ModuleWork, split: Split, settings: GapSettings) -> str | 
 
     On a recording with more than :data:`NESTED_PART_SAMPLES` training or choosing samples
     the candidates are fitted and compared on the contiguous part of at most that many of each
-    around their boundary (:func:`module_part`, windowed as the fit sees it:
+    around their boundary (:func:`~dtwin.gap.models.module_part`, windowed as the fit sees it:
     :func:`~dtwin.gap.fit.training_view`); only when the test finds a gap are they fitted
     again on the whole training part, every start refined (the test's own fits refine the best
     start only: ``fit_candidates(quick=True)``), into ``work.candidates``.
