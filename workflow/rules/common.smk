@@ -332,7 +332,7 @@ DRAW_BIC = {
 # --- the warm job server (dtwin/_job_server.py) -------------------------------------------------
 # Started when jobs are about to run on this machine: its process imports what the run's scripts
 # import, then forks one child per job, so each job skips the interpreter's start-up (imports and
-# the EM kernels' cache loads: 0.4-1.4 CPU-s a job). `--config job_server=false` turns it off;
+# the EM kernels' cache loads: 0.4-1.4 CPU-s a job). `--config job_server=False` turns it off;
 # jobs on a cluster, or started before the server is ready, run in their own process as before.
 # Besides the dtwin modules the scripts import: Snakemake's script preamble, and what matplotlib
 # loads when a figure is saved.
