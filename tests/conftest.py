@@ -12,10 +12,21 @@ and changed in turn); the files go out in the order of their first test, and
 :func:`pytest_collection_modifyitems` puts the longest file first, then the other slow tests.
 """
 
+# ruff: noqa: E402 (the thread variables below are set before the imports that load numpy)
+
 from __future__ import annotations
 
-import copy
 import os
+
+# One BLAS thread per test process, set before numpy loads OpenBLAS (and inherited by the
+# subprocesses the tests start), as a Snakemake job with ``threads: 1`` and the diagnoser
+# (``threadpool_limits(1)``) run. Two xdist workers on two cores with two OpenBLAS threads
+# each spin on each other: the whitened-ratio test of tests/gap/test_gap_nested.py took
+# 20.5 CPU s with two threads and 2.3 with one. Set the variable to override.
+for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
+
+import copy
 from functools import cache
 from pathlib import Path
 
