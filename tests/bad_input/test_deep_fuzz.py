@@ -12,7 +12,8 @@ training fraction.
 Each one must exit 0 (a complete output folder) or 2 (one line on stderr, no output folder,
 nothing left behind), never 3; no traceback and no Python warning may reach stderr, and the
 peak memory of the whole run stays under :data:`PEAK_MB`. CI draws :data:`CI_EXAMPLES`
-derandomized examples; `make fuzz` draws ``FUZZ_FACTOR`` (25) times as many with fresh
+derandomized examples (`make test-fast` the first test's :data:`FAST_EXAMPLES`, the second
+test, slow, the rest); `make fuzz` draws ``FUZZ_FACTOR`` (25) times as many with fresh
 randomness (>= 500).
 """
 
@@ -28,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 import yaml
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
@@ -36,8 +38,11 @@ from dtwin.cli import main
 from dtwin.gapbench.generator import ALL_CASE_EFFECTS, generate_case
 from tests.conftest import n_examples, paper_twin
 
-#: Derandomized deep examples per CI run (each takes about one second).
+#: Derandomized deep examples per CI run (each takes about one second, a quarter of a CPU
+#: second): :data:`FAST_EXAMPLES` of them in `make test-fast`, the rest with the slow tests.
 CI_EXAMPLES = 24
+#: The deep examples of `make test-fast` (the other ``CI_EXAMPLES - FAST_EXAMPLES`` are slow).
+FAST_EXAMPLES = 8
 #: Largest growth of resident memory during one deep input, MB (its peak minus the memory held
 #: when it starts, so earlier tests in the process do not count). Measured 2026-11-23 under
 #: `make fuzz` (600 deep inputs): 599 grew by less than 25 MB, one by 25-50 MB, and the whole
@@ -168,15 +173,30 @@ def dead_sensor_case() -> tuple:
     return frame, case.twin, [], "y_B zero throughout"
 
 
-@settings(
-    max_examples=n_examples(CI_EXAMPLES),
-    deadline=None,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
-)
+DEEP_SETTINGS = {
+    "deadline": None,
+    "suppress_health_check": [HealthCheck.too_slow, HealthCheck.data_too_large],
+}
+
+
+@settings(max_examples=n_examples(FAST_EXAMPLES), **DEEP_SETTINGS)
 @given(hostile_cases())
 @example(spiked_case())
 @example(dead_sensor_case())
 def test_hostile_recordings_exit_cleanly_without_warnings(case):
+    exits_cleanly_without_warnings(case)
+
+
+@pytest.mark.slow
+@settings(max_examples=n_examples(CI_EXAMPLES - FAST_EXAMPLES), **DEEP_SETTINGS)
+@given(hostile_cases())
+def test_more_hostile_recordings_exit_cleanly_without_warnings(case):
+    """Other derandomized examples (Hypothesis seeds each test by its own code)."""
+    exits_cleanly_without_warnings(case)
+
+
+def exits_cleanly_without_warnings(case: tuple) -> None:
+    """Run `dtwin diagnose` on a hostile case: exit 0 or 2, no traceback, warning or leftover."""
     frame, twin, options, label = case
     reset_peak_memory()
     start_mb = memory_mb("VmRSS")

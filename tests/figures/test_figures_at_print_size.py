@@ -302,7 +302,10 @@ def test_figure_passes_the_reader_checks(name):
         assert check.passed, (check.id, check.observed)
 
 
-@pytest.mark.parametrize("name", ["fig03_residual_acf", "fig09_bic", "gap_benchmark"])
+@pytest.mark.parametrize(
+    "name",
+    [pytest.param("fig03_residual_acf", marks=pytest.mark.slow), "fig09_bic", "gap_benchmark"],
+)
 def test_publishing_lays_out_once_and_draws_the_pdf_where_the_png_is(tmp_path, monkeypatch, name):
     """publish_artifact lays the figure out once, at 300 dpi; the PNG and the PDF share it.
 

@@ -87,11 +87,16 @@ def test_stribeck_friction_starts_at_the_fitted_coulomb_friction_and_departs_by_
     assert effect_by_name("coulomb_friction").departure is None
 
 
+@pytest.mark.slow
 def test_a_breakaway_rig_reads_stribeck_friction_though_it_removes_barely_more():
     """Harder rig, Stribeck seed 501 (a dev seed; open loop, 979 samples per period, Fs = 2.6
     Fc): Stribeck friction removes 76 % of the choosing excess, Coulomb friction 75 % with a
     level 1.6 times the sliding force. The fitted breakaway (Fs/Fc = 2.6) shows what Coulomb
-    friction lacks; before, the share margin alone kept Coulomb friction."""
+    friction lacks; before, the share margin alone kept Coulomb friction.
+
+    Slow (a whole diagnosis of 20,000 samples, 7-8 CPU s): `make test-fast` checks the choice
+    on these shares (test_a_breakaway_the_fit_shows_is_stribeck_friction_whatever_its_share_margin).
+    """
     from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping
     from dtwin.gapbench.rigs import generate_hard_rig_case
 
