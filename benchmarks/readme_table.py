@@ -156,12 +156,20 @@ def imports_rows(imports: dict) -> list[tuple[str, str, str]]:
     ]
 
 
+def tests_rows(tests: dict) -> list[tuple[str, str, str]]:
+    r = tests["results"]
+    cpu = f"{r['test_fast_cpu_s']:.1f} CPU s of every process, {r['test_fast_passed']} passed"
+    measured = f"{r['test_fast_s']:.1f} s ({cpu})"
+    return [("`make test-fast` (lint, then the tests not marked slow)", measured, "≤ 60 s")]
+
+
 ROWS = {
     "dag": dag_rows,
     "figures": figures_rows,
     "hmm": hmm_rows,
     "gap": gap_rows,
     "imports": imports_rows,
+    "tests": tests_rows,
 }
 
 

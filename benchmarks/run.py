@@ -29,7 +29,10 @@ load average before and after it), medians where repeated. Sections (`python ben
   iteration's tracemalloc peak and the process's peak RSS; benchmarks/hmm_fit.py), and the
   same at T = 1000 for K = 4, 12, 20 (median of 7; the BIC sweeps' size);
 - ``gap``: `dtwin diagnose` on a 2,000-sample six-module recording and a 100,000-sample one,
-  and `--calibrate` on a 130,000-sample plant-only rig (issue 10's target: ≤ 30 s).
+  and `--calibrate` on a 130,000-sample plant-only rig (issue 10's target: ≤ 30 s);
+- ``tests``: `make test-fast` in the repository (its .venv set up): wall seconds, the CPU
+  seconds of every process (``RUSAGE_CHILDREN`` around it: lint, both pytest-xdist workers and
+  the subprocesses the tests start) and the tests passed.
 """
 
 from __future__ import annotations
@@ -345,12 +348,28 @@ def _plant_only_rig(folder: Path) -> float:
     return round(run([*diagnose, *options, "--calibrate"], REPO), 2)
 
 
+def tests_benchmark() -> dict:
+    """`make test-fast` once: wall s, CPU s of every process and the count of tests passed."""
+    cpu_before, start = children_cpu(), time.perf_counter()
+    done = subprocess.run(["make", "test-fast"], cwd=REPO, capture_output=True, text=True)
+    wall, cpu = time.perf_counter() - start, children_cpu() - cpu_before
+    if done.returncode != 0:
+        raise RuntimeError(f"make test-fast failed:\n{done.stdout[-2000:]}{done.stderr[-2000:]}")
+    summary = done.stdout.strip().splitlines()[-1]  # "1107 passed, 60 deselected in 52.3s"
+    return {
+        "test_fast_s": round(wall, 1),
+        "test_fast_cpu_s": round(cpu, 1),
+        "test_fast_passed": int(summary.split(" passed")[0].split()[-1]),
+    }
+
+
 SECTIONS = {
     "dag": dag_benchmarks,
     "figures": figures_benchmark,
     "imports": import_benchmarks,
     "gap": gap_benchmarks,
     "hmm": hmm_benchmarks,
+    "tests": tests_benchmark,
 }
 
 
