@@ -316,13 +316,18 @@ def nested_test(work: ModuleWork, split: Split, settings: GapSettings) -> str | 
     fitted on the training part and compared on the choosing part with the linear twin, the
     better of the calibrated one and the same one re-fitted by the candidates' own fit (so
     that a candidate's gain is not a better fit of the linear part). Both errors are whitened by
-    the AR noise model of the calibrated twin's training error (:func:`whitening_filter`), so
-    that ``T = n·ln(Σε_linear²/Σε_candidate²)`` over the ``n`` whitened choosing samples is the
-    likelihood ratio of the nested Gaussian models with coloured noise. The module has a gap
-    when the best-scored candidate (:func:`score_candidates`, nested forms as in
-    :func:`choose`) reaches ``χ²_p(1 − significance/K)`` (``p`` its effect parameters, ``K``
-    the candidates: a test of size ``significance`` over all of them) and removes at least
-    ``min_gap`` of the linear twin's error, ``√(gap_linear² − gap_candidate²) ≥ min_gap``.
+    the AR noise model of the candidate's training error (:func:`whitening_filter`): the
+    candidate nests the linear twin, so its error is the noise whether the effect is there or
+    not, whereas the linear twin's error holds a present effect, whose slow part its noise model
+    would take for coloured noise. ``T = n·ln(Σε_linear²/Σε_candidate²)`` over the ``n``
+    whitened choosing samples is then the likelihood ratio of the nested Gaussian models with
+    coloured noise. The module has a gap when the best-scored candidate
+    (:func:`score_candidates`, nested forms as in :func:`choose`) reaches
+    ``χ²_p(1 − significance/K)`` (``p`` its effect parameters, ``K`` the candidates: a test of
+    size ``significance`` over all of them) and removes at least ``min_gap`` of the linear
+    twin's error, ``√(gap_linear² − gap_candidate²) ≥ min_gap`` (the test's null, the
+    calibrated linear twin, is itself only an approximation of a rig: a candidate that takes
+    up a small misfit of it passes the test as an effect would).
 
     On a recording with more than :data:`NESTED_PART_SAMPLES` training or choosing samples
     the candidates are fitted and compared on the contiguous part of at most that many of each
@@ -355,7 +360,8 @@ def nested_test(work: ModuleWork, split: Split, settings: GapSettings) -> str | 
     best = _plain_over_nesting(ranked)
     fitted = next(c for c in part.candidates if c.effect.name == best.effect)
     output, choose = part.data.output, part_split.choose
-    whiten = whitening_filter((output - part.sim_before)[: part_split.n_train])
+    # the noise model of the model that nests the other: its error is noise under both
+    whiten = whitening_filter((output - fitted.predicted)[: part_split.n_train])
     refit = fit_candidate(part.data, None, part.lin_base, n_train=part_split.n_train)
     errors = [
         (output - prediction)[choose]

@@ -31,9 +31,10 @@ def test_the_whitening_filter_reads_an_ar1_pole_across_unscored_gaps():
 def test_the_whitened_ratio_has_its_stated_size_under_coloured_noise():
     """Noise with pole 0.67 and a least-squares term along a slow direction: T is χ²₁.
 
-    The worst case of the test, in sample (out of sample a spurious term only adds error).
-    Scaled by the effective sample size of a mean square instead, T was 1.9 times too large
-    along such a direction (mean 1.86 here), a size of 5 % (21 of these 400) for a stated 1 %.
+    The worst case of the test, in sample (out of sample a spurious term only adds error),
+    whitened by the noise model of the candidate's error, as the test is. Scaled by the
+    effective sample size of a mean square instead, T was 1.9 times too large along such a
+    direction (mean 1.86 here), a size of 5 % (21 of these 400) for a stated 1 %.
     """
     n, trials = 3000, 400
     noise = _ar1(0.67, (trials, n), seed=3)
@@ -41,12 +42,37 @@ def test_the_whitened_ratio_has_its_stated_size_under_coloured_noise():
     statistics = []
     for error in noise:
         fitted = error - (error @ slow) / (slow @ slow) * slow  # the candidate's error
-        whiten = whitening_filter(error)
+        whiten = whitening_filter(fitted)
         linear, candidate = (lfilter(whiten, [1.0], e)[len(whiten) :] for e in (error, fitted))
         statistics.append(len(linear) * math.log(linear @ linear / (candidate @ candidate)))
     statistics = np.array(statistics)
     assert 0.7 < statistics.mean() < 1.4  # χ²₁ has mean 1
     assert np.count_nonzero(statistics >= chi2.ppf(0.99, 1)) <= 10  # expected 4 of 400
+
+
+def test_a_slow_effect_is_not_taken_for_coloured_noise():
+    """An effect four times the noise's innovation along a slow direction, then removed.
+
+    The linear twin's error holds the effect: an AR model of it whitens the slow term away
+    (AR(8) here, and T about 14 times smaller). The candidate's error is the noise alone under
+    either hypothesis: its AR(1) model has the noise's pole, and T is the effect's.
+    """
+    n = 3000
+    slow = np.sin(2 * np.pi * np.arange(2 * n) / 700.0)
+    error = _ar1(0.67, (2 * n,), seed=5) + 4.0 * slow  # the linear twin's, training then choosing
+    train, choose = slice(0, n), slice(n, 2 * n)
+    fitted = error - (error[train] @ slow[train]) / (slow[train] @ slow[train]) * slow
+
+    def statistic(whiten):
+        linear, candidate = (
+            lfilter(whiten, [1.0], e[choose])[len(whiten) :] for e in (error, fitted)
+        )
+        return len(linear) * math.log(linear @ linear / (candidate @ candidate))
+
+    own, absorbed = whitening_filter(fitted[train]), whitening_filter(error[train])
+    assert len(own) == 2 and own[1] == pytest.approx(-0.67, abs=0.05)
+    assert len(absorbed) > 2
+    assert statistic(own) > 10 * statistic(absorbed)
 
 
 @pytest.fixture(scope="module")
