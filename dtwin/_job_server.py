@@ -3,11 +3,12 @@
 A ``script:`` job starts a fresh interpreter that imports numpy, pandas, matplotlib, scipy and
 dtwin and loads the compiled EM kernels from numba's cache before it does its work: 0.4-1.4
 CPU-s a job, a third of the paper DAG's CPU time. The server pays that once per run. The
-Snakefile's ``onstart`` starts it (:func:`start_server`: a process that imports the modules
-the run's scripts import, runs their kernels' ``warm_up`` and then listens on a Unix socket in
-a private folder, ``mkdtemp``, mode 0700, named by :data:`SOCKET_ENV` in the environment the
-jobs inherit); ``onsuccess`` and ``onerror`` stop it (:func:`stop_server`), and it stops by
-itself when the Snakemake process that started it dies.
+Snakefile's ``onstart`` starts it (:func:`start_server`: a process that listens on a Unix
+socket in a private folder, ``mkdtemp``, mode 0700, named by :data:`SOCKET_ENV` in the
+environment the jobs inherit, and meanwhile imports the modules the run's scripts import and
+runs their ``warm_up``: the compiled kernels loaded, a figure drawn); ``onsuccess`` and
+``onerror`` stop it (:func:`stop_server`), and it stops by itself when the Snakemake process
+that started it dies.
 
 Each job still starts as Snakemake starts it, ``python .snakemake/scripts/tmp<random>.<rule>.py``
 (the copy of the script Snakemake writes under a random name).
@@ -104,14 +105,15 @@ def start_server(modules: Sequence[str], warm_up: Sequence[str] = ()) -> str | N
     Parameters
     ----------
     modules : sequence of str
-        Modules to import before serving (what the run's scripts import).
+        Modules to preload (what the run's scripts import), in the order the jobs need them.
     warm_up : sequence of str
-        Of those, the modules whose ``warm_up()`` loads their compiled kernels.
+        Of those, the modules whose ``warm_up()`` runs right after their import (compiled
+        kernels loaded, caches filled).
 
     Returns
     -------
     str or None
-        The socket's path (it appears once the modules are loaded; jobs that start before run
+        The socket's path (it appears as soon as the server runs; jobs that start before run
         in their own process), or None where processes cannot fork (not POSIX).
     """
     global _SERVER
@@ -216,11 +218,15 @@ def _wait_for_child(pid: int, replies: Any) -> int:
 
 
 def serve(path: str, modules: Sequence[str], warm_up: Sequence[str]) -> None:
-    """Serve jobs: preload, then fork one child per job until told to stop.
+    """Serve jobs: fork one child per job until told to stop, preloading meanwhile.
 
-    Stops on SIGTERM, SIGINT or when its parent process dies (then its running children are
-    killed). The socket is bound under a temporary name and renamed into place once the
-    modules are loaded, so a job never waits for the preload.
+    The socket is in place from the start (bound under a temporary name and renamed, so a job
+    never finds it half set up). The modules are imported one at a time, in the order given
+    (the order the run's jobs need them), each of ``warm_up`` followed by its ``warm_up()``;
+    after each step the server takes the jobs that are waiting, so a job that starts during
+    the preload is forked with what is loaded by then and imports the rest itself, as its own
+    process would. Stops on SIGTERM, SIGINT or when its parent process dies (then its running
+    children are killed).
     """
     parent = os.getppid()
     for signum in _FORWARDED:
@@ -229,29 +235,36 @@ def serve(path: str, modules: Sequence[str], warm_up: Sequence[str]) -> None:
     running: dict[int, socket.socket] = {}
     try:
         baseline = _comparable(os.environ)
-        for name in modules:
-            importlib.import_module(name)
-        for name in warm_up:
-            importlib.import_module(name).warm_up()
-        # what the imports set (scikit-learn's KMP_* variables): a job importing them sets them
-        added = {k: v for k, v in os.environ.items() if k not in baseline and k != SOCKET_ENV}
         listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         listener.bind(path + ".tmp")
         listener.listen(64)
         os.rename(path + ".tmp", path)
-        gc.freeze()  # objects the children inherit are never collected: fewer copied pages
         selector = selectors.DefaultSelector()
         selector.register(listener, selectors.EVENT_READ)
+        for name in modules:
+            module = importlib.import_module(name)
+            _take_jobs(listener, baseline, running, selector, timeout_s=0.0)
+            if name in warm_up:
+                module.warm_up()
+                _take_jobs(listener, baseline, running, selector, timeout_s=0.0)
+        gc.freeze()  # objects the children inherit are never collected: fewer copied pages
         while os.getppid() == parent:
-            for key, _ in selector.select(timeout=1.0):
-                if key.fileobj is listener:
-                    _accept(listener, (baseline, added), running, selector)
-                else:
-                    _reap(key, running, selector)
+            _take_jobs(listener, baseline, running, selector, timeout_s=1.0)
     except _StopError:
         pass
     finally:
         _shut_down(path, running)
+
+
+def _take_jobs(
+    listener: socket.socket, baseline: dict, running: dict, selector: Any, timeout_s: float
+) -> None:
+    """Accept the jobs that are waiting and report the children that ended (up to ``timeout_s``)."""
+    for key, _ in selector.select(timeout=timeout_s):
+        if key.fileobj is listener:
+            _accept(listener, baseline, running, selector)
+        else:
+            _reap(key, running, selector)
 
 
 def _shut_down(path: str, running: dict[int, socket.socket]) -> None:
@@ -314,18 +327,18 @@ def _refusal(request: dict, baseline: dict) -> str | None:
     return None
 
 
-def _accept(listener: socket.socket, envs: tuple, running: dict, selector: Any) -> None:
+def _accept(listener: socket.socket, baseline: dict, running: dict, selector: Any) -> None:
     """Take one job: refuse it, or fork its child and watch for the child's end.
 
-    ``envs``: the server's environment before the preload (without :data:`PER_JOB_ENV`), which
-    a job's must equal, and the variables the preload's imports set, which the child adds.
+    ``baseline``: the server's environment before it imported anything (without
+    :data:`PER_JOB_ENV`), which a job's must equal; the child adds the variables the imports
+    so far have set (scikit-learn's ``KMP_*``: a job importing them sets them).
     """
     connection, _ = listener.accept()
     fds: list[int] = []
     try:
         connection.settimeout(10.0)
         request, fds = _receive(connection)
-        baseline, added = envs
         reason = _refusal(request, baseline)
         if reason is None and len(fds) != 3:
             reason = "stdin, stdout and stderr not received"
@@ -343,6 +356,8 @@ def _accept(listener: socket.socket, envs: tuple, running: dict, selector: Any) 
                 if isinstance(other.fileobj, int):
                     os.close(other.fileobj)
             selector.close()
+            added = {k: v for k, v in os.environ.items() if k not in baseline}
+            added.pop(SOCKET_ENV, None)
             request["env"] = {**added, **request["env"]}
             _run_child(connection, request, fds)  # never returns
         connection.sendall(json.dumps({"pid": pid}).encode() + b"\n")

@@ -108,11 +108,20 @@ def rate_limit(x: Any, r_max: float) -> np.ndarray:
     x = require_finite_array("x", x, ndim=None)
     if x.ndim not in (1, 2) or len(x) == 0:
         raise DtwinValueError(f"x must be (T,) or (T, n_channels) with T >= 1 (got {x.shape})")
-    out = np.empty_like(x)
-    out[0] = x[0]
-    for i in range(1, len(x)):
-        out[i] = out[i - 1] + np.clip(x[i] - out[i - 1], -r_max, r_max)
-    return out
+    # One channel at a time in Python floats (the same IEEE operations as numpy's, without a
+    # numpy call per sample): min(max(step, −r), r) is np.clip's value for finite steps.
+    columns = x.reshape(len(x), -1)
+    out = np.empty_like(columns)
+    for channel in range(columns.shape[1]):
+        values = columns[:, channel].tolist()
+        limited = [values[0]]
+        previous = values[0]
+        for value in values[1:]:
+            step = value - previous
+            previous = previous + (-r_max if step < -r_max else (r_max if step > r_max else step))
+            limited.append(previous)
+        out[:, channel] = limited
+    return out.reshape(x.shape)
 
 
 def _require_posteriors(posteriors: Any, n_steps: int) -> np.ndarray:

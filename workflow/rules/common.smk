@@ -330,16 +330,15 @@ DRAW_BIC = {
 
 
 # --- the warm job server (dtwin/_job_server.py) -------------------------------------------------
-# Started when jobs are about to run on this machine: its process imports what the run's scripts
-# import, then forks one child per job, so each job skips the interpreter's start-up (imports and
-# the EM kernels' cache loads: 0.4-1.4 CPU-s a job). `--config job_server=False` turns it off;
-# jobs on a cluster, or started before the server is ready, run in their own process as before.
-# Besides the dtwin modules the scripts import: Snakemake's script preamble, and what matplotlib
-# loads when a figure is saved.
+# Started when jobs are about to run on this machine: its process forks one child per job, so each
+# job skips the interpreter's start-up (imports and the EM kernels' cache loads: 0.4-1.4 CPU-s a
+# job). It imports what the run's scripts import one module at a time, in the order the jobs
+# start, and forks the jobs that start meanwhile with what it has loaded by then.
+# `--config job_server=False` turns it off; jobs on a cluster run in their own process as before.
+# Besides the dtwin modules the scripts import: Snakemake's script preamble (first: every job
+# runs it), and what matplotlib loads when a figure is saved.
+JOB_SERVER_PREAMBLE = ("snakemake.script", "snakemake.logging", "snakemake.iocontainers")
 JOB_SERVER_PRELOAD = (
-    "snakemake.script",
-    "snakemake.logging",
-    "snakemake.iocontainers",
     "matplotlib.backends.backend_agg",
     "matplotlib.backends.backend_pdf",
     "fontTools.subset",
@@ -347,17 +346,39 @@ JOB_SERVER_PRELOAD = (
 # Not preloaded although a script names it: the hmmlearn reference engine (with scikit-learn),
 # which a job imports only if hmm.engine asks for it or the compiled EM falls back.
 JOB_SERVER_SKIP = ("dtwin._em_reference",)
-# Modules whose warm_up() loads their compiled kernels from numba's cache.
-JOB_SERVER_KERNELS = ("dtwin._em_kernels", "dtwin._force_kernels")
+# Modules whose warm_up() the server runs once after the imports: the EM kernels' and the force
+# loop's cache loads, and a figure drawn in the set's style (matplotlib's fonts, mathtext parser
+# and writers; dtwin.figures._style.warm_up).
+JOB_SERVER_WARM_UP = ("dtwin._em_kernels", "dtwin._force_kernels", "dtwin.figures._style")
+
+
+def expected_start_order(jobs):
+    """``jobs`` in the order Snakemake starts them on one core: the ready job of highest priority
+    first (ties by rule name), a job ready once every job it depends on has run."""
+    jobs = set(jobs)
+    waiting = {job: set(workflow.dag.dependencies[job]) & jobs for job in jobs}
+    order = []
+    while waiting:
+        ready = [job for job, deps in waiting.items() if not deps]
+        job = min(ready, key=lambda job: (-job.priority, job.rule.name, str(job.wildcards)))
+        order.append(job)
+        del waiting[job]
+        for deps in waiting.values():
+            deps.discard(job)
+    return order
 
 
 def job_server_modules(jobs):
-    """The dtwin modules the scripts of ``jobs`` import (dotted names), sorted."""
-    modules = set()
-    for script in {os.path.basename(job.rule.script) for job in jobs if job.rule.script}:
-        for path in dtwin_sources(os.path.join("scripts", script)):
-            modules.add(path[: -len(".py")].replace(os.sep, ".").removesuffix(".__init__"))
-    return sorted(modules.difference(JOB_SERVER_SKIP))
+    """The dtwin modules the scripts of ``jobs`` import (dotted names), in the order the jobs
+    need them (:func:`expected_start_order`; a script's new modules sorted by name)."""
+    modules = {}
+    for job in expected_start_order(jobs):
+        if job.rule.script:
+            script = os.path.join("scripts", os.path.basename(job.rule.script))
+            for path in dtwin_sources(script):
+                name = path[: -len(".py")].replace(os.sep, ".").removesuffix(".__init__")
+                modules.setdefault(name, None)
+    return [name for name in modules if name not in JOB_SERVER_SKIP]
 
 
 def start_job_server():
@@ -368,8 +389,8 @@ def start_job_server():
 
     modules = job_server_modules(workflow.dag.needrun_jobs())
     if modules:
-        kernels = [name for name in JOB_SERVER_KERNELS if name in modules]
-        start_server([*modules, *JOB_SERVER_PRELOAD], kernels)
+        warm_up = [name for name in JOB_SERVER_WARM_UP if name in modules]
+        start_server([*JOB_SERVER_PREAMBLE, *modules, *JOB_SERVER_PRELOAD], warm_up)
 
 
 def stop_job_server():
