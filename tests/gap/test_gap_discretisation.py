@@ -395,3 +395,34 @@ def test_substeps_bring_a_coarsely_sampled_friction_to_the_continuous_plant():
         for s in (1, substeps)
     ]
     assert errors[1] < 0.2 * errors[0]
+
+
+@pytest.mark.parametrize(
+    ("name", "params"),
+    [
+        (None, ()),
+        ("tanh_friction", (0.4, 0.01)),
+        ("cubic_spring", (3e4, 0.02)),
+        ("cubic_spring", (-3e6, 0.0)),  # diverges: the guard fills the rest
+        ("quadratic_damping", (0.7,)),
+        ("stribeck_friction", (0.3, 0.2, 0.05, 0.01)),
+    ],
+)
+def test_compiled_euler_loop_gives_the_python_loops_bits(name, params):
+    """The diagnoser's Euler twin stepped by numba: plant_response's positions, bit for bit."""
+    from dtwin._force_kernels import ForceLaw, euler_response
+    from dtwin.modules import plant_response
+
+    rng = np.random.default_rng(5)
+    u = np.sign(np.sin(np.arange(600) * 0.05)) + 0.1 * rng.normal(size=600)
+    force, law = None, None
+    if name is not None:
+        force, law = _law_force(name, params)[0].scalar, ForceLaw(name, params)
+    x0, v0 = np.float64(0.01), np.float64(-0.2)
+    for limit in (1e3, 0.5):
+        expected = plant_response(
+            u.tolist(), 1.3, 0.3, 40.0, 0.01, x0=x0, v0=v0, force=force, limit=limit
+        )
+        xs, vs = euler_response(u, 1.3, 0.3, 40.0, 0.01, x0, v0, law, limit)
+        np.testing.assert_array_equal(xs, expected.x)
+        np.testing.assert_array_equal(vs, expected.v)
