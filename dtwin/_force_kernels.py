@@ -33,7 +33,7 @@ import numpy as np
 
 from dtwin._jit import njit
 
-__all__ = ["LAWS", "ForceLaw", "euler_response", "force_windows", "warm_up"]
+__all__ = ["LAWS", "ForceLaw", "euler_response", "force_windows", "substepped_windows", "warm_up"]
 
 #: The laws the compiled loop knows, by name; the index is the law's code in the loop.
 LAWS: tuple[str, ...] = ("tanh_friction", "cubic_spring", "quadratic_damping", "stribeck_friction")
@@ -153,6 +153,73 @@ def force_windows(drive, x0, v0, steps, law: ForceLaw, inv_m: float) -> np.ndarr
     return out
 
 
+@njit(cache=True)
+def _substepped_loop(
+    fine_drive, starts, stops, substeps, x_start, v_start, steps, code, p, inv_m, out
+):
+    # the windows in lockstep, each with its own arithmetic: their chains overlap in the CPU
+    a11, a12, a21, a22, q1, q2, r1, r2 = steps
+    n_windows = len(starts)
+    xs, vs = np.empty(n_windows), np.empty(n_windows)
+    n_fine, live = np.empty(n_windows, np.int64), np.ones(n_windows, np.bool_)
+    longest = 0
+    for w in range(n_windows):
+        xs[w], vs[w] = x_start[starts[w]], v_start[starts[w]]
+        out[starts[w]] = xs[w]
+        n_fine[w] = (stops[w] - 1 - starts[w]) * substeps + 1
+        longest = max(longest, n_fine[w])
+    for j in range(1, longest):
+        for w in range(n_windows):
+            if j >= n_fine[w] or not live[w]:
+                continue
+            x, v = xs[w], vs[w]
+            row = starts[w] * substeps + j - 1  # the fine drive of the window's step j
+            f_prev = _law_value(code, x, v, p) * inv_m
+            x_free = a11 * x + a12 * v + fine_drive[row, 0] - q1 * f_prev
+            v_free = a21 * x + a22 * v + fine_drive[row, 1] - q2 * f_prev
+            f_next = _law_value(code, x_free - r1 * f_prev, v_free - r2 * f_prev, p) * inv_m
+            x, v = x_free - r1 * f_next, v_free - r2 * f_next
+            xs[w], vs[w] = x, v
+            if not -1e300 < x < 1e300:
+                # inf from the window's first sample at or after fine step j
+                out[starts[w] + (j + substeps - 1) // substeps : stops[w]] = np.inf
+                live[w] = False
+            elif j % substeps == 0:
+                out[starts[w] + j // substeps] = x
+
+
+def substepped_windows(
+    fine_drive, windows, substeps: int, x_start, v_start, steps, law: ForceLaw, inv_m: float
+) -> np.ndarray:
+    """Return the positions at the samples of windows stepped ``substeps`` times per sample.
+
+    The loop of :func:`force_windows` over the fine grid of
+    :func:`dtwin.exact_plant._substepped_response` (``fine_drive`` of shape
+    ``(n_samples·substeps, 2)``; window ``(a, b)`` runs over fine steps ``a·substeps …
+    (b−1)·substeps`` from ``(x_start[a], v_start[a])``), reading the fine drive in place and
+    keeping every ``substeps``-th position: shape ``(n_samples,)``, 0 outside the windows,
+    ``inf`` from a window's first sample at or after a fine step whose position is not finite
+    or beyond ±1e300. ``windows`` must not overlap.
+    """
+    if law.name not in LAWS:
+        raise ValueError(f"force law must be one of {', '.join(LAWS)} (got {law.name!r})")
+    out = np.zeros(len(fine_drive) // substeps)
+    _substepped_loop(
+        np.ascontiguousarray(fine_drive, dtype=float),
+        np.array([a for a, _ in windows], dtype=np.int64),
+        np.array([b for _, b in windows], dtype=np.int64),
+        int(substeps),
+        np.asarray(x_start, dtype=float),
+        np.asarray(v_start, dtype=float),
+        tuple(float(s) for s in steps),
+        LAWS.index(law.name),
+        np.asarray(law.params, dtype=float),
+        float(inv_m),
+        out,
+    )
+    return out
+
+
 def warm_up() -> None:
     """Compile the loops for the argument types their callers pass, or load them from the cache.
 
@@ -164,3 +231,13 @@ def warm_up() -> None:
         np.zeros((1, 3, 2)), np.zeros(1), np.zeros(1), steps, ForceLaw(LAWS[0], (1.0, 1.0)), 1.0
     )
     euler_response(np.zeros(3), 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, ForceLaw(LAWS[0], (1.0, 1.0)), 1.0)
+    substepped_windows(
+        np.zeros((4, 2)),
+        [(0, 2)],
+        2,
+        np.zeros(2),
+        np.zeros(2),
+        steps,
+        ForceLaw(LAWS[0], (1.0, 1.0)),
+        1.0,
+    )

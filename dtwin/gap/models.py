@@ -25,6 +25,7 @@ import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
 from scipy.signal import lfilter, savgol_filter
@@ -470,14 +471,26 @@ def _window_states(data, u, m, c, k, windows, warmup, drive=None) -> tuple[np.nd
         hold=data.discretisation,
         drive=drive,
     )
-    step = hold_matrices(c / m, k / m, data.dt, data.discretisation)
-    solve = np.linalg.pinv(free_response_basis(step, warmup))
+    solve = _warmup_solve(c / m, k / m, data.dt, data.discretisation, warmup)
     x0, v0 = zeros.copy(), zeros.copy()
     starts = np.array([a for a, _ in windows])
     rows = starts[:, None] + np.arange(warmup)
     states = (data.output[rows] - forced[rows]) @ solve.T
     x0[starts], v0[starts] = states[:, 0], states[:, 1]
     return x0, v0
+
+
+@lru_cache(maxsize=256)
+def _warmup_solve(c_per_m: float, k_per_m: float, dt: float, hold: str, warmup: int) -> np.ndarray:
+    """Return ``Φ⁺``, shape ``(2, warmup)``: the warm-up's least-squares map to the initial state.
+
+    ``Φ`` is the free response over the warm-up (:func:`~dtwin.exact_plant.free_response_basis`).
+    Cached per argument tuple (both state estimates of a simulation, and every fit step that
+    moves only the effect, ask for the same one): read-only.
+    """
+    solve = np.linalg.pinv(free_response_basis(hold_matrices(c_per_m, k_per_m, dt, hold), warmup))
+    solve.flags.writeable = False
+    return solve
 
 
 def window_noise_gain(
