@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -222,8 +223,39 @@ def atomic_write_folder(out_dir: str | os.PathLike, write: Callable[[Path], obje
 
 
 def write_csv(table: pd.DataFrame, path: str | os.PathLike, float_format: str = "%.12g") -> None:
-    """Write ``table`` as CSV atomically, without index, floats with 12 significant digits."""
+    """Write ``table`` as CSV atomically, without index, floats with 12 significant digits.
+
+    A table of finite float64 columns with plain names (a recording) is formatted row by row,
+    one ``%`` per row: the bytes of ``DataFrame.to_csv`` at a quarter of its time
+    (``tests/concepts/test_artifacts.py``); any other table goes through ``to_csv``.
+    """
+    text = _float_table_csv(table, float_format)
+    if text is not None:
+        atomic_write(path, lambda tmp: Path(tmp).write_text(text))
+        return
     atomic_write(path, lambda tmp: table.to_csv(tmp, index=False, float_format=float_format))
+
+
+def _float_table_csv(table: pd.DataFrame, float_format: str) -> str | None:
+    """Return ``table.to_csv(index=False, float_format=...)``'s text, or None if not plain floats.
+
+    Plain: at least one row, every column float64 and finite (``to_csv`` writes NaN as an empty
+    field), every name letters, digits and underscores (written unquoted).
+    """
+    names = [str(name) for name in table.columns]
+    if not len(table) or not names or not all(_PLAIN_NAME.fullmatch(name) for name in names):
+        return None
+    if any(dtype != np.float64 for dtype in table.dtypes):
+        return None
+    values = table.to_numpy(dtype=float)
+    if not np.isfinite(values).all():
+        return None
+    line = ",".join([float_format] * len(names))
+    rows = [line % row for row in map(tuple, values.tolist())]
+    return ",".join(names) + "\n" + "\n".join(rows) + "\n"
+
+
+_PLAIN_NAME = re.compile(r"[A-Za-z0-9_]+")
 
 
 def to_jsonable(value: Any) -> Any:

@@ -59,3 +59,26 @@ def test_a_folder_holding_other_files_is_never_replaced(tmp_path):
         atomic_write_folder(out, lambda folder: (folder / "report.md").write_text("x"))
     assert (out / "thesis.tex").read_text() == "months of work"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+@pytest.mark.parametrize(
+    "table",
+    [
+        pd.DataFrame(  # a recording: finite floats of every size and sign, -0.0 included
+            {
+                "t": [0.0, 0.001, 0.002, 1e-17],
+                "u_act": [-0.0, 1e16, -3.25e-300, 123456789.123456789],
+                "x": [1 / 3, -2 / 3, 5e-324, 1e308],
+            }
+        ),
+        pd.DataFrame({"t": [0.0, 1.0], "x": [float("nan"), 2.0]}),  # NaN: an empty field
+        pd.DataFrame({"n": [1, 2], "x": [0.5, 1.5]}),  # an int column
+        pd.DataFrame({"a b": [0.5], "c": [1.0]}),  # a name to quote
+        pd.DataFrame({"x": pd.Series([], dtype=float)}),  # no rows
+    ],
+)
+def test_write_csv_gives_the_bytes_of_to_csv(tmp_path, table):
+    """The plain-float fast path of write_csv writes what DataFrame.to_csv writes."""
+    write_csv(table, tmp_path / "fast.csv")
+    table.to_csv(tmp_path / "pandas.csv", index=False, float_format="%.12g")
+    assert (tmp_path / "fast.csv").read_bytes() == (tmp_path / "pandas.csv").read_bytes()
