@@ -14,6 +14,8 @@ The paper's explicit-Euler plant (:func:`dtwin.modules.plant_response`, the loop
 None or a known law: the same arithmetic in the same order on the same doubles, so the same
 bits (tests/gap/test_gap_discretisation.py), at ~30 ns instead of ~1 µs per step. The
 diagnoser's Euler twin uses it only where numba is installed (:data:`dtwin._jit.HAVE_NUMBA`).
+So does the benchmark's continuous asset without an extra force (:func:`rk4_chain`, the RK4 loop
+of ``dtwin.gapbench.arms._rk4_chain``, the same bits).
 
 The laws (``x`` position, ``v`` velocity, ``p`` the parameters):
 
@@ -33,7 +35,15 @@ import numpy as np
 
 from dtwin._jit import njit
 
-__all__ = ["LAWS", "ForceLaw", "euler_response", "force_windows", "substepped_windows", "warm_up"]
+__all__ = [
+    "LAWS",
+    "ForceLaw",
+    "euler_response",
+    "force_windows",
+    "rk4_chain",
+    "substepped_windows",
+    "warm_up",
+]
 
 #: The laws the compiled loop knows, by name; the index is the law's code in the loop.
 LAWS: tuple[str, ...] = ("tanh_friction", "cubic_spring", "quadratic_damping", "stribeck_friction")
@@ -220,6 +230,44 @@ def substepped_windows(
     return out
 
 
+@njit(cache=True)
+def _rk4_loop(u, eta, xi, tau, m, c, k, h, half, sixth, substeps, out):
+    a, x, v = 0.0, 0.0, 0.0
+    row = 1
+    for j in range(1, len(u)):
+        drive, noise = u[j - 1] + eta[j], xi[j]
+        for _ in range(substeps):
+            k1a, k1x, k1v = (drive - a) / tau, v, (a - c * v - k * x - 0.0) / m + noise
+            a2, x2, v2 = a + half * k1a, x + half * k1x, v + half * k1v
+            k2a, k2x = (drive - a2) / tau, v2
+            k2v = (a2 - c * v2 - k * x2 - 0.0) / m + noise
+            a3, x3, v3 = a + half * k2a, x + half * k2x, v + half * k2v
+            k3a, k3x = (drive - a3) / tau, v3
+            k3v = (a3 - c * v3 - k * x3 - 0.0) / m + noise
+            a4, x4, v4 = a + h * k3a, x + h * k3x, v + h * k3v
+            k4a, k4x = (drive - a4) / tau, v4
+            k4v = (a4 - c * v4 - k * x4 - 0.0) / m + noise
+            a += sixth * (k1a + 2 * k2a + 2 * k3a + k4a)
+            x += sixth * (k1x + 2 * k2x + 2 * k3x + k4x)
+            v += sixth * (k1v + 2 * k2v + 2 * k3v + k4v)
+            out[row, 0], out[row, 1], out[row, 2] = a, x, v
+            row += 1
+
+
+def rk4_chain(u_in, tau, m, c, k, dt, eta, xi, substeps: int) -> np.ndarray:
+    """Return the continuous asset's states at every sub-step, ``((n−1)·substeps + 1, 3)``.
+
+    ``dtwin.gapbench.arms._rk4_chain`` without an extra force (the same arguments, arrays of
+    shape ``(n,)``): the same arithmetic in the same order, the same bits.
+    """
+    u, eta, xi = (np.asarray(s, dtype=float) for s in (u_in, eta, xi))
+    h = dt / substeps
+    out = np.zeros((max(len(u) - 1, 0) * substeps + 1, 3))
+    floats = (float(value) for value in (tau, m, c, k, h, h / 2, h / 6))
+    _rk4_loop(u, eta, xi, *floats, int(substeps), out)
+    return out
+
+
 def warm_up() -> None:
     """Compile the loops for the argument types their callers pass, or load them from the cache.
 
@@ -241,3 +289,4 @@ def warm_up() -> None:
         ForceLaw(LAWS[0], (1.0, 1.0)),
         1.0,
     )
+    rk4_chain(np.zeros(2), 1.0, 1.0, 0.0, 0.0, 1.0, np.zeros(2), np.zeros(2), 1)

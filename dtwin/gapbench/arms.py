@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 from scipy.signal import lfilter
 
+from dtwin._jit import HAVE_NUMBA
 from dtwin.gapbench.case_effects import CaseEffect, log_between, spec_value
 from dtwin.modules import lag_coefficient
 from dtwin.wiring import ACTUATOR, role_of
@@ -392,8 +393,13 @@ def _rk4_chain(u_in, tau, m, c, k, dt, force, eta, xi, substeps):
     The inputs ``u_in[j−1] + η[j]`` and ``ξ[j]`` are held over step ``j`` (from sample ``j−1``
     to ``j``). Returns the state at every sub-step, shape ``((n−1)·substeps + 1, 3)``. The
     loop runs on Python floats (each stage's three derivatives written out, the arithmetic of
-    a ``deriv(state)`` call in the same order).
+    a ``deriv(state)`` call in the same order); without a force, where numba is installed, the
+    same loop compiled (:func:`dtwin._force_kernels.rk4_chain`, the same bits).
     """
+    if force is None and HAVE_NUMBA:
+        from dtwin._force_kernels import rk4_chain
+
+        return rk4_chain(u_in, tau, m, c, k, dt, eta, xi, substeps)
     n = len(u_in)
     h = dt / substeps
     half, sixth = h / 2, h / 6

@@ -412,3 +412,16 @@ def test_a_second_module_with_its_own_gap_is_said_to_need_a_second_effect():
     schema = json.loads((root / "workflow/schemas/diagnosis.schema.json").read_text())
     jsonschema.validate(payload, schema)
     assert "A second effect is needed**: M2a: sensor_bias_drift" in render_markdown(result)
+
+
+def test_continuous_asset_compiled_loop_gives_the_python_loops_bits():
+    """Without a force the continuous asset's RK4 runs compiled: the Python loop's states."""
+    from dtwin.gapbench.arms import _rk4_chain
+
+    rng = np.random.default_rng(2)
+    for n in (1, 2, 400):
+        u, eta, xi = rng.normal(size=n), 0.1 * rng.normal(size=n), rng.normal(size=n)
+        args = (u, 0.05, 1.3, 0.4, 40.0, 0.01)
+        compiled = _rk4_chain(*args, None, eta, xi, 20)
+        python = _rk4_chain(*args, lambda x, v: 0.0, eta, xi, 20)  # a force: the Python loop
+        np.testing.assert_array_equal(compiled, python)
