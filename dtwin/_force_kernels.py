@@ -128,7 +128,7 @@ def euler_response(
     """
     if law is not None and law.name not in LAWS:
         raise ValueError(f"force law must be one of {', '.join(LAWS)} (got {law.name!r})")
-    u = np.asarray(u, dtype=float)
+    u = np.ascontiguousarray(u, dtype=float)
     xs, vs = np.zeros(len(u)), np.zeros(len(u))
     if len(u):
         code = -1 if law is None else LAWS.index(law.name)
@@ -164,9 +164,7 @@ def force_windows(drive, x0, v0, steps, law: ForceLaw, inv_m: float) -> np.ndarr
 
 
 @njit(cache=True)
-def _substepped_loop(
-    fine_drive, starts, stops, substeps, x_start, v_start, steps, code, p, inv_m, out
-):
+def _substepped_loop(fine_drive, starts, stops, substeps, x0, v0, steps, code, p, inv_m, out):
     # the windows in lockstep, each with its own arithmetic: their chains overlap in the CPU
     a11, a12, a21, a22, q1, q2, r1, r2 = steps
     n_windows = len(starts)
@@ -174,7 +172,7 @@ def _substepped_loop(
     n_fine, live = np.empty(n_windows, np.int64), np.ones(n_windows, np.bool_)
     longest = 0
     for w in range(n_windows):
-        xs[w], vs[w] = x_start[starts[w]], v_start[starts[w]]
+        xs[w], vs[w] = x0[w], v0[w]
         out[starts[w]] = xs[w]
         n_fine[w] = (stops[w] - 1 - starts[w]) * substeps + 1
         longest = max(longest, n_fine[w])
@@ -214,13 +212,14 @@ def substepped_windows(
     if law.name not in LAWS:
         raise ValueError(f"force law must be one of {', '.join(LAWS)} (got {law.name!r})")
     out = np.zeros(len(fine_drive) // substeps)
-    _substepped_loop(
+    starts = np.array([a for a, _ in windows], dtype=np.int64)
+    _substepped_loop(  # every array C-contiguous: the one specialisation warm_up compiled
         np.ascontiguousarray(fine_drive, dtype=float),
-        np.array([a for a, _ in windows], dtype=np.int64),
+        starts,
         np.array([b for _, b in windows], dtype=np.int64),
         int(substeps),
-        np.asarray(x_start, dtype=float),
-        np.asarray(v_start, dtype=float),
+        np.asarray(x_start, dtype=float)[starts],
+        np.asarray(v_start, dtype=float)[starts],
         tuple(float(s) for s in steps),
         LAWS.index(law.name),
         np.asarray(law.params, dtype=float),
@@ -260,7 +259,7 @@ def rk4_chain(u_in, tau, m, c, k, dt, eta, xi, substeps: int) -> np.ndarray:
     ``dtwin.gapbench.arms._rk4_chain`` without an extra force (the same arguments, arrays of
     shape ``(n,)``): the same arithmetic in the same order, the same bits.
     """
-    u, eta, xi = (np.asarray(s, dtype=float) for s in (u_in, eta, xi))
+    u, eta, xi = (np.ascontiguousarray(s, dtype=float) for s in (u_in, eta, xi))
     h = dt / substeps
     out = np.zeros((max(len(u) - 1, 0) * substeps + 1, 3))
     floats = (float(value) for value in (tau, m, c, k, h, h / 2, h / 6))
