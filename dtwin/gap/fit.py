@@ -239,6 +239,7 @@ def fit_candidate(
     lin_bounds: Mapping[str, tuple[float, float]] | None = None,
     starts: Sequence[Sequence[float]] | None = None,
     n_refine: int = _N_REFINE,
+    incumbent: CandidateFit | None = None,
 ) -> CandidateFit:
     """Fit a module's linear parameters and an effect's parameters on the training part.
 
@@ -262,6 +263,11 @@ def fit_candidate(
         ``effect.starts(scales)``.
     n_refine : int, default 3
         How many of the starts, the lowest-cost first, are refined by least squares.
+    incumbent : CandidateFit, optional
+        A fit of the same model already made (same ``data``, ``effect`` and ``n_train``): the
+        starts are refined only if one of them trains better than it, and it is returned
+        unless the new fit trains better (a start from another model's fit, which may only
+        confirm the incumbent's optimum).
 
     Returns
     -------
@@ -299,21 +305,35 @@ def fit_candidate(
     if not len(starts[0]):
         r = residual(starts[0])
         return CandidateFit(lin_start, (), 0, float(np.sqrt(np.mean(r**2))) * scale)
+    n_used = max(1, sum(b - a - 1 for a, b in segments or [(0, n_train)]))
+    to_beat = math.inf if incumbent is None else (incumbent.train_rms / scale) ** 2 * n_used
+    best_x, best_cost = _refine_starts(residual, starts, (low, high), x_scale, n_refine, to_beat)
+    if best_cost >= to_beat:
+        return incumbent
+    lin = dict(lin_start)
+    lin.update({k: float(v) for k, v in zip(free, best_x[: len(free)], strict=True)})
+    theta = tuple(float(v) for v in best_x[len(free) :])
+    return CandidateFit(lin, theta, len(best_x), math.sqrt(best_cost / n_used) * scale)
+
+
+def _refine_starts(residual, starts, bounds, x_scale, n_refine, to_beat):
+    """Return ``(x, cost)``: the best of the starts and of the fits from the ``n_refine`` best.
+
+    No fit is made when no start costs less than ``to_beat`` (an incumbent fit's cost).
+    """
     costs = [float(np.sum(residual(x0) ** 2)) for x0 in starts]
     best_x, best_cost = starts[int(np.argmin(costs))], min(costs)
+    if best_cost >= to_beat:
+        return best_x, best_cost
     for index in np.argsort(costs)[:n_refine]:
-        result = _scaled_least_squares(residual, starts[index], low, high, x_scale)
+        result = _scaled_least_squares(residual, starts[index], *bounds, x_scale)
         if result is None:
-            logger.debug("fit of %s failed from start %d", effect, index)
+            logger.debug("fit failed from start %d", index)
             continue
         x_fit, cost = result
         if cost < best_cost:
             best_x, best_cost = x_fit, cost
-    lin = dict(lin_start)
-    lin.update({k: float(v) for k, v in zip(free, best_x[: len(free)], strict=True)})
-    theta = tuple(float(v) for v in best_x[len(free) :])
-    n_used = max(1, sum(b - a - 1 for a, b in segments or [(0, n_train)]))
-    return CandidateFit(lin, theta, len(best_x), math.sqrt(best_cost / n_used) * scale)
+    return best_x, best_cost
 
 
 def _scaled_least_squares(residual, start, low, high, typical) -> tuple[np.ndarray, float] | None:

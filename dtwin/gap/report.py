@@ -74,7 +74,8 @@ DEFINITIONS: dict[str, str] = {
     "exactly 100 %). Scoring part",
     "kpi_shrink_pct": "100·(1 − chain gap after / chain gap before) of the end-to-end signal "
     "(kpi_signal: z when recorded), scoring part; null when the source is not upstream of it",
-    "choosing_share_pct": "the excess gap a candidate removes on the choosing part, against its "
+    "choosing_share_pct": "the excess gap a candidate removes on the choosing part (on the "
+    "training and choosing parts when the twin has no excess on the choosing part), against its "
     "own floor (a quantizer's includes its rounding); the winner needs min_share of it "
     "(min_linear_share for a candidate of linear form: parameter_mismatch, sensor_scale_error)",
     "score": "n_eff·deviance + n_params·ln(n_eff) on the choosing part (deviance ln MSE; a "

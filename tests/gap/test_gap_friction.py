@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from dtwin.gap.effects import Scales, effect_by_name
@@ -109,3 +110,50 @@ def test_a_breakaway_rig_reads_stribeck_friction_though_it_removes_barely_more()
         assert result.params[name] == pytest.approx(truth[name], rel=0.1)
         low, high = result.param_intervals[name]
         assert low <= truth[name] <= high
+
+
+def test_stribeck_friction_without_a_bump_is_coulomb_friction_at_its_plain_part():
+    """``plain_part`` maps a Stribeck fit to the Coulomb friction it equals when ``Fs ≤ Fc``."""
+    from dtwin.gap.models import _force
+
+    stribeck, coulomb = effect_by_name("stribeck_friction"), effect_by_name("coulomb_friction")
+    velocity = np.linspace(-3.0, 3.0, 61)
+    for theta in ([1.3, 0.9, 0.2], [1.3, 1.3, 0.5]):
+        plain = stribeck.plain_part(theta)
+        assert plain == [1.3]
+        wide_force = _force(stribeck, theta, 4.0, arrays=True)(0 * velocity, velocity)
+        plain_force = _force(coulomb, plain, 4.0, arrays=True)(0 * velocity, velocity)
+        np.testing.assert_array_equal(wide_force, plain_force)
+    assert coulomb.plain_part is None
+
+
+def test_a_fit_from_another_models_start_replaces_its_incumbent_only_when_it_trains_better():
+    """``fit_candidate(incumbent=...)``: a start no better than the incumbent fit is not refined
+    and the incumbent itself comes back; a better start is refined and wins."""
+    from dtwin.gap.fit import fit_candidate
+    from dtwin.gap.models import ModuleData, first_order_lag
+
+    dt, n = 0.02, 1000
+    t = np.arange(n) * dt
+    x = np.sin(2 * np.pi * 0.3 * t) + 0.5 * np.sign(np.sin(2 * np.pi * 0.07 * t))
+    y = 1.08 * first_order_lag(x, 0.08, dt, x[0]) + 0.01
+    y = y + 0.01 * np.random.default_rng(3).standard_normal(n)
+    scales = Scales(
+        input_max=1.5,
+        input_std=float(np.std(x)),
+        output_std=float(np.std(y)),
+        velocity_std=0.0,
+        duration=n * dt,
+        dt=dt,
+        noise_std=0.01,
+    )
+    data = ModuleData("M2a", {"x": x}, y, dt, t, scales=scales)
+    effect = effect_by_name("sensor_scale_error")
+    start = {"tau": 0.08, "bias": 0.0}
+    best = fit_candidate(data, effect, start, n_train=700)
+    again = fit_candidate(data, effect, best.lin, n_train=700, starts=[[0.5]], incumbent=best)
+    assert again is best
+    poor = fit_candidate(data, effect, start, n_train=700, starts=[[0.5]], n_refine=0)
+    better = fit_candidate(data, effect, start, n_train=700, starts=[[1.0]], incumbent=poor)
+    assert better is not poor and better.train_rms < poor.train_rms
+    assert better.theta[0] == pytest.approx(1.08, rel=0.01)

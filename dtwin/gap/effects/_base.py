@@ -148,6 +148,11 @@ class Effect:
         ``departure(theta) -> float`` (Stribeck friction: ``(Fs − Fc)/Fc``, the breakaway
         force's excess over the sliding one). From ``dtwin.gap.which.NEST_DEPARTURE`` on,
         the data show what the plain form lacks.
+    plain_part : callable or None
+        The plain form's parameters nearest to fitted ones of this form:
+        ``plain_part(theta) -> theta_plain`` (Stribeck friction: ``[Fc]``), the same model
+        exactly where ``departure(theta)`` is 0. The plain form is fitted again from there when
+        this form's fit trains better (``dtwin.gap.which.fit_candidates``).
     force_law : callable or None
         A ``force`` effect's law: ``force_law(theta, velocity_std, ops) -> F(x, v)``, built on
         ``ops`` (:data:`ARRAY_OPS` for numpy arrays, :data:`SCALAR_OPS` for Python floats).
@@ -190,6 +195,7 @@ class Effect:
     nests: tuple[str, ...] = ()
     nested_starts: Callable[[Sequence[float], Scales], list[list[float]]] | None = None
     departure: Callable[[Sequence[float]], float] | None = None
+    plain_part: Callable[[Sequence[float]], list[float]] | None = None
     force_law: Callable[..., Callable[[float, float], float]] | None = None
     compiled_law: Callable[[list[float], float], CompiledLaw] | None = None
     input_map: Callable[[np.ndarray, Sequence[float], float], np.ndarray] | None = None

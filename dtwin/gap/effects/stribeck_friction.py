@@ -53,6 +53,11 @@ def _breakaway_excess(theta: Sequence[float]) -> float:
     return bump / fc if fc > 0 else (math.inf if bump > 0 else 0.0)
 
 
+def _coulomb_part(theta: Sequence[float]) -> list[float]:
+    """``[Fc]``: the Coulomb friction this one is when ``Fs ≤ Fc`` (no bump)."""
+    return [float(theta[0])]
+
+
 def _stribeck_compiled(values: list[float], smooth: float) -> CompiledLaw:
     fc, fs, vs = values
     return "stribeck_friction", (fc, max(fs - fc, 0.0), max(abs(vs), 1e-300), smooth)
@@ -75,6 +80,7 @@ EFFECT = Effect(
     nests=("coulomb_friction",),
     nested_starts=_stribeck_from_coulomb,
     departure=_breakaway_excess,
+    plain_part=_coulomb_part,
     force_law=_stribeck_law,
     compiled_law=_stribeck_compiled,
 )
