@@ -174,9 +174,13 @@ def test_a_band_near_the_nyquist_frequency_keeps_white_noise():
     assert len(floor.acf) == 1 and floor.rms == pytest.approx(1.0, rel=0.1)
 
 
+@pytest.mark.slow
 def test_a_plain_coulomb_rig_reads_coulomb_not_its_stribeck_generalisation():
     """Rig seed 16001 (a sharp Coulomb friction): Stribeck friction removed 65 % of the choosing
-    excess, Coulomb friction 61 %, and the score chose Stribeck (a shape mismatch, no bump)."""
+    excess, Coulomb friction 61 %, and the score chose Stribeck (a shape mismatch, no bump).
+
+    Slow (a whole calibrated diagnosis, 3.5 CPU s): `make test-fast` checks the choice on such
+    shares in tests/gap/test_gap_friction.py (a faint bump stays Coulomb friction)."""
     from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping
     from dtwin.gapbench.rigs import generate_rig_case
 
