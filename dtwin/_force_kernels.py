@@ -70,8 +70,22 @@ def _law_value(code, x, v, p):
 
 
 @njit(cache=True)
-def _windows_loop(drive_x, drive_v, x0, v0, steps, code, p, inv_m, out):
+def _force_step(x, v, drive_x, drive_v, steps, code, p, inv_m):
+    """Return ``(x, v)`` one sample on under the force of law ``code``.
+
+    The force at the start, the free step, then the force at the predicted end (``steps`` =
+    ``a11, a12, a21, a22, q1, q2, r1, r2``); shared by the window loops.
+    """
     a11, a12, a21, a22, q1, q2, r1, r2 = steps
+    f_prev = _law_value(code, x, v, p) * inv_m
+    x_free = a11 * x + a12 * v + drive_x - q1 * f_prev
+    v_free = a21 * x + a22 * v + drive_v - q2 * f_prev
+    f_next = _law_value(code, x_free - r1 * f_prev, v_free - r2 * f_prev, p) * inv_m
+    return x_free - r1 * f_next, v_free - r2 * f_next
+
+
+@njit(cache=True)
+def _windows_loop(drive_x, drive_v, x0, v0, steps, code, p, inv_m, out):
     n_windows, length = drive_x.shape
     for w in range(n_windows):
         x, v = x0[w], v0[w]
@@ -81,11 +95,7 @@ def _windows_loop(drive_x, drive_v, x0, v0, steps, code, p, inv_m, out):
             if broken:
                 out[w, j] = np.inf
                 continue
-            f_prev = _law_value(code, x, v, p) * inv_m
-            x_free = a11 * x + a12 * v + drive_x[w, j - 1] - q1 * f_prev
-            v_free = a21 * x + a22 * v + drive_v[w, j - 1] - q2 * f_prev
-            f_next = _law_value(code, x_free - r1 * f_prev, v_free - r2 * f_prev, p) * inv_m
-            x, v = x_free - r1 * f_next, v_free - r2 * f_next
+            x, v = _force_step(x, v, drive_x[w, j - 1], drive_v[w, j - 1], steps, code, p, inv_m)
             if not -1e300 < x < 1e300:
                 broken = True
                 out[w, j] = np.inf
@@ -166,7 +176,6 @@ def force_windows(drive, x0, v0, steps, law: ForceLaw, inv_m: float) -> np.ndarr
 @njit(cache=True)
 def _substepped_loop(fine_drive, starts, stops, substeps, x0, v0, steps, code, p, inv_m, out):
     # the windows in lockstep, each with its own arithmetic: their chains overlap in the CPU
-    a11, a12, a21, a22, q1, q2, r1, r2 = steps
     n_windows = len(starts)
     xs, vs = np.empty(n_windows), np.empty(n_windows)
     n_fine, live = np.empty(n_windows, np.int64), np.ones(n_windows, np.bool_)
@@ -182,11 +191,7 @@ def _substepped_loop(fine_drive, starts, stops, substeps, x0, v0, steps, code, p
                 continue
             x, v = xs[w], vs[w]
             row = starts[w] * substeps + j - 1  # the fine drive of the window's step j
-            f_prev = _law_value(code, x, v, p) * inv_m
-            x_free = a11 * x + a12 * v + fine_drive[row, 0] - q1 * f_prev
-            v_free = a21 * x + a22 * v + fine_drive[row, 1] - q2 * f_prev
-            f_next = _law_value(code, x_free - r1 * f_prev, v_free - r2 * f_prev, p) * inv_m
-            x, v = x_free - r1 * f_next, v_free - r2 * f_next
+            x, v = _force_step(x, v, fine_drive[row, 0], fine_drive[row, 1], steps, code, p, inv_m)
             xs[w], vs[w] = x, v
             if not -1e300 < x < 1e300:
                 # inf from the window's first sample at or after fine step j
