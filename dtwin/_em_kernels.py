@@ -277,10 +277,11 @@ def _backward_step(transmat_t, ahead, row):
 
 
 @njit(cache=True)
-def _backward(transmat_t, frameprob, scaling, bwd, weighted):
+def _backward(transmat_t, frameprob, scaling, bwd):
     """Scaled backward pass; ``transmat_t`` is Aᵀ (contiguous), sums run over j in order.
 
-    Row t ≥ 1 of ``weighted`` receives ``b_t ⊙ β_t``, the ξ-sum's right factor.
+    Row t ≥ 1 of ``frameprob`` is overwritten by ``b_t ⊙ β_t``, the ξ-sum's right factor
+    (b_t is not read again), so the E-step needs no fourth (T, K) array for it.
     """
     n_steps, n_states = frameprob.shape
     ahead, row = np.empty(n_states), np.empty(n_states)
@@ -289,7 +290,7 @@ def _backward(transmat_t, frameprob, scaling, bwd, weighted):
     for t in range(n_steps - 2, -1, -1):
         for j in range(n_states):
             ahead[j] = frameprob[t + 1, j] * bwd[t + 1, j]
-            weighted[t + 1, j] = ahead[j]
+            frameprob[t + 1, j] = ahead[j]
         _backward_step(transmat_t, ahead, row)
         for i in range(n_states):
             bwd[t, i] = row[i] * scaling[t]
@@ -297,7 +298,10 @@ def _backward(transmat_t, frameprob, scaling, bwd, weighted):
 
 @njit(cache=True)
 def _posteriors(fwd, bwd, out):
-    """γ_t ∝ α_t·β_t, rows normalised as hmmlearn's ``normalize(axis=1)`` (zero rows kept)."""
+    """γ_t ∝ α_t·β_t, rows normalised as hmmlearn's ``normalize(axis=1)`` (zero rows kept).
+
+    ``out`` may be ``bwd`` (γ then replaces β in place).
+    """
     n_steps, n_states = fwd.shape
     for t in range(n_steps):
         for k in range(n_states):
@@ -315,7 +319,7 @@ def _xi_sum(fwd, transmat, weighted, products, out):
 
     ``Σ_t α_t(i) A_ij b_j(e_t+1) β_t+1(j) = A_ij · [α_0:T−1ᵀ (b ⊙ β)_1:T]_ij``: A is constant
     over t, so the sum is one matrix product (BLAS, into ``products``) instead of T·K² scalar
-    updates; ``weighted`` holds ``b ⊙ β`` (:func:`_backward`).
+    updates; rows 1 … T−1 of ``weighted`` hold ``b ⊙ β`` (:func:`_backward`).
     """
     np.dot(fwd[:-1].T, weighted[1:], products)
     for i in range(out.shape[0]):
@@ -342,30 +346,39 @@ def _normalise(counts, previous, zero_rows_kept):
     return out
 
 
+#: Positions in :func:`_lattices`' tuple: the densities (then the ξ-sum's right factor), the
+#: forward lattice, β (then the posteriors γ), the (K, K) product and the (T,) forward scales.
+_FRAMEPROB, _FWD, _GAMMA, _PRODUCTS, _SCALING = 0, 1, 2, 3, 4
+
+
 @njit(cache=True)
 def _lattices(n_steps, n_states):
-    """Return the E-step's buffers, reused by every iteration of a start (see :func:`_estep`)."""
+    """Return the E-step's buffers, reused by every iteration of a start (see :func:`_estep`).
+
+    Three (T, K) arrays (24·T·K bytes: 96 MB at T = 1e6, K = 4), a (K, K) one and the (T,)
+    scales, in the order of :data:`_FRAMEPROB` … :data:`_SCALING`.
+    """
     frameprob, fwd = np.empty((n_steps, n_states)), np.empty((n_steps, n_states))
-    bwd, gamma = np.empty((n_steps, n_states)), np.empty((n_steps, n_states))
-    weighted, products = np.empty((n_steps, n_states)), np.empty((n_states, n_states))
-    return frameprob, fwd, bwd, gamma, weighted, products, np.empty(n_steps)
+    gamma, products = np.empty((n_steps, n_states)), np.empty((n_states, n_states))
+    return frameprob, fwd, gamma, products, np.empty(n_steps)
 
 
 @njit(cache=True)
 def _estep(kind, data, emission, startprob, transmat, buffers, xi):
     """Emission densities, forward, backward, γ and the ξ-sum; returns log p(X) (NaN on underflow).
 
-    ``buffers`` are :func:`_lattices`' (T, K) arrays; γ ends in ``buffers[3]``, Σ_t ξ_t in ``xi``.
+    ``buffers`` are :func:`_lattices`'; the densities become the ξ-sum's right factor ``b ⊙ β``
+    and β becomes γ in place, so γ ends in ``buffers[_GAMMA]``, Σ_t ξ_t in ``xi``.
     """
-    frameprob, fwd, bwd, gamma, weighted, products, scaling = buffers
+    frameprob, fwd, gamma, products, scaling = buffers
     _log_frameprob(kind, data, emission, frameprob)
     _exp_all(frameprob)
     log_prob = _forward(startprob, transmat, frameprob, fwd, scaling)
     if math.isnan(log_prob):
         return log_prob
-    _backward(np.ascontiguousarray(transmat.T), frameprob, scaling, bwd, weighted)
-    _xi_sum(fwd, transmat, weighted, products, xi)
-    _posteriors(fwd, bwd, gamma)
+    _backward(np.ascontiguousarray(transmat.T), frameprob, scaling, gamma)
+    _xi_sum(fwd, transmat, frameprob, products, xi)
+    _posteriors(fwd, gamma, gamma)
     return log_prob
 
 
@@ -403,10 +416,11 @@ def _log_forward(log_start, log_trans_t, log_frameprob, fwd):
 
 
 @njit(cache=True)
-def _log_backward(log_trans, log_frameprob, bwd, weighted):
+def _log_backward(log_trans, log_frameprob, bwd):
     """Log-space backward pass (hmmlearn's ``backward_log``), ``log β_T = 0``.
 
-    Row t ≥ 1 of ``weighted`` receives ``log b_t + log β_t``, the ξ-sum's right factor.
+    Row t ≥ 1 of ``log_frameprob`` is overwritten by ``log b_t + log β_t``, the ξ-sum's right
+    factor (as :func:`_backward`).
     """
     n_steps, n_states = log_frameprob.shape
     terms = np.empty(n_states)
@@ -414,10 +428,10 @@ def _log_backward(log_trans, log_frameprob, bwd, weighted):
         bwd[n_steps - 1, i] = 0.0
     for t in range(n_steps - 2, -1, -1):
         for j in range(n_states):
-            weighted[t + 1, j] = log_frameprob[t + 1, j] + bwd[t + 1, j]
+            log_frameprob[t + 1, j] = log_frameprob[t + 1, j] + bwd[t + 1, j]
         for i in range(n_states):
             for j in range(n_states):
-                terms[j] = log_trans[i, j] + weighted[t + 1, j]
+                terms[j] = log_trans[i, j] + log_frameprob[t + 1, j]
             bwd[t, i] = _logsumexp(terms)
 
 
@@ -457,7 +471,10 @@ def _log_xi_sum(fwd, log_trans, weighted, log_prob, peaks, out):
 
 @njit(cache=True)
 def _log_posteriors(fwd, bwd, out):
-    """γ_t = exp(log α_t + log β_t − logsumexp_k(…)) (hmmlearn's ``_compute_posteriors_log``)."""
+    """γ_t = exp(log α_t + log β_t − logsumexp_k(…)) (hmmlearn's ``_compute_posteriors_log``).
+
+    ``out`` may be ``bwd`` (γ then replaces log β in place).
+    """
     n_steps, n_states = fwd.shape
     for t in range(n_steps):
         for k in range(n_states):
@@ -474,15 +491,15 @@ def _estep_log(kind, data, emission, startprob, transmat, buffers, xi):
     The same statistics, exact where every emission density of a sample underflows (an
     outlier far from every state): returns log p(X) (−∞ or NaN if not finite).
     """
-    log_frameprob, fwd, bwd, gamma, weighted, products, _ = buffers
+    log_frameprob, fwd, gamma, products, _ = buffers
     _log_frameprob(kind, data, emission, log_frameprob)
     log_start, log_trans = np.log(startprob), np.log(transmat)
     log_prob = _log_forward(log_start, np.ascontiguousarray(log_trans.T), log_frameprob, fwd)
     if not np.isfinite(log_prob):
         return log_prob
-    _log_backward(log_trans, log_frameprob, bwd, weighted)
-    _log_xi_sum(fwd, log_trans, weighted, log_prob, products, xi)
-    _log_posteriors(fwd, bwd, gamma)
+    _log_backward(log_trans, log_frameprob, gamma)
+    _log_xi_sum(fwd, log_trans, log_frameprob, log_prob, products, xi)
+    _log_posteriors(fwd, gamma, gamma)
     return log_prob
 
 
@@ -676,7 +693,7 @@ def em(kind, data, emission, max_iter, tol, var_floor, log_space):
             if math.isnan(log_prob):
                 code = UNDERFLOW
                 break
-        gamma = buffers[3]
+        gamma = buffers[_GAMMA]
         startprob, transmat = _transition_mstep(startprob, transmat, gamma, xi)
         emission = _emission_mstep(kind, gamma, data, var_floor)
         history[n_done] = log_prob
@@ -700,7 +717,7 @@ def em(kind, data, emission, max_iter, tol, var_floor, log_space):
     elif code == OK:
         final = _estep(kind, data, emission, startprob, transmat, buffers, xi)
         code = UNDERFLOW if math.isnan(final) else OK
-    gamma = buffers[3]
+    gamma = buffers[_GAMMA]
     return code, history[:n_done].copy(), stopped, startprob, transmat, emission, final, gamma
 
 

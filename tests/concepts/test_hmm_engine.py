@@ -287,7 +287,7 @@ def test_log_space_estep_is_hmmlearns():
     kernels._log_frameprob(0, data, emission, log_frameprob)
     ref_log_prob, ref_gamma, ref_xi = _hmmlearn_log_estep(startprob, transmat, log_frameprob)
     assert log_prob == pytest.approx(ref_log_prob, rel=1e-12)
-    np.testing.assert_allclose(buffers[3], ref_gamma, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(buffers[kernels._GAMMA], ref_gamma, rtol=0, atol=1e-12)
     np.testing.assert_allclose(xi, ref_xi, rtol=1e-10, atol=0)
     assert xi[1, 3] == 0.0
     score = kernels.score(0, data, emission, startprob, transmat)
