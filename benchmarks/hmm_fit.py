@@ -10,7 +10,9 @@ Prints one JSON line. Data: T×10 features from a 4-state switching Gaussian, se
 
 ``em-*``: one EM iteration alone (K states, default 4, from one k-means++ start on the first
 10,000 samples, BLAS on one thread), through
-dtwin's compiled kernel (``dtwin._em_kernels.em``) or hmmlearn's own GaussianHMM:
+dtwin's compiled kernel (``dtwin._em_kernels.em``, on the ``(x, x²)`` rows that
+:func:`dtwin.hmm.fit_hmm` gives it) or hmmlearn's own GaussianHMM; each engine's process imports
+what its fit needs (``em-dtwin``: dtwin.hmm and the kernels, not hmmlearn or scikit-learn):
 
 - ``seconds_per_iteration``: ``(t(fit, 1 + n iterations) − t(fit, 1 iteration)) / n``, so set-up,
   validation and the first call are not counted; median of ``repeats``;
@@ -20,7 +22,11 @@ dtwin's compiled kernel (``dtwin._em_kernels.em``) or hmmlearn's own GaussianHMM
   (tracemalloc, MiB; ``X`` is allocated before);
 - ``peak_mb``: the process's peak resident memory (MiB) after the measurements, with the
   interpreter and imports (``baseline_mb``) and ``X`` (``setup_mb``: after the data and the
-  start, which comes from the first 10,000 samples).
+  start, which comes from the first 10,000 samples);
+- ``rss_file_mb``: of the resident memory at the end, the pages mapped from files (shared
+  libraries: libllvmlite.so alone is 36–93 MiB of it, more when the file was written
+  recently and sits whole in the page cache), as ``RssFile`` of ``/proc/self/status``
+  (Linux; None elsewhere).
 """
 
 from __future__ import annotations
@@ -51,25 +57,41 @@ def features_in_place(n_steps: int) -> np.ndarray:
     return X
 
 
+def _rss_file_mb() -> float | None:
+    """Resident memory mapped from files (``RssFile``, MiB), or None where /proc is missing."""
+    try:
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith("RssFile:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return None
+
+
 def em_iteration(engine: str, n_steps: int, repeats: int, n_states: int = 4) -> dict:
     """Seconds per EM iteration and its memory peak (see the module docstring)."""
     import os
     import statistics
     import tracemalloc
 
-    from hmmlearn.hmm import GaussianHMM
-    from threadpoolctl import threadpool_limits
-
-    from dtwin import _em_kernels as kernels
-    from dtwin import _em_reference as reference
     from dtwin import hmm
+    from dtwin._multistart import one_blas_thread
+
+    if engine == "em-dtwin":
+        from dtwin import _em_kernels as kernels
+    else:
+        from hmmlearn.hmm import GaussianHMM
+
+        from dtwin import _em_reference as reference
 
     baseline_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     X = features_in_place(n_steps)
     means, variances, _ = hmm._kmeanspp_start(X[:10_000], n_states, np.random.default_rng(0), 1e-3)
     setup_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
-    rows, emission = np.hstack([X, X * X]), np.stack([means, variances])
+    emission = np.stack([means, variances])
+    rows = hmm._em_data(X).kernel if engine == "em-dtwin" else None
 
     def fit(n_iter: int) -> tuple[float, float]:
         if engine == "em-dtwin":  # the compiled kernel, every iteration in one call
@@ -89,7 +111,7 @@ def em_iteration(engine: str, n_steps: int, repeats: int, n_states: int = 4) -> 
     # n = 2 at T >= 1e5 (seconds per iteration); 20 below, where the later iterations cost more
     # (transition probabilities decay into subnormal numbers after ~10 iterations at K >= 12)
     span = 2 if n_steps >= 100_000 else 20
-    with threadpool_limits(limits=1):
+    with one_blas_thread():  # loads numba's BLAS (scipy's) first, as fit_hmm does
         fit(1)
         tracemalloc.start()
         fit(1)
@@ -113,6 +135,7 @@ def em_iteration(engine: str, n_steps: int, repeats: int, n_states: int = 4) -> 
         "baseline_mb": baseline_mb,
         "setup_mb": setup_mb,
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "rss_file_mb": _rss_file_mb(),
         "load_1min": os.getloadavg()[0],
     }
 

@@ -192,8 +192,15 @@ def _require_engine(engine: Any) -> str:
 
 
 def _em_data(X: np.ndarray) -> EmData:
-    """``X`` as the EM engines read it: ``(x, x²)`` rows for the kernels, ``X`` for hmmlearn."""
-    return EmData(GAUSSIAN, np.hstack([X, X * X]), X)
+    """``X`` as the EM engines read it: ``(x, x²)`` rows for the kernels, ``X`` for hmmlearn.
+
+    The rows (T, 2D) are filled in place, without a (T, D) temporary for ``x²``.
+    """
+    n_features = X.shape[1]
+    rows = np.empty((len(X), 2 * n_features), dtype=X.dtype)
+    rows[:, :n_features] = X
+    np.multiply(X, X, out=rows[:, n_features:])
+    return EmData(GAUSSIAN, rows, X)
 
 
 def _weighted_emissions(
@@ -489,6 +496,7 @@ def _assemble_fit(
     restart_viterbi = np.full((n_restarts, len(X)), -1, dtype=int)
     for restart, run in runs.items():
         restart_viterbi[restart - 1] = decode(data, run, engine)
+    del data  # the (x, x²) rows (T, 2D) are not needed by the filter below
     best = _best_restart(restarts, runs)
     run, best_row = runs[best], restarts.loc[restarts["restart"] == best].iloc[0]
     means, variances = run.emission
