@@ -568,9 +568,10 @@ def _forward_filter(
     at every step, so nothing overflows; if a row underflows to zero (a state sequence the
     transition matrix forbids) the exact log-space loop takes over.
     """
-    log_b = _log_emission(X, means, variances)
-    peak = log_b.max(axis=1)
-    emission = np.exp(log_b - peak[:, None])
+    emission = _log_emission(X, means, variances)  # log b, made β in place
+    peak = emission.max(axis=1)
+    emission -= peak[:, None]
+    np.exp(emission, out=emission)
     first = startprob * emission[0]
     n_steps, n_states = emission.shape
     filtered = np.empty((n_steps, n_states))
@@ -600,6 +601,7 @@ def _blocked_forward(start: np.ndarray, emission: np.ndarray, transmat: np.ndarr
         step = beta[:, position, :, None] * transposed
         prefix[:, position] = step if position == 0 else step @ prefix[:, position - 1]
         prefix[:, position] /= prefix[:, position].max(axis=(1, 2), keepdims=True)
+    del beta
     entries = np.empty((n_blocks, n_states))
     alpha = start
     for index in range(n_blocks):
@@ -607,7 +609,9 @@ def _blocked_forward(start: np.ndarray, emission: np.ndarray, transmat: np.ndarr
         alpha = prefix[index, -1] @ alpha
         alpha = alpha / alpha.sum()
     alphas = np.einsum("bjik,bk->bji", prefix, entries).reshape(-1, n_states)[:n_steps]
-    return alphas / alphas.sum(axis=1, keepdims=True)
+    del prefix
+    alphas /= alphas.sum(axis=1, keepdims=True)
+    return alphas
 
 
 def _forward_filter_loop(
