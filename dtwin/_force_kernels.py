@@ -14,8 +14,9 @@ The paper's explicit-Euler plant (:func:`dtwin.modules.plant_response`, the loop
 None or a known law: the same arithmetic in the same order on the same doubles, so the same
 bits (tests/gap/test_gap_discretisation.py), at ~30 ns instead of ~1 µs per step. The
 diagnoser's Euler twin uses it only where numba is installed (:data:`dtwin._jit.HAVE_NUMBA`).
-So does the benchmark's continuous asset without an extra force (:func:`rk4_chain`, the RK4 loop
-of ``dtwin.gapbench.arms._rk4_chain``, the same bits).
+The benchmark's continuous asset is integrated here (:func:`rk4_chain`, its one Runge-Kutta
+loop, with or without a force), and its generator's Euler plant evaluates a case's force by
+:func:`law_function`, the laws' arithmetic run by the interpreter.
 
 The laws (``x`` position, ``v`` velocity, ``p`` the parameters):
 
@@ -23,30 +24,49 @@ The laws (``x`` position, ``v`` velocity, ``p`` the parameters):
 - ``cubic_spring``: ``p[0]·(x − p[1])³``;
 - ``quadratic_damping``: ``p[0]·v·|v|``;
 - ``stribeck_friction``: ``(p[0] + p[1]·exp(−(v/p[2])²))·tanh(v/p[3])`` (sliding level, the
-  breakaway bump above it, Stribeck velocity, smoothing).
+  breakaway bump above it, Stribeck velocity, smoothing);
+- ``generalised_stribeck``: ``(p[0] + p[1]·exp(−|v/p[2]|^p[3]))·tanh(v/p[4]) + p[5]·v``
+  (sliding level, bump, Stribeck velocity, exponent, smoothing, viscous coefficient);
+- ``power_spring``: ``p[0]·sign(x)·|x/p[1]|^p[2]`` (gain, reference position, exponent);
+- ``power_damping``: ``p[0]·sign(v)·|v/p[1]|^p[2]`` (gain, reference velocity, exponent);
+- ``sine_in_position``: ``p[0]·sin(p[1]·x + p[2])`` (amplitude, wavenumber, phase; cogging).
+
+The first four are the diagnoser's candidates' (:mod:`dtwin.gap.effects`), the others the
+benchmark's real forms (:class:`dtwin.gap.effects.CaseEffect`'s ``force``).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
 
-from dtwin._jit import njit
+from dtwin._jit import HAVE_NUMBA, njit
 
 __all__ = [
     "LAWS",
     "ForceLaw",
     "euler_response",
     "force_windows",
+    "law_function",
     "rk4_chain",
     "substepped_windows",
     "warm_up",
 ]
 
 #: The laws the compiled loop knows, by name; the index is the law's code in the loop.
-LAWS: tuple[str, ...] = ("tanh_friction", "cubic_spring", "quadratic_damping", "stribeck_friction")
+LAWS: tuple[str, ...] = (
+    "tanh_friction",
+    "cubic_spring",
+    "quadratic_damping",
+    "stribeck_friction",
+    "generalised_stribeck",
+    "power_spring",
+    "power_damping",
+    "sine_in_position",
+)
 
 
 class ForceLaw(NamedTuple):
@@ -56,7 +76,7 @@ class ForceLaw(NamedTuple):
     params: tuple[float, ...]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # inlined in numba IR: its laws do not slow the loops
 def _law_value(code, x, v, p):
     if code == 0:
         return p[0] * math.tanh(v / p[1])
@@ -65,8 +85,37 @@ def _law_value(code, x, v, p):
         return p[0] * offset * offset * offset
     if code == 2:
         return p[0] * v * abs(v)
-    ratio = v / p[2]
-    return (p[0] + p[1] * math.exp(-ratio * ratio)) * math.tanh(v / p[3])
+    if code == 3:
+        ratio = v / p[2]
+        return (p[0] + p[1] * math.exp(-ratio * ratio)) * math.tanh(v / p[3])
+    if code == 4:
+        level = p[0] + p[1] * math.exp(-(abs(v / p[2]) ** p[3]))
+        return level * math.tanh(v / p[4]) + p[5] * v
+    if code == 5:
+        return p[0] * math.copysign(abs(x / p[1]) ** p[2], x)
+    if code == 6:
+        return p[0] * math.copysign(abs(v / p[1]) ** p[2], v)
+    return p[0] * math.sin(p[1] * x + p[2])
+
+
+def _law_code(law: ForceLaw) -> int:
+    """Return ``law``'s code in the loops, its index in :data:`LAWS` (an unknown law: error)."""
+    if law.name not in LAWS:
+        raise ValueError(f"force law must be one of {', '.join(LAWS)} (got {law.name!r})")
+    return LAWS.index(law.name)
+
+
+def law_function(law: ForceLaw) -> Callable[[float, float], float]:
+    """Return the force ``F(x, v)`` of ``law`` (N) for a loop that stays in Python.
+
+    The arithmetic the compiled loops step (:func:`_law_value`), run by the interpreter on the
+    floats it is given: the same bits as the compiled law (tests/gapbench/test_gap_arms.py),
+    without a call into compiled code at every step.
+    """
+    code = _law_code(law)
+    params = tuple(float(value) for value in law.params)
+    value = getattr(_law_value, "py_func", _law_value)  # the Python function numba compiled
+    return lambda x, v: value(code, x, v, params)
 
 
 @njit(cache=True)
@@ -136,12 +185,10 @@ def euler_response(
     or is NaN, the rest of ``x`` is ``limit`` and of ``v`` 0): the same arithmetic, the same
     bits. ``u`` shape ``(n_steps,)``, input units; ``u[k−1]`` drives step ``k``.
     """
-    if law is not None and law.name not in LAWS:
-        raise ValueError(f"force law must be one of {', '.join(LAWS)} (got {law.name!r})")
+    code = -1 if law is None else _law_code(law)
     u = np.ascontiguousarray(u, dtype=float)
     xs, vs = np.zeros(len(u)), np.zeros(len(u))
     if len(u):
-        code = -1 if law is None else LAWS.index(law.name)
         params = np.asarray(law.params if law is not None else (0.0,), dtype=float)
         floats = (float(value) for value in (x0, v0, m, c, k, dt))
         _euler_loop(u, *floats, code, params, float(limit), xs, vs)
@@ -155,8 +202,7 @@ def force_windows(drive, x0, v0, steps, law: ForceLaw, inv_m: float) -> np.ndarr
     shape (n_windows, length, 2), ``steps`` the eight step coefficients ``a11 … r2``), ``inf``
     from a window's first sample whose position is not finite or beyond ±1e300.
     """
-    if law.name not in LAWS:
-        raise ValueError(f"force law must be one of {', '.join(LAWS)} (got {law.name!r})")
+    code = _law_code(law)
     drive = np.asarray(drive, dtype=float)
     out = np.empty(drive.shape[:2])
     _windows_loop(
@@ -165,7 +211,7 @@ def force_windows(drive, x0, v0, steps, law: ForceLaw, inv_m: float) -> np.ndarr
         np.asarray(x0, dtype=float),
         np.asarray(v0, dtype=float),
         tuple(float(s) for s in steps),
-        LAWS.index(law.name),
+        code,
         np.asarray(law.params, dtype=float),
         float(inv_m),
         out,
@@ -214,8 +260,7 @@ def substepped_windows(
     ``inf`` from a window's first sample at or after a fine step whose position is not finite
     or beyond ±1e300. ``windows`` must not overlap.
     """
-    if law.name not in LAWS:
-        raise ValueError(f"force law must be one of {', '.join(LAWS)} (got {law.name!r})")
+    code = _law_code(law)
     out = np.zeros(len(fine_drive) // substeps)
     starts = np.array([a for a, _ in windows], dtype=np.int64)
     _substepped_loop(  # every array C-contiguous: the one specialisation warm_up compiled
@@ -226,7 +271,7 @@ def substepped_windows(
         np.asarray(x_start, dtype=float)[starts],
         np.asarray(v_start, dtype=float)[starts],
         tuple(float(s) for s in steps),
-        LAWS.index(law.name),
+        code,
         np.asarray(law.params, dtype=float),
         float(inv_m),
         out,
@@ -235,22 +280,26 @@ def substepped_windows(
 
 
 @njit(cache=True)
-def _rk4_loop(u, eta, xi, tau, m, c, k, h, half, sixth, substeps, out):
+def _rk4_loop(u, eta, xi, tau, m, c, k, h, half, sixth, substeps, code, p, out):
     a, x, v = 0.0, 0.0, 0.0
     row = 1
     for j in range(1, len(u)):
         drive, noise = u[j - 1] + eta[j], xi[j]
         for _ in range(substeps):
-            k1a, k1x, k1v = (drive - a) / tau, v, (a - c * v - k * x - 0.0) / m + noise
+            f1 = _law_value(code, x, v, p) if code >= 0 else 0.0
+            k1a, k1x, k1v = (drive - a) / tau, v, (a - c * v - k * x - f1) / m + noise
             a2, x2, v2 = a + half * k1a, x + half * k1x, v + half * k1v
+            f2 = _law_value(code, x2, v2, p) if code >= 0 else 0.0
             k2a, k2x = (drive - a2) / tau, v2
-            k2v = (a2 - c * v2 - k * x2 - 0.0) / m + noise
+            k2v = (a2 - c * v2 - k * x2 - f2) / m + noise
             a3, x3, v3 = a + half * k2a, x + half * k2x, v + half * k2v
+            f3 = _law_value(code, x3, v3, p) if code >= 0 else 0.0
             k3a, k3x = (drive - a3) / tau, v3
-            k3v = (a3 - c * v3 - k * x3 - 0.0) / m + noise
+            k3v = (a3 - c * v3 - k * x3 - f3) / m + noise
             a4, x4, v4 = a + h * k3a, x + h * k3x, v + h * k3v
+            f4 = _law_value(code, x4, v4, p) if code >= 0 else 0.0
             k4a, k4x = (drive - a4) / tau, v4
-            k4v = (a4 - c * v4 - k * x4 - 0.0) / m + noise
+            k4v = (a4 - c * v4 - k * x4 - f4) / m + noise
             a += sixth * (k1a + 2 * k2a + 2 * k3a + k4a)
             x += sixth * (k1x + 2 * k2x + 2 * k3x + k4x)
             v += sixth * (k1v + 2 * k2v + 2 * k3v + k4v)
@@ -258,17 +307,27 @@ def _rk4_loop(u, eta, xi, tau, m, c, k, h, half, sixth, substeps, out):
             row += 1
 
 
-def rk4_chain(u_in, tau, m, c, k, dt, eta, xi, substeps: int) -> np.ndarray:
-    """Return the continuous asset's states at every sub-step, ``((n−1)·substeps + 1, 3)``.
+def rk4_chain(
+    u_in, tau, m, c, k, dt, eta, xi, substeps: int, law: ForceLaw | None = None
+) -> np.ndarray:
+    """Return the continuous asset's states ``(u, x, v)`` at every sub-step, ``((n−1)·S + 1, 3)``.
 
-    ``dtwin.gapbench.arms._rk4_chain`` without an extra force (the same arguments, arrays of
-    shape ``(n,)``): the same arithmetic in the same order, the same bits.
+    Classical Runge-Kutta (``S = substeps`` steps of ``h = dt/S`` per sample, from rest) of
+    ``τ·u̇ = u_in + η − u``, ``ẋ = v``, ``m·v̇ = u − c·v − k·x − F(x, v) + m·ξ``, ``F`` the force
+    of ``law`` (None: no force). The inputs ``u_in[j−1] + η[j]`` and ``ξ[j]`` are held over step
+    ``j`` (from sample ``j−1`` to ``j``); ``u_in``, ``eta``, ``xi`` shape ``(n,)``; ``tau`` s,
+    ``m, c, k`` the plant's parameters. Compiled where numba is installed; without it the same
+    loop runs in Python on Python floats, the same bits (tests/concepts/test_without_numba.py).
     """
+    code = -1 if law is None else _law_code(law)
+    params = np.asarray(law.params if law is not None else (0.0,), dtype=float)
     u, eta, xi = (np.ascontiguousarray(s, dtype=float) for s in (u_in, eta, xi))
+    if not HAVE_NUMBA:  # the interpreter runs the loop faster on floats than on numpy scalars
+        u, eta, xi, params = u.tolist(), eta.tolist(), xi.tolist(), params.tolist()
     h = dt / substeps
     out = np.zeros((max(len(u) - 1, 0) * substeps + 1, 3))
     floats = (float(value) for value in (tau, m, c, k, h, h / 2, h / 6))
-    _rk4_loop(u, eta, xi, *floats, int(substeps), out)
+    _rk4_loop(u, eta, xi, *floats, int(substeps), code, params, out)
     return out
 
 

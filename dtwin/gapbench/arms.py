@@ -41,7 +41,6 @@ from typing import Any
 import numpy as np
 from scipy.signal import lfilter
 
-from dtwin._jit import HAVE_NUMBA
 from dtwin.gapbench.case_effects import CaseEffect, log_between, spec_value
 from dtwin.modules import lag_coefficient
 from dtwin.wiring import ACTUATOR, role_of
@@ -306,24 +305,18 @@ def hysteresis_offset(x: np.ndarray, spec: Mapping[str, Any]) -> np.ndarray:
 
 def _stribeck_force(spec: Mapping[str, Any], c: float, k: float, min_smoothing: float = 0.0):
     """Stribeck friction with a generalised exponent; its sign smoothed over ``10⁻³·vs`` or more."""
-    fc, fs, vs, delta = spec["Fc"], spec["Fs"], spec["vs"], spec["delta"]
-    viscous, smooth = spec["viscous"], max(1e-3 * spec["vs"], min_smoothing)
-
-    def friction(xp, vp):
-        level = fc + (fs - fc) * math.exp(-(abs(vp / vs) ** delta))
-        return level * math.tanh(vp / smooth) + viscous * vp
-
-    return friction
+    fc, fs, vs = spec["Fc"], spec["Fs"], spec["vs"]
+    smooth = max(1e-3 * vs, min_smoothing)
+    return "generalised_stribeck", (fc, fs - fc, vs, spec["delta"], smooth, spec["viscous"])
 
 
 def _quintic_force(spec: Mapping[str, Any], c: float, k: float, min_smoothing: float = 0.0):
     ratio, ref = spec["ratio"], spec["x_ref"]
-    return lambda xp, vp: ratio * k * ref * (xp / ref) ** 5
+    return "power_spring", (ratio * k * ref, ref, 5.0)
 
 
 def _cogging_force(spec: Mapping[str, Any], c: float, k: float, min_smoothing: float = 0.0):
-    amplitude, wavenumber, phase = spec["A"], 2 * math.pi / spec["period"], spec["phase"]
-    return lambda xp, vp: amplitude * math.sin(wavenumber * xp + phase)
+    return "sine_in_position", (spec["A"], 2 * math.pi / spec["period"], spec["phase"])
 
 
 def _hysteresis_reading(y, spec: Mapping[str, Any], t, x) -> np.ndarray:
@@ -387,47 +380,6 @@ ARM_CASE_EFFECTS: dict[str, CaseEffect] = {
 # --- the continuous asset -------------------------------------------------------------------
 
 
-def _rk4_chain(u_in, tau, m, c, k, dt, force, eta, xi, substeps):
-    """RK4 of ``τ·u̇ = u_in + η − u``, ``ẋ = v``, ``m·v̇ = u − c·v − k·x − F(x, v) + m·ξ``.
-
-    The inputs ``u_in[j−1] + η[j]`` and ``ξ[j]`` are held over step ``j`` (from sample ``j−1``
-    to ``j``). Returns the state at every sub-step, shape ``((n−1)·substeps + 1, 3)``. The
-    loop runs on Python floats (each stage's three derivatives written out, the arithmetic of
-    a ``deriv(state)`` call in the same order); without a force, where numba is installed, the
-    same loop compiled (:func:`dtwin._force_kernels.rk4_chain`, the same bits).
-    """
-    if force is None and HAVE_NUMBA:
-        from dtwin._force_kernels import rk4_chain
-
-        return rk4_chain(u_in, tau, m, c, k, dt, eta, xi, substeps)
-    n = len(u_in)
-    h = dt / substeps
-    half, sixth = h / 2, h / 6
-    extra = force or (lambda xp, vp: 0.0)
-    u_list, eta_list, xi_list = (np.asarray(s, dtype=float).tolist() for s in (u_in, eta, xi))
-    rows = [(0.0, 0.0, 0.0)]
-    append = rows.append
-    a, x, v = 0.0, 0.0, 0.0
-    for j in range(1, n):
-        drive, noise = u_list[j - 1] + eta_list[j], xi_list[j]
-        for _ in range(substeps):
-            k1a, k1x, k1v = (drive - a) / tau, v, (a - c * v - k * x - extra(x, v)) / m + noise
-            a2, x2, v2 = a + half * k1a, x + half * k1x, v + half * k1v
-            k2a, k2x = (drive - a2) / tau, v2
-            k2v = (a2 - c * v2 - k * x2 - extra(x2, v2)) / m + noise
-            a3, x3, v3 = a + half * k2a, x + half * k2x, v + half * k2v
-            k3a, k3x = (drive - a3) / tau, v3
-            k3v = (a3 - c * v3 - k * x3 - extra(x3, v3)) / m + noise
-            a4, x4, v4 = a + h * k3a, x + h * k3x, v + h * k3v
-            k4a, k4x = (drive - a4) / tau, v4
-            k4v = (a4 - c * v4 - k * x4 - extra(x4, v4)) / m + noise
-            a += sixth * (k1a + 2 * k2a + 2 * k3a + k4a)
-            x += sixth * (k1x + 2 * k2x + 2 * k3x + k4x)
-            v += sixth * (k1v + 2 * k2v + 2 * k3v + k4v)
-            append((a, x, v))
-    return np.array(rows, dtype=float)
-
-
 def _continuous_lag(x_fine: np.ndarray, tau: float, h: float, delay: float) -> np.ndarray:
     """First-order lag ``τ·ẏ = x(t − delay) − y`` on the sub-step grid (midpoint input)."""
     grid = np.arange(len(x_fine)) * h
@@ -439,7 +391,7 @@ def _continuous_lag(x_fine: np.ndarray, tau: float, h: float, delay: float) -> n
 def continuous_chain(
     u_in: np.ndarray,
     asset: Mapping[str, Any],
-    force,
+    law: tuple[str, tuple[float, ...]] | None,
     act_noise: np.ndarray,
     accel_noise: np.ndarray,
     sensor_delays: Mapping[str, float],
@@ -453,8 +405,9 @@ def continuous_chain(
         The actuator's input after its effect, held over each sample (a digital command).
     asset : mapping
         The asset's sections (``dt``, ``actuator.tau``, ``plant``, ``sensor_A/B.tau``).
-    force : callable or None
-        The plant's extra force ``F(x, v)`` (N).
+    law : (str, tuple of float) or None
+        The plant's extra force ``F(x, v)`` (N): a law of :data:`dtwin._force_kernels.LAWS`
+        and its parameters (a case effect's ``force``), None for none.
     act_noise, accel_noise : array, shape (n,)
         The Euler twin's per-step actuator noise ``w[j]`` (held on the lag's input as
         ``w[j]/(1 − a)``, the same step variance) and acceleration noise ``ξ[j]`` (m/s², held).
@@ -474,7 +427,10 @@ def continuous_chain(
     p = asset["plant"]
     a = lag_coefficient(tau, dt)
     eta = np.asarray(act_noise) / (1 - a)
-    fine = _rk4_chain(u_in, tau, p["m"], p["c"], p["k"], dt, force, eta, accel_noise, substeps)
+    from dtwin._force_kernels import ForceLaw, rk4_chain  # numba (~0.5 s) only when run
+
+    force = None if law is None else ForceLaw(*law)
+    fine = rk4_chain(u_in, tau, p["m"], p["c"], p["k"], dt, eta, accel_noise, substeps, force)
     h = dt / substeps
     out = {"u_act": fine[::substeps, 0], "x": fine[::substeps, 1], "v": fine[::substeps, 2]}
     for which in ("A", "B"):

@@ -273,7 +273,7 @@ def _actuator(u_cmd, tau, dt, noise, spec):
 
 
 def _plant_force(spec, c, k, min_smoothing=0.0):
-    """Return the real effect's force hook ``F(x, v)`` (N) of the plant, or None.
+    """Return the real effect's plant force ``(law, params)`` (a :class:`CaseEffect`'s), or None.
 
     A friction's sign is smoothed over its own velocity scale, or ``min_smoothing`` if larger
     (the continuous asset's Runge-Kutta step needs it).
@@ -291,7 +291,12 @@ def _plant(u, m, c, k, dt, noise, spec, n):
     plant = _hook(spec, "plant")
     if plant is not None:
         return plant(u, m, c, k, dt, noise, spec, n)
-    force = _plant_force(spec, c, k)
+    law = _plant_force(spec, c, k)
+    force = None
+    if law is not None:
+        from dtwin._force_kernels import ForceLaw, law_function  # numba only for a force
+
+        force = law_function(ForceLaw(*law))
     x, v = plant_response(u[:n], m, c, k, dt, force=force, accel_noise=noise[:n])
     return x, v
 
@@ -368,14 +373,14 @@ def _run_continuous_asset(asset, u_cmd, noises, specs, t):
     u_in = _actuator_input(u_cmd, specs["M0"], dt)
     h = dt / CONTINUOUS_SUBSTEPS
     friction = specs["M1"].get("Fs", specs["M1"].get("Fc", 0.0))
-    force = _plant_force(specs["M1"], p["c"], p["k"], min_smoothing=2 * h * friction / p["m"])
+    law = _plant_force(specs["M1"], p["c"], p["k"], min_smoothing=2 * h * friction / p["m"])
     delays = {
         which: specs[module].get("delay_samples", 0.0) * dt
         if _hook(specs[module], "continuous_delay")
         else 0.0
         for which, module in (("A", "M2a"), ("B", "M2b"))
     }
-    chain = continuous_chain(u_in, asset, force, noises["actuator"], noises["plant"], delays)
+    chain = continuous_chain(u_in, asset, law, noises["actuator"], noises["plant"], delays)
 
     def sensor(which: str, module: str) -> Step:
         bias = asset[f"sensor_{which}"]["bias"]

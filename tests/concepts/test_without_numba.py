@@ -9,16 +9,29 @@ import numpy as np
 
 from dtwin.hmm import fit_hmm
 
-SCRIPT = textwrap.dedent(
-    """
+#: A continuous asset's run with a friction law (dtwin._force_kernels.rk4_chain's arguments).
+RK4_SETUP = """
+from dtwin._force_kernels import ForceLaw
+u = np.sin(np.arange(60) * 0.3)
+RK4_ARGS = (u, 0.05, 1.3, 0.4, 40.0, 0.01, 0.1 * u[::-1], np.cos(np.arange(60)), 20,
+            ForceLaw("generalised_stribeck", (0.3, 0.2, 0.05, 1.4, 0.02, 0.1)))
+"""
+
+SCRIPT = (
+    textwrap.dedent(
+        """
     import sys
     sys.modules["numba"] = None  # `import numba` now fails, as in an environment without it
     import json
     import numpy as np
     from dtwin._jit import HAVE_NUMBA
-    from dtwin._force_kernels import ForceLaw, force_windows
+    from dtwin._force_kernels import ForceLaw, force_windows, rk4_chain
     from dtwin.hmm import fit_hmm
-
+    """
+    )
+    + RK4_SETUP
+    + textwrap.dedent(
+        """
     rng = np.random.default_rng(3)
     drive = rng.normal(0, 1e-3, (2, 50, 2))
     steps = (0.99, 0.01, -0.01, 0.98, 1e-4, 1e-2, 1e-4, 1e-2)
@@ -26,16 +39,22 @@ SCRIPT = textwrap.dedent(
     out = force_windows(drive, np.zeros(2), np.zeros(2), steps, law, 1.0)
     X = np.concatenate([rng.normal(-2, 1, (80, 2)), rng.normal(2, 1, (80, 2))])
     fit = fit_hmm(X, 2, n_restarts=2, seed=1)
+    chain = rk4_chain(*RK4_ARGS)
     loaded = sys.modules.get("numba") is not None
     finite = bool(np.isfinite(out).all())
     print(json.dumps({"numba": HAVE_NUMBA, "numba_loaded": loaded, "finite": finite,
-                      "loglik": fit.log_likelihood}))
+                      "loglik": fit.log_likelihood, "rk4": chain.tobytes().hex()}))
     """
+    )
 )
 
 
 def test_diagnoser_kernels_and_em_run_without_numba():
-    """A process that cannot import numba still steps a force law and fits an HMM (hmmlearn)."""
+    """A process that cannot import numba still steps a force law and fits an HMM (hmmlearn).
+
+    The continuous asset's Runge-Kutta loop, run by the interpreter there, gives the bits of the
+    compiled loop here.
+    """
     done = subprocess.run(
         [sys.executable, "-c", SCRIPT], capture_output=True, text=True, check=False, timeout=120
     )
@@ -48,3 +67,8 @@ def test_diagnoser_kernels_and_em_run_without_numba():
     X = np.concatenate([rng.normal(-2, 1, (80, 2)), rng.normal(2, 1, (80, 2))])
     reference = fit_hmm(X, 2, n_restarts=2, seed=1, engine="hmmlearn").log_likelihood
     assert np.isclose(result["loglik"], reference, rtol=1e-9)
+    setup = {"np": np}
+    exec(RK4_SETUP, setup)  # the same run where numba is installed: the same bits
+    from dtwin._force_kernels import rk4_chain
+
+    assert result["rk4"] == rk4_chain(*setup["RK4_ARGS"]).tobytes().hex()

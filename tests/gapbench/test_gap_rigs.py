@@ -117,11 +117,12 @@ def test_unknown_hard_rig_effects_are_refused_and_the_prefix_dispatches():
 
 
 def test_cogging_is_a_near_catalogue_plant_force_periodic_in_the_position():
+    from dtwin._force_kernels import ForceLaw, law_function
     from dtwin.gapbench.arms import ARM_CASE_EFFECTS, NEAR_CATALOGUE
 
     assert "cogging" in NEAR_CATALOGUE and "stiction" not in NEAR_CATALOGUE
     spec = {"effect": "cogging", "A": 2.0, "period": 0.5, "phase": 0.3}
-    force = ARM_CASE_EFFECTS["cogging"].force(spec, 0.4, 1.0)
+    force = law_function(ForceLaw(*ARM_CASE_EFFECTS["cogging"].force(spec, 0.4, 1.0)))
     assert force(0.1, 0.0) == pytest.approx(force(0.6, 5.0))
     assert force(0.1, 0.0) == pytest.approx(2.0 * math.sin(2 * math.pi * 0.1 / 0.5 + 0.3))
 

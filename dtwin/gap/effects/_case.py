@@ -80,8 +80,10 @@ class CaseEffect:
     actuator : callable, optional
         ``actuator(u_cmd, spec, dt) -> u``: the command after the effect, before the lag.
     force : callable, optional
-        ``force(spec, c, k, min_smoothing) -> F(x, v)``: an extra plant force (N) on Python
-        floats; a friction's sign is smoothed over at least ``min_smoothing`` (m/s).
+        ``force(spec, c, k, min_smoothing) -> (law, params)``: an extra plant force ``F(x, v)``
+        (N), a law of :data:`dtwin._force_kernels.LAWS` and its parameters (the Euler plant and
+        the continuous asset step the same law); a friction's sign is smoothed over at least
+        ``min_smoothing`` (m/s).
     plant : callable, optional
         ``plant(u, m, c, k, dt, noise, spec, n) -> (x, v)``: the whole plant run, in place of
         the contract's Euler plant (stick-slip friction, a change of ``k``).
@@ -107,7 +109,7 @@ class CaseEffect:
     name: str
     draw: Draw
     actuator: Callable[..., np.ndarray] | None = None
-    force: Callable[..., Callable[[float, float], float]] | None = None
+    force: Callable[..., tuple[str, tuple[float, ...]]] | None = None
     plant: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None
     sensor_input: Callable[..., np.ndarray] | None = None
     sensor_gain: Callable[..., np.ndarray] | None = None

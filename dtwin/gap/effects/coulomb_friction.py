@@ -8,7 +8,6 @@ benchmark draws it and its real form (a Stribeck bump, or Coulomb plus viscous f
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from dtwin.gap.effects._base import CompiledLaw, Effect, ForceOps, smoothing_velocity
@@ -57,14 +56,9 @@ def _draw_friction(module, level, rng, scale) -> dict[str, Any]:
 
 def _friction(spec, c, k, min_smoothing=0.0):
     """Stribeck or Coulomb + viscous friction; its sign smoothed over ``10⁻³·vs`` or more."""
-    fc, fs, vs, extra = spec["Fc"], spec["Fs"], spec["vs"], spec["extra_c"]
+    fc, fs, vs = spec["Fc"], spec["Fs"], spec["vs"]
     smooth = max(1e-3 * vs, min_smoothing)
-
-    def friction(xp, vp):
-        level = fc + (fs - fc) * math.exp(-((vp / vs) ** 2))
-        return level * math.tanh(vp / smooth) + extra * vp
-
-    return friction
+    return "generalised_stribeck", (fc, fs - fc, vs, 2.0, smooth, spec["extra_c"])
 
 
 CASE = CaseEffect("coulomb_friction", _draw_friction, force=_friction, truth=spec_value("Fc"))

@@ -8,7 +8,6 @@ its real form (a power near 2, hardening or softening).
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from dtwin.gap.effects._base import CompiledLaw, Effect, ForceOps, Scales
@@ -73,7 +72,7 @@ def _draw_stiffness(module, level, rng, scale) -> dict[str, Any]:
 
 def _stiffness(spec, c, k, min_smoothing=0.0):
     ratio, ref, power = spec["ratio"], spec["x_ref"], spec["power"]
-    return lambda xp, vp: ratio * k * ref * math.copysign(abs(xp / ref) ** (power + 1), xp)
+    return "power_spring", (ratio * k * ref, ref, power + 1)
 
 
 def _stiffness_truth(spec, key, dt):

@@ -8,7 +8,6 @@ its real form (a power 1.7–2.3).
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from dtwin.gap.effects._base import Effect, ForceOps
@@ -53,7 +52,7 @@ def _draw_damping(module, level, rng, scale) -> dict[str, Any]:
 
 def _damping(spec, c, k, min_smoothing=0.0):
     ratio, ref, power = spec["ratio"], spec["v_ref"], spec["power"]
-    return lambda xp, vp: ratio * c * ref * math.copysign(abs(vp / ref) ** power, vp)
+    return "power_damping", (ratio * c * ref, ref, power)
 
 
 CASE = CaseEffect("quadratic_damping", _draw_damping, force=_damping)
