@@ -71,6 +71,18 @@ _MAX_NFEV = 300
 #: a fit stops once its step is below ``FIT_XTOL·(FIT_XTOL + ‖z‖)`` (``z = θ/typical``), so
 #: its parameters are known to no better (:mod:`dtwin.gap.intervals`).
 FIT_XTOL = 1e-6
+#: Finite-difference step of the Jacobian, relative to each parameter's typical size, of a fit
+#: whose exact plant carries a candidate force (SciPy's default, ``√ε ≈ 1.5e-8``, elsewhere).
+#: Such a training error is rough on small scales, though its trend is smooth: a window's
+#: initial state is a local least-squares fit under the force, which moves in steps where a
+#: warm-up passes through a stick or a reversal, and a friction's stick–slip changes a window's
+#: error in steps where a parameter moves a simulated velocity across rest. At SciPy's step the
+#: Jacobian is the slope of those steps, and the fit stops at its start (a closed-loop rig's
+#: Coulomb friction, docs/gap.md §Which: a change of 1e-4 of ``Fc`` moved the training cost by
+#: 16 %). A step of 1e-3 of the typical size reads the trend; its truncation error moves the
+#: optimum by about half a step (the rig families' friction fits have 95 % intervals of ±0.1 %
+#: to ±20 % of their value).
+FORCE_DIFF_STEP = 1e-3
 
 
 @dataclass(frozen=True)
@@ -307,7 +319,11 @@ def fit_candidate(
         return CandidateFit(lin_start, (), 0, float(np.sqrt(np.mean(r**2))) * scale)
     n_used = max(1, sum(b - a - 1 for a, b in segments or [(0, n_train)]))
     to_beat = math.inf if incumbent is None else (incumbent.train_rms / scale) ** 2 * n_used
-    best_x, best_cost = _refine_starts(residual, starts, (low, high), x_scale, n_refine, to_beat)
+    rough = exact and effect is not None and effect.stage == "force"
+    diff_step = FORCE_DIFF_STEP if rough else None
+    best_x, best_cost = _refine_starts(
+        residual, starts, (low, high), x_scale, n_refine, to_beat, diff_step
+    )
     if best_cost >= to_beat:
         return incumbent
     lin = dict(lin_start)
@@ -316,17 +332,18 @@ def fit_candidate(
     return CandidateFit(lin, theta, len(best_x), math.sqrt(best_cost / n_used) * scale)
 
 
-def _refine_starts(residual, starts, bounds, x_scale, n_refine, to_beat):
+def _refine_starts(residual, starts, bounds, x_scale, n_refine, to_beat, diff_step=None):
     """Return ``(x, cost)``: the best of the starts and of the fits from the ``n_refine`` best.
 
-    No fit is made when no start costs less than ``to_beat`` (an incumbent fit's cost).
+    No fit is made when no start costs less than ``to_beat`` (an incumbent fit's cost);
+    ``diff_step`` is :func:`_scaled_least_squares`'.
     """
     costs = [float(np.sum(residual(x0) ** 2)) for x0 in starts]
     best_x, best_cost = starts[int(np.argmin(costs))], min(costs)
     if best_cost >= to_beat:
         return best_x, best_cost
     for index in np.argsort(costs)[:n_refine]:
-        result = _scaled_least_squares(residual, starts[index], *bounds, x_scale)
+        result = _scaled_least_squares(residual, starts[index], *bounds, x_scale, diff_step)
         if result is None:
             logger.debug("fit failed from start %d", index)
             continue
@@ -336,13 +353,17 @@ def _refine_starts(residual, starts, bounds, x_scale, n_refine, to_beat):
     return best_x, best_cost
 
 
-def _scaled_least_squares(residual, start, low, high, typical) -> tuple[np.ndarray, float] | None:
+def _scaled_least_squares(
+    residual, start, low, high, typical, diff_step: float | None = None
+) -> tuple[np.ndarray, float] | None:
     """Minimise ``Σ residual(x)²`` over ``x / typical``; return ``(x, cost)`` or None on failure.
 
     Every parameter is fitted in units of its typical size, so that the finite-difference
     step of the Jacobian is relative to that size. SciPy's default step is absolute for
     ``|x| < 1`` (``√ε ≈ 1.5e-8``): a cubic stiffness of typical size 1e10 (a rig recorded in
-    micrometres) started at 0 would see a zero Jacobian column and never move.
+    micrometres) started at 0 would see a zero Jacobian column and never move. ``diff_step``
+    (SciPy's, relative to ``max(1, |x/typical|)``; None: its default) is
+    :data:`FORCE_DIFF_STEP` for a training error that is rough on small scales.
     """
 
     def scaled(z: np.ndarray) -> np.ndarray:
@@ -358,6 +379,7 @@ def _scaled_least_squares(residual, start, low, high, typical) -> tuple[np.ndarr
             ftol=1e-6,
             xtol=FIT_XTOL,
             gtol=1e-8,
+            diff_step=diff_step,
         )
     except (ValueError, FloatingPointError):  # pragma: no cover - defensive
         return None

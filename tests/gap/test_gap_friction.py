@@ -157,3 +157,42 @@ def test_a_fit_from_another_models_start_replaces_its_incumbent_only_when_it_tra
     better = fit_candidate(data, effect, start, n_train=700, starts=[[1.0]], incumbent=poor)
     assert better is not poor and better.train_rms < poor.train_rms
     assert better.theta[0] == pytest.approx(1.08, rel=0.01)
+
+
+def test_a_force_on_the_exact_plant_is_fitted_with_a_finite_difference_step_above_its_roughness(
+    monkeypatch,
+):
+    """An exact plant's training error with a candidate force is rough on small scales (window
+    states fitted under the force, stick–slip), so its Jacobian takes steps of
+    ``FORCE_DIFF_STEP`` of each typical size; the linear twin keeps SciPy's default step."""
+    from dtwin.gap import fit
+    from dtwin.gap.models import ModuleData, velocity_from_position
+
+    dt, n = 0.01, 600
+    t = np.arange(n) * dt
+    u = np.sin(2 * np.pi * 0.5 * t) + 0.3 * np.sin(2 * np.pi * 1.7 * t)
+    x = np.cumsum(np.cumsum(u) * dt) * dt * 0.1
+    velocity = velocity_from_position(x, dt)
+    scales = Scales(
+        input_max=1.3,
+        input_std=float(np.std(u)),
+        output_std=float(np.std(x)),
+        velocity_std=float(np.std(velocity)),
+        duration=n * dt,
+        dt=dt,
+        noise_std=0.0,
+    )
+    data = ModuleData(
+        "M1", {"u_act": u}, x, dt, t, velocity, scales=scales, discretisation="zoh", horizon=100
+    )
+    steps = []
+
+    def recording(fun, x0, **options):
+        steps.append(options.get("diff_step"))
+        raise ValueError("recorded")  # _scaled_least_squares treats it as a failed fit
+
+    monkeypatch.setattr(fit, "least_squares", recording)
+    start = {"m": 1.0, "c": 0.1, "k": 0.0}
+    fit.fit_candidate(data, effect_by_name("coulomb_friction"), start, n_train=400, n_refine=1)
+    fit.fit_candidate(data, None, start, n_train=400)
+    assert steps == [fit.FORCE_DIFF_STEP, None]
