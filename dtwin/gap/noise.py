@@ -22,6 +22,11 @@ For the sensors, M3 and M4 the noise is taken as AR(1), fitted to the residual's
 above a tenth of the sampling rate (:func:`_ar1_floor`), which removes the plain estimate's
 low bias for coloured noise (``√(1 − φ)``, 0.63 at ``φ = 0.6``).
 
+The exact plant (simulated over windows) reads its measurement noise from the linear twin's
+simulation error: as AR(1) noise over the whole band when that model explains the error
+(:func:`residual_noise_floor`), else from its spectrum above the plant
+(:func:`spectral_noise_floor`).
+
 The data estimate is reported beside the twin's but used only when the twin gives no noise: it
 cannot tell noise from high-frequency *effects* (a quantizer, an interference), whereas the
 twin's level is trusted to the ``noise_tolerance`` that the threshold includes.
@@ -48,6 +53,7 @@ __all__ = [
     "twin_noise_floor",
     "data_noise_floor",
     "spectral_noise_floor",
+    "residual_noise_floor",
     "reconcile_noise_floor",
     "effective_samples",
     "gap_threshold",
@@ -315,6 +321,99 @@ def spectral_noise_floor(residual: np.ndarray, dt: float, bandwidth_hz: float) -
     n_lags = max(2, min(400, int(10 / (1.0 - pole))))
     # a coloured level is what an effect's broadband residual (a friction's sign changes) also
     # looks like: it never overrules a twin's noise level (reconcile_noise_floor)
+    return NoiseFloor(sigma, "data", pole ** np.arange(n_lags), identified=False)
+
+
+#: Lags of the Ljung–Box test on the innovations of :func:`residual_noise_floor`'s AR(1) model.
+WHITENESS_LAGS = 20
+
+
+def _runs(finite: np.ndarray) -> list[tuple[int, int]]:
+    """Return ``[(start, stop), …]`` of the contiguous runs where ``finite`` is True."""
+    edges = np.flatnonzero(np.diff(np.r_[0, finite.astype(np.int8), 0]))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def _lag_products(values: np.ndarray, runs: list[tuple[int, int]], lag: int) -> tuple[float, int]:
+    """Return ``(Σ v[k]·v[k−lag], count)`` over the pairs inside one run."""
+    total, count = 0.0, 0
+    for start, stop in runs:
+        if stop - start > lag:
+            total += float(values[start + lag : stop] @ values[start : stop - lag])
+            count += stop - start - lag
+    return total, count
+
+
+def residual_noise_floor(residual: np.ndarray, significance: float) -> NoiseFloor | None:
+    """Return the AR(1) noise the whole residual is, or None when the residual is not such noise.
+
+    Parameters
+    ----------
+    residual : array, shape (n,)
+        The calibrated linear twin's simulation error over its windows (output units; NaN on the
+        unscored warm-ups, which cut it into runs).
+    significance : float
+        Size of the whiteness test of the model's innovations.
+
+    Returns
+    -------
+    NoiseFloor or None
+        The residual taken as AR(1) noise ``e[k] = a·e[k−1] + w[k]`` over the whole band (the
+        output-error fit's residual modelled by the noise model a Box–Jenkins fit would
+        give it, with the plant fixed): ``a`` the least-squares lag-1 coefficient within runs,
+        the level ``√(σ_w²/(1 − a²))`` with ``σ_w`` the innovations' RMS, the autocorrelation
+        ``a^l``, ``identified`` False (it never overrules a twin's level). None when the
+        innovations ``w`` are not white — the Ljung–Box statistic over lags 1–
+        :data:`WHITENESS_LAGS` (pairs inside runs) reaches ``χ²`` of ``lags − 1`` degrees of
+        freedom at ``1 − significance`` — or ``a`` reaches the top of :data:`NOISE_POLES`
+        (a drift as slow as the motion is not told from an effect): the residual then holds
+        more than AR(1) noise, an effect's structured part among it.
+
+    Notes
+    -----
+    docs/gap.md §Noise floors. Under the null of no effect this is the consistent estimate of
+    the noise's level, whatever its colour: a noise with most of its power below the plant's
+    resonance is half missed by a floor read above the plant. An effect either leaves the
+    innovations coloured (the floor stays the spectral one) or is faint beside the noise,
+    where the nested test (docs/gap.md §Where) is the stronger judge.
+    """
+    values = np.asarray(residual, dtype=float)
+    finite = np.isfinite(values)
+    if np.count_nonzero(finite) < 4 * WHITENESS_LAGS:
+        return None
+    centred = np.where(finite, values - np.mean(values[finite]), np.nan)
+    runs = _runs(finite)
+    cross, _ = _lag_products(centred, runs, 1)
+    lagged = sum(float(centred[a : b - 1] @ centred[a : b - 1]) for a, b in runs if b - a > 1)
+    if lagged <= 0.0:
+        return None
+    pole = cross / lagged
+    if not -1.0 < pole < NOISE_POLES[-1]:
+        return None
+    innovations = np.full_like(centred, np.nan)
+    for start, stop in runs:
+        innovations[start + 1 : stop] = centred[start + 1 : stop] - pole * centred[start : stop - 1]
+    kept = np.isfinite(innovations)
+    innovations = np.where(kept, innovations - np.mean(innovations[kept]), np.nan)
+    n = int(np.count_nonzero(kept))
+    variance = float(np.mean(innovations[kept] ** 2))
+    if variance <= 0.0:
+        return None
+    inner = _runs(kept)
+    statistic, lags = 0.0, 0
+    for lag in range(1, WHITENESS_LAGS + 1):
+        total, count = _lag_products(innovations, inner, lag)
+        if count == 0:
+            break
+        rho = total / (n * variance)
+        statistic += rho * rho / (n - lag)
+        lags += 1
+    if lags < 2 or chi2.sf(n * (n + 2) * statistic, lags - 1) < significance:
+        return None
+    sigma = math.sqrt(variance / (1.0 - pole * pole))
+    if pole <= 0.0:
+        return NoiseFloor(sigma, "data", _white_acf(), identified=False)
+    n_lags = max(2, min(400, int(10 / (1.0 - pole))))
     return NoiseFloor(sigma, "data", pole ** np.arange(n_lags), identified=False)
 
 

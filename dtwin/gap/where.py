@@ -45,6 +45,7 @@ from dtwin.gap.noise import (
     effective_samples,
     gap_threshold,
     reconcile_noise_floor,
+    residual_noise_floor,
     spectral_noise_floor,
     twin_noise_floor,
     window_gain_pole,
@@ -269,12 +270,18 @@ def _in_band_bounds(lin: Mapping[str, float], typical: Mapping[str, float], tol:
     return bounds
 
 
-def _exact_plant_floor(data: ModuleData, simulated, lin: dict, n_train: int) -> NoiseFloor:
-    """Return the exact plant's data floor: spectral noise times the window's noise gain.
+def _exact_plant_floor(
+    data: ModuleData, simulated, lin: dict, n_train: int, significance: float
+) -> NoiseFloor:
+    """Return the exact plant's data floor: the spectral one, or the whole-band one if larger.
 
-    docs/gap.md §Noise floors: over windows the initial state estimated from the warm-up samples
-    carries part of the measurement noise forward (:func:`~dtwin.gap.models.window_noise_gain`,
-    with the noise's AR(1) pole unless it sits at the top of its grid: :func:`window_gain_pole`).
+    docs/gap.md §Noise floors: the spectral noise above the plant times the window's noise
+    gain (over windows the initial state estimated from the warm-up samples carries part of the
+    measurement noise forward: :func:`~dtwin.gap.models.window_noise_gain`, with the noise's
+    AR(1) pole unless it sits at the top of its grid, :func:`window_gain_pole`); and the linear
+    twin's training error taken as AR(1) noise over the whole band when that model explains it
+    (:func:`residual_noise_floor`, its innovations white at size ``significance``), which a
+    coloured noise with its power below the plant's resonance needs.
     """
     residual = (data.output - simulated)[:n_train]
     # the scored samples only: the windows' unscored warm-ups (a fifth of every window) read
@@ -284,7 +291,10 @@ def _exact_plant_floor(data: ModuleData, simulated, lin: dict, n_train: int) -> 
         return floor
     pole = window_gain_pole(floor)
     gain = window_noise_gain(lin, data.dt, data.discretisation, data.horizon, pole)
-    return replace(floor, rms=floor.rms * math.sqrt(gain))
+    floor = replace(floor, rms=floor.rms * math.sqrt(gain))
+    # the realised error of the windows carries their warm-ups' noise already: no gain
+    whole = residual_noise_floor(residual, significance)
+    return whole if whole is not None and whole.rms > floor.rms else floor
 
 
 def _exact_plant_window(data, nominal, n_train, n_held) -> tuple[int, dict | None, int | None]:
@@ -363,7 +373,7 @@ def analyse_module(name, rec, twin, t, split: Split, calibrate, settings, layout
     norm = float(np.std(data.output)) or 1.0
     sim_before = simulate_module(data, lin_base)
     if data.discretisation != EULER:
-        floor_data = _exact_plant_floor(data, sim_before, lin_base, n_train)
+        floor_data = _exact_plant_floor(data, sim_before, lin_base, n_train, settings.significance)
     else:
         floor_data = data_noise_floor(name, data.inputs, data.output, sim_before, lin_base, rec.dt)
     floor_twin = (

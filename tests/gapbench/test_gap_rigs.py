@@ -166,6 +166,44 @@ def test_a_window_gain_counts_a_noise_pole_but_not_one_at_the_grid_top():
     assert window_gain_pole(floor) == 0.0
 
 
+@pytest.mark.parametrize("pole", [0.0, 0.67, 0.9])
+def test_the_whole_band_floor_reads_coloured_noise_cut_into_windows(pole):
+    """AR(1) noise of unit variance with every window's warm-up unscored (NaN): its level and
+    pole over the whole band, whatever the colour (hardrig_none_01, pole 0.67 at 15 samples per
+    period, read about half its level above the plant and ``unexplained``)."""
+    from scipy.signal import lfilter
+
+    from dtwin.gap.noise import residual_noise_floor
+
+    white = np.random.default_rng(3).standard_normal(6000)
+    noise = lfilter([math.sqrt(1 - pole**2)], [1.0, -pole], white)
+    noise[(np.arange(6000) % 300) < 60] = np.nan
+    floor = residual_noise_floor(noise, 0.01)
+    assert floor is not None and not floor.identified
+    assert floor.rms == pytest.approx(1.0, rel=0.08)
+    memory = floor.acf[1] if len(floor.acf) > 1 else 0.0
+    assert memory == pytest.approx(pole, abs=0.05)
+
+
+def test_the_whole_band_floor_refuses_a_residual_that_is_not_ar1_noise():
+    """A lightly damped plant's response to a friction's sign changes beside the noise leaves
+    the AR(1) model's innovations coloured, and a drift as slow as the motion fits a pole at
+    the grid's top: neither is taken for noise (None: the spectral floor stays)."""
+    from scipy.signal import lfilter
+
+    from dtwin.gap.noise import residual_noise_floor
+
+    rng = np.random.default_rng(4)
+    noise = lfilter([math.sqrt(1 - 0.6**2)], [1.0, -0.6], rng.standard_normal(6000))
+    time = np.arange(6000) * 0.001
+    force = np.sign(np.sin(2 * math.pi * 0.7 * time))
+    radius, angle = 0.99, 2 * math.pi * 20 / 1000  # a resonance at 20 Hz, ζ ≈ 0.08
+    response = lfilter([1.0], [1.0, -2 * radius * math.cos(angle), radius**2], force)
+    assert residual_noise_floor(noise + 0.5 * response / np.std(response), 0.01) is None
+    drift = np.cumsum(rng.standard_normal(6000))
+    assert residual_noise_floor(drift, 0.01) is None
+
+
 def test_a_band_near_the_nyquist_frequency_keeps_white_noise():
     """At 4 samples per period the band cannot tell a pole from a level: white, as before."""
     from dtwin.gap.noise import spectral_noise_floor
