@@ -130,3 +130,36 @@ def test_a_long_recording_is_tested_on_a_bounded_part(monkeypatch):
     assert faint.effect == "coulomb_friction" and faint.params["Fc"] == pytest.approx(0.1, rel=0.2)
     assert (calls[0].n_train, calls[0].n_choose) == (1500, 3000)  # the part: 1,500 of each
     assert calls[1].n_train == 6000  # found: the answer's fits on the whole training part
+
+
+def test_each_windows_initial_state_is_profiled_out_of_the_error():
+    """An integrating plant (velocity time constant 2,000 samples), its true parameters.
+
+    With the state fitted to each window's warm-up (120 of 600 samples), the true twin's error
+    holds the state's error, a drift through the window: its mean square is 1.6 times the
+    white noise's. With the state fitted to the whole window it is the noise less two
+    directions per window, ``σ²·(1 − 2/600)``.
+    """
+    from dtwin.exact_plant import exact_plant_response
+    from dtwin.gap.models import ModuleData, profiled_window_error, simulate_module
+    from dtwin.modules import ZOH
+
+    n, dt, horizon, sigma = 6000, 0.001, 600, 0.01
+    rng = np.random.default_rng(11)
+    u = lfilter([1.0], [1.0, -0.99], rng.standard_normal(n))
+    u -= u.mean()
+    lin = {"m": 0.02, "c": 0.01, "k": 0.0, "u_offset": 0.0, "delay_samples": 0}
+    zeros = np.zeros(n)
+    x = exact_plant_response(
+        u, 0.02, 0.01, 0.0, dt, windows=[(0, n)], x_start=zeros, v_start=zeros, hold=ZOH
+    )
+    spread = float(np.std(x))
+    x = x / spread + sigma * rng.standard_normal(n)
+    lin["m"], lin["c"] = 0.02 * spread, 0.01 * spread  # the same plant, the position scaled
+    t = np.arange(n) * dt
+    data = ModuleData("M1", {"u_act": u}, x, dt, t, np.gradient(x) / dt, None, ZOH, horizon)
+    plain = x - simulate_module(data, lin)
+    profiled = profiled_window_error(data, lin)
+    assert np.all(np.isfinite(profiled))
+    assert np.nanmean(plain**2) > 1.4 * sigma**2
+    assert np.mean(profiled**2) == pytest.approx(sigma**2 * (1 - 2 / horizon), rel=0.05)
