@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 from scipy.special import chdtrc
 
+from dtwin._ljung_box import ljung_box_statistic
 from dtwin._validation import DtwinValueError, require_finite_array, require_min_length
 
 __all__ = ["white_noise_band", "sample_acf", "ljung_box", "acf_table", "ljung_box_table"]
@@ -58,13 +59,11 @@ def ljung_box(values: np.ndarray, lags: Sequence[int]) -> tuple[np.ndarray, np.n
     """Return the Ljung–Box Q statistic and its p-value at each of ``lags``.
 
     ``Q(h) = n (n + 2) Σ_{k=1..h} r_k² / (n − k)`` with ``r_k`` the sample ACF
-    (:func:`sample_acf`); the p-value is the upper tail of a χ² with ``h`` degrees of freedom.
+    (:func:`sample_acf`, :func:`dtwin._ljung_box.ljung_box_statistic`); the p-value is the upper
+    tail of a χ² with ``h`` degrees of freedom.
     """
     lags = np.asarray(lags, dtype=int)
-    n, max_lag = len(values), int(lags.max())
-    r = sample_acf(values, max_lag)
-    q = n * (n + 2) * np.cumsum(r[1 : max_lag + 1] ** 2 / (n - np.arange(1, max_lag + 1)))
-    q = q[lags - 1]
+    q = ljung_box_statistic(sample_acf(values, int(lags.max())), len(values))[lags - 1]
     return q, chdtrc(lags, q)
 
 

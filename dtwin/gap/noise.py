@@ -42,6 +42,7 @@ from scipy.linalg import solve_discrete_lyapunov
 from scipy.optimize import nnls
 from scipy.stats import chi2
 
+from dtwin._ljung_box import ljung_box_statistic
 from dtwin.modules import CONTRACTS, lag_coefficient, plant_matrices
 from dtwin.params import NoiseParams
 from dtwin.wiring import ACTUATOR, PLANT, SENSOR, role_of
@@ -400,15 +401,14 @@ def residual_noise_floor(residual: np.ndarray, significance: float) -> NoiseFloo
     if variance <= 0.0:
         return None
     inner = _runs(kept)
-    statistic, lags = 0.0, 0
+    acf = [1.0]
     for lag in range(1, WHITENESS_LAGS + 1):
         total, count = _lag_products(innovations, inner, lag)
         if count == 0:
             break
-        rho = total / (n * variance)
-        statistic += rho * rho / (n - lag)
-        lags += 1
-    if lags < 2 or chi2.sf(n * (n + 2) * statistic, lags - 1) < significance:
+        acf.append(total / (n * variance))
+    lags = len(acf) - 1
+    if lags < 2 or chi2.sf(ljung_box_statistic(np.asarray(acf), n)[-1], lags - 1) < significance:
         return None
     sigma = math.sqrt(variance / (1.0 - pole * pole))
     if pole <= 0.0:
