@@ -8,10 +8,11 @@ into the input. A fit that lets the input at sample ``k`` (or later) act on the 
 controller's inverse: the direct prediction-error method is consistent under feedback only if
 the loop holds a delay, here the plant's (Ljung, *System Identification*, 2nd ed., §13.4).
 The first-order and band-limited holds let ``u[k]`` (and, band-limited, later samples) act on
-``x[k]``; the zero-order hold and the Euler plant do not. :func:`feedback_statistic` tells a
-loop from an open-loop input by the direction in which the two signals' noise bands are
-related: the input's band reacts to the output's noise at the same and earlier samples in a
-loop, while in open loop the output's band follows the input (later samples) or neither.
+``x[k]``; the zero-order hold and the Euler plant do not. :func:`feedback_test` tells a loop
+from an open-loop input by whether the position at and before sample ``k`` explains ``u[k]``
+beyond what the input's own neighbours on both sides explain (a Granger-type test with a
+χ² null distribution and a stated size, :data:`FEEDBACK_SIZE`): in open loop the position
+holds nothing of ``u[k]`` that its neighbours do not, however few samples per period.
 
 A causal plant is not enough when the noise is coloured: the noise the loop fed into the input
 a few samples ago is still in the position, so an output-error fit explains part of it through
@@ -24,10 +25,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.signal import lfilter, savgol_filter
+from scipy.signal import lfilter
+from scipy.stats import chi2
 
 from dtwin.exact_plant import exact_plant_response, free_response_basis, hold_matrices
 from dtwin.gap.effects import MAX_DELAY_SAMPLES, fractional_delay
@@ -36,10 +39,13 @@ from dtwin.wiring import PLANT, only_module
 
 __all__ = [
     "CAUSAL_HOLDS",
-    "FEEDBACK_THRESHOLD",
     "FEEDBACK_LAGS",
-    "feedback_statistic",
-    "loop_statistic",
+    "FEEDBACK_NEIGHBOURS",
+    "FEEDBACK_SIZE",
+    "FEEDBACK_THRESHOLD",
+    "FEEDBACK_MIN_SHARE",
+    "FeedbackTest",
+    "feedback_test",
     "causal_holds",
     "in_loop",
     "LOOP_WINDOW",
@@ -51,66 +57,85 @@ __all__ = [
 #: The plant discretisations in which ``u[k]`` does not act on ``x[k]`` (the loop's delay).
 CAUSAL_HOLDS = (EULER, ZOH)
 
-#: Lags (samples) of each side of :func:`feedback_statistic`.
+#: Lags of the position in :func:`feedback_test`: ``x[k], x[k−1], …, x[k−FEEDBACK_LAGS]``.
 FEEDBACK_LAGS = 2
-#: Smallest statistic read as a feedback loop (docs/gap.md §Closed loop: open-loop rigs and
-#: the paper asset ≤ 0.094, PD-loop rigs flagged ≥ 0.21).
-FEEDBACK_THRESHOLD = 0.15
+#: Input samples on each side of ``u[k]`` that :func:`feedback_test` interpolates it from.
+FEEDBACK_NEIGHBOURS = 20
+#: Size of the feedback test: the chance that an open-loop recording is read as a loop.
+FEEDBACK_SIZE = 1e-4
+#: Smallest statistic read as a feedback loop: the χ² quantile of :data:`FEEDBACK_SIZE` with
+#: ``FEEDBACK_LAGS + 1`` degrees of freedom (21.1; docs/gap.md §Closed loop).
+FEEDBACK_THRESHOLD = float(chi2.isf(FEEDBACK_SIZE, FEEDBACK_LAGS + 1))
+#: Smallest share of the input's variance that the fed-back noise must hold for a loop to be
+#: treated as one (docs/gap.md §Closed loop: set between the EMPS axis, 7e-8, fitted well in
+#: open loop, and the weakest loop the rig families read, 3e-4; not derived from a bias bound).
+FEEDBACK_MIN_SHARE = 1e-5
+#: At most this many regression rows (evenly thinned): the test's power needs a few thousand.
+FEEDBACK_MAX_ROWS = 50_000
 
 
-def _share_explained(target: np.ndarray, regressors: np.ndarray) -> float:
-    """Return the share of ``target``'s energy a least-squares fit on ``regressors`` explains."""
-    energy = float(target @ target)
-    if not energy > 0:
-        return 0.0
-    coef, *_ = np.linalg.lstsq(regressors, target, rcond=None)
-    error = target - regressors @ coef
-    return 1.0 - float(error @ error) / energy
+class FeedbackTest(NamedTuple):
+    """The feedback test of a plant's input and position (:func:`feedback_test`)."""
+
+    #: Wald statistic of the position's coefficients, χ² with ``FEEDBACK_LAGS + 1`` degrees of
+    #: freedom in open loop.
+    statistic: float
+    #: Share of the input's variance that the position's coefficients explain.
+    share: float
+
+    @property
+    def loop(self) -> bool:
+        """Whether the input is read as computed from the measured position."""
+        return self.statistic >= FEEDBACK_THRESHOLD and self.share >= FEEDBACK_MIN_SHARE
 
 
-def feedback_statistic(u: np.ndarray, x: np.ndarray, window: int) -> float:
-    """Return how much more the input's noise band follows the output's than it leads it.
+def feedback_test(u: np.ndarray, x: np.ndarray) -> FeedbackTest:
+    """Test whether the input reacts to the position's noise (a Granger-type test).
 
     Parameters
     ----------
     u, x : numpy.ndarray, shape (n_samples,)
-        Recorded input and output (the training part), any units.
-    window : int
-        Samples of the cubic Savitzky-Golay smoother whose residual is the output's noise (the
-        position smoothing window of :func:`dtwin.gap.models.plant_state_from_position`).
+        Recorded input and position (the training part), any units.
 
     Returns
     -------
-    float
-        ``R²_past − R²_future``: the share of the input's band (its residual after the same
-        smoother) that a least-squares fit on the output's band at lags ``0 … FEEDBACK_LAGS``
-        explains, less the share the output's band at lags ``−1 … −(FEEDBACK_LAGS + 1)`` (later
-        samples) explains. Near 0 or negative in open loop; large when a controller computes the
-        input from the noisy output. 0 for records too short to tell.
+    FeedbackTest
+        ``u[k]`` is regressed by least squares on a constant, its :data:`FEEDBACK_NEIGHBOURS`
+        neighbours on each side and the position ``x[k], …, x[k − FEEDBACK_LAGS]``.
+        ``statistic`` is the Wald statistic ``b'·(P'P)·b/σ̂²`` of the position's coefficients
+        ``b`` (``P`` the position's columns less their projection on the neighbours, ``σ̂²``
+        the residual variance), ``share`` ``b'·(P'P)·b`` over the sum of squares of ``u``.
+        In open loop the position up to ``k`` is the plant's response to inputs that the
+        neighbours of ``u[k]`` interpolate, plus noise the input never saw: ``b = 0`` and the
+        statistic is χ² with ``FEEDBACK_LAGS + 1`` degrees of freedom, at any sampling rate
+        (the input's own dynamics are in the neighbours; a plant's lag or hold cannot make the
+        position lead an input it follows). A controller computing ``u[k]`` from the measured
+        ``x[k]`` and ``x[k − 1]`` puts those samples' noise into the input, which no neighbour
+        holds in full. Both 0 for records too short to tell (fewer than ten rows per
+        regressor). docs/gap.md §Closed loop.
     """
-    window = int(window) | 1
-    lags = FEEDBACK_LAGS
-    n = len(u)
-    rows = np.arange(window + lags + 1, n - window - lags - 1)
-    if len(rows) < 50 * (lags + 2) or n < window:
-        return 0.0
-    band_u = u - savgol_filter(u, window, 3)
-    band_x = x - savgol_filter(x, window, 3)
-    past = np.column_stack([band_x[rows - j] for j in range(lags + 1)])
-    future = np.column_stack([band_x[rows + j] for j in range(1, lags + 2)])
-    target = band_u[rows]
-    return _share_explained(target, past) - _share_explained(target, future)
-
-
-def loop_statistic(u: np.ndarray, x: np.ndarray) -> float:
-    """Return :func:`feedback_statistic` with the position's own smoothing window.
-
-    The window is the widest whose residual is still only the position's noise
-    (``dtwin.gap.models._smoothing_window``), so the band holds noise, not dynamics.
-    """
-    from dtwin.gap.models import _smoothing_window
-
-    return feedback_statistic(u, x, _smoothing_window(x))
+    u = np.asarray(u, dtype=float)
+    x = np.asarray(x, dtype=float)
+    side, lags = FEEDBACK_NEIGHBOURS, FEEDBACK_LAGS
+    n_rows = len(u) - 2 * side - lags
+    if n_rows < 10 * (2 * side + lags + 2) or not (np.std(u) > 0 and np.std(x) > 0):
+        return FeedbackTest(0.0, 0.0)
+    u = (u - np.mean(u)) / np.std(u)
+    x = (x - np.mean(x)) / np.std(x)
+    rows = side + lags + np.arange(0, n_rows, -(-n_rows // FEEDBACK_MAX_ROWS))
+    offsets = np.concatenate([np.arange(-side, 0), np.arange(1, side + 1)])
+    neighbours = np.column_stack([np.ones(len(rows)), u[rows[:, None] + offsets]])
+    basis, _ = np.linalg.qr(neighbours)
+    target = u[rows] - basis @ (basis.T @ u[rows])
+    position = x[rows[:, None] - np.arange(lags + 1)]
+    position = position - basis @ (basis.T @ position)
+    coef, *_ = np.linalg.lstsq(position, target, rcond=None)
+    residual = target - position @ coef
+    variance = float(residual @ residual) / (len(rows) - neighbours.shape[1] - lags - 1)
+    explained = float(coef @ (position.T @ position) @ coef)
+    if not variance > 0:
+        return FeedbackTest(0.0, 0.0)
+    return FeedbackTest(explained / variance, explained / len(rows))
 
 
 def causal_holds(
@@ -133,21 +158,31 @@ def causal_holds(
     -------
     tuple
         ``(holds, notes)``: when M1 is diagnosed, more than one hold is allowed and the plant's
-        input reacts to its output's noise (:func:`loop_statistic` at least
-        :data:`FEEDBACK_THRESHOLD`), the holds of :data:`CAUSAL_HOLDS` among ``holds`` and one
-        note giving the statistic; otherwise ``holds`` unchanged and no note.
+        input reacts to its output's noise (:func:`in_loop`), the holds of
+        :data:`CAUSAL_HOLDS` among ``holds`` and one note giving the test; otherwise ``holds``
+        unchanged, with a note when the test is significant but the fed-back noise too small
+        to matter (below :data:`FEEDBACK_MIN_SHARE`).
     """
     plant = only_module(PLANT)
     if plant not in names or len(holds) == 1:
         return holds, []
-    statistic = loop_statistic(signals["u_act"][:n_train], signals["x"][:n_train])
-    if statistic < FEEDBACK_THRESHOLD:
+    test = feedback_test(signals["u_act"][:n_train], signals["x"][:n_train])
+    if test.statistic < FEEDBACK_THRESHOLD:
         return holds, []
+    if not test.loop:
+        note = (
+            f"{plant}'s input reacts to the position's noise (feedback statistic "
+            f"{test.statistic:.1f} >= {FEEDBACK_THRESHOLD:.1f}), but that noise is "
+            f"{test.share:.1e} of the input's variance (< {FEEDBACK_MIN_SHARE:.0e}): fitted as "
+            "in open loop (docs/gap.md, Closed loop)"
+        )
+        return holds, [note]
     causal = tuple(h for h in holds if h in CAUSAL_HOLDS)
     note = (
-        f"{plant} runs in a feedback loop: its input reacts to the position's noise (statistic "
-        f"{statistic:.2f} >= {FEEDBACK_THRESHOLD}); only causal plants ({', '.join(causal)}) "
-        "were tried (docs/gap.md, Closed loop)"
+        f"{plant} runs in a feedback loop: its input reacts to the position's noise (feedback "
+        f"statistic {test.statistic:.1f} >= {FEEDBACK_THRESHOLD:.1f}, size "
+        f"{FEEDBACK_SIZE:.0e}; {test.share:.1e} of the input's variance); only causal plants "
+        f"({', '.join(causal)}) were tried (docs/gap.md, Closed loop)"
     )
     return causal, [note]
 
@@ -155,10 +190,10 @@ def causal_holds(
 def in_loop(u: np.ndarray, x: np.ndarray) -> bool:
     """Return whether a plant's input reacts to its position's noise (a feedback loop).
 
-    ``u``, ``x`` shape ``(n_samples,)``: the training part. :func:`loop_statistic` at least
-    :data:`FEEDBACK_THRESHOLD`, the rule :func:`causal_holds` applies.
+    ``u``, ``x`` shape ``(n_samples,)``: the training part. :attr:`FeedbackTest.loop` of
+    :func:`feedback_test`, the rule :func:`causal_holds` applies.
     """
-    return loop_statistic(u, x) >= FEEDBACK_THRESHOLD
+    return feedback_test(u, x).loop
 
 
 #: Shortest window (samples) of :func:`loop_prediction_error_fit`: each window's initial state

@@ -7,16 +7,18 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from scipy.signal import lfilter
+from scipy.signal import lfilter, ss2tf
+from scipy.stats import chi2
 
 from dtwin.exact_plant import hold_matrices
 from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping
 from dtwin.gap.closed_loop import (
+    FEEDBACK_LAGS,
+    FEEDBACK_SIZE,
     FEEDBACK_THRESHOLD,
-    feedback_statistic,
+    feedback_test,
     in_loop,
     loop_prediction_error_fit,
-    loop_statistic,
 )
 from dtwin.gapbench.generator import generate_case
 from dtwin.gapbench.rigs import generate_rig_case
@@ -41,20 +43,46 @@ def _integrator_records(closed: bool, seed: int = 4, n: int = 4000) -> tuple[np.
     return u, y
 
 
-def test_the_statistic_tells_a_pd_loop_from_the_same_plant_in_open_loop():
+def test_the_test_tells_a_pd_loop_from_the_same_plant_in_open_loop():
     u, y = _integrator_records(closed=True)
-    assert feedback_statistic(u, y, 7) >= FEEDBACK_THRESHOLD
+    assert in_loop(u, y)
     u, y = _integrator_records(closed=False)
-    assert feedback_statistic(u, y, 7) < FEEDBACK_THRESHOLD
+    assert feedback_test(u, y).statistic < FEEDBACK_THRESHOLD
 
 
-def test_the_paper_asset_and_an_open_loop_rig_are_not_read_as_loops():
+def test_the_threshold_is_the_chi2_quantile_of_the_size():
+    assert chi2.sf(FEEDBACK_THRESHOLD, FEEDBACK_LAGS + 1) == pytest.approx(FEEDBACK_SIZE)
+
+
+def _open_loop_record(rng: np.random.Generator, samples_per_period: float, n: int = 2000):
+    """A lightly damped plant (zero-order hold) driven by low-passed noise, 1 % position noise."""
+    omega = 2 * np.pi / samples_per_period  # rad per sample
+    step = hold_matrices(2 * 0.05 * omega, omega**2, 1.0, "zoh")
+    drive = lfilter([1.0], [1.0, -rng.uniform(0.0, 0.95)], rng.standard_normal(n))
+    numerator, denominator = ss2tf(step.a, step.taps[0][:, None], [[1.0, 0.0]], [[0.0]])
+    x = lfilter(numerator[0], denominator, drive)
+    return drive, x + 0.01 * np.std(x) * rng.standard_normal(n)
+
+
+def test_open_loop_records_at_3_to_1000_samples_per_period_read_chi2():
+    """The open-loop statistic is χ² with FEEDBACK_LAGS + 1 degrees of freedom at any rate."""
+    rng = np.random.default_rng(3)
+    rates = np.exp(rng.uniform(np.log(3.0), np.log(1000.0), 60))
+    statistics = [feedback_test(*_open_loop_record(rng, rate)).statistic for rate in rates]
+    assert np.mean(np.array(statistics) > chi2.isf(0.05, FEEDBACK_LAGS + 1)) <= 0.15
+    assert max(statistics) < FEEDBACK_THRESHOLD
+
+
+def test_the_paper_asset_and_open_loop_rigs_are_not_read_as_loops():
     paper = generate_case("none", 5000, nominal=paper_twin()).recording
-    assert loop_statistic(paper["u_act"].to_numpy(), paper["x"].to_numpy()) < FEEDBACK_THRESHOLD
-    rig = generate_rig_case("none", 15006)  # 60 samples per period, open loop
-    assert not rig.key["closed_loop"]
-    record = rig.recording.iloc[: len(rig.recording) // 2]
-    assert loop_statistic(record["u_act"].to_numpy(), record["x"].to_numpy()) < FEEDBACK_THRESHOLD
+    assert not in_loop(paper["u_act"].to_numpy(), paper["x"].to_numpy())
+    # 60 and 5 samples per period: the old noise-band statistic read the second as a loop
+    for seed in (15006, 15024):
+        rig = generate_rig_case("none", seed)
+        assert not rig.key["closed_loop"]
+        record = rig.recording.iloc[: len(rig.recording) // 2]
+        test = feedback_test(record["u_act"].to_numpy(), record["x"].to_numpy())
+        assert test.statistic < FEEDBACK_THRESHOLD
 
 
 def _diagnose(case):
