@@ -16,7 +16,9 @@ bits (tests/gap/test_gap_discretisation.py), at ~30 ns instead of ~1 µs per ste
 diagnoser's Euler twin uses it only where numba is installed (:data:`dtwin._jit.HAVE_NUMBA`).
 The benchmark's continuous asset is integrated here (:func:`rk4_chain`, its one Runge-Kutta
 loop, with or without a force), and its generator's Euler plant evaluates a case's force by
-:func:`law_function`, the laws' arithmetic run by the interpreter.
+:func:`law_function`, the laws' arithmetic run by the interpreter. The rig families' plants
+(:mod:`dtwin.gapbench.rigs`: a drive held or given at every Runge-Kutta instant, or a digital PD
+loop) are integrated by :func:`rk4_plant`, with the same step (``_plant_rk4_step``).
 
 The laws (``x`` position, ``v`` velocity, ``p`` the parameters):
 
@@ -51,7 +53,9 @@ __all__ = [
     "euler_response",
     "force_windows",
     "law_function",
+    "PdLoop",
     "rk4_chain",
+    "rk4_plant",
     "substepped_windows",
     "warm_up",
 ]
@@ -279,6 +283,30 @@ def substepped_windows(
     return out
 
 
+@njit(cache=True, inline="always")  # inlined: one Runge-Kutta step for both loops below
+def _plant_rk4_step(x, v, in1, in2, in3, in4, noise, m, c, k, h, half, sixth, code, p):
+    """Return the plant's ``(x, v)`` one classical Runge-Kutta step ``h`` on.
+
+    ``m·v̇ = u − c·v − k·x − F(x, v) + m·noise``, ``ẋ = v``: the input ``u`` is given at the
+    four stages (``in1`` at ``t``, ``in2`` and ``in3`` at ``t + h/2``, ``in4`` at ``t + h``),
+    ``F`` is the force of law ``code`` (negative: none), ``noise`` (m/s²) is held over the step.
+    """
+    f1 = _law_value(code, x, v, p) if code >= 0 else 0.0
+    k1v = (in1 - c * v - k * x - f1) / m + noise
+    x2, v2 = x + half * v, v + half * k1v
+    f2 = _law_value(code, x2, v2, p) if code >= 0 else 0.0
+    k2v = (in2 - c * v2 - k * x2 - f2) / m + noise
+    x3, v3 = x + half * v2, v + half * k2v
+    f3 = _law_value(code, x3, v3, p) if code >= 0 else 0.0
+    k3v = (in3 - c * v3 - k * x3 - f3) / m + noise
+    x4, v4 = x + h * v3, v + h * k3v
+    f4 = _law_value(code, x4, v4, p) if code >= 0 else 0.0
+    k4v = (in4 - c * v4 - k * x4 - f4) / m + noise
+    # (h/6)·(v + 2·v2 + 2·v3 + v4) = h·(v + (h/6)·(k1v + k2v + k3v)): the rig loop's form (the
+    # rig cases keep their bits; the continuous asset's moved by < 1e-14 of their spread)
+    return x + h * (v + sixth * (k1v + k2v + k3v)), v + sixth * (k1v + 2 * k2v + 2 * k3v + k4v)
+
+
 @njit(cache=True)
 def _rk4_loop(u, eta, xi, tau, m, c, k, h, half, sixth, substeps, code, p, out):
     a, x, v = 0.0, 0.0, 0.0
@@ -286,23 +314,17 @@ def _rk4_loop(u, eta, xi, tau, m, c, k, h, half, sixth, substeps, code, p, out):
     for j in range(1, len(u)):
         drive, noise = u[j - 1] + eta[j], xi[j]
         for _ in range(substeps):
-            f1 = _law_value(code, x, v, p) if code >= 0 else 0.0
-            k1a, k1x, k1v = (drive - a) / tau, v, (a - c * v - k * x - f1) / m + noise
-            a2, x2, v2 = a + half * k1a, x + half * k1x, v + half * k1v
-            f2 = _law_value(code, x2, v2, p) if code >= 0 else 0.0
-            k2a, k2x = (drive - a2) / tau, v2
-            k2v = (a2 - c * v2 - k * x2 - f2) / m + noise
-            a3, x3, v3 = a + half * k2a, x + half * k2x, v + half * k2v
-            f3 = _law_value(code, x3, v3, p) if code >= 0 else 0.0
-            k3a, k3x = (drive - a3) / tau, v3
-            k3v = (a3 - c * v3 - k * x3 - f3) / m + noise
-            a4, x4, v4 = a + h * k3a, x + h * k3x, v + h * k3v
-            f4 = _law_value(code, x4, v4, p) if code >= 0 else 0.0
-            k4a, k4x = (drive - a4) / tau, v4
-            k4v = (a4 - c * v4 - k * x4 - f4) / m + noise
+            # the lag's stages do not depend on the plant's: the actuator's output at the four
+            # stages is the plant's input there
+            k1a = (drive - a) / tau
+            a2 = a + half * k1a
+            k2a = (drive - a2) / tau
+            a3 = a + half * k2a
+            k3a = (drive - a3) / tau
+            a4 = a + h * k3a
+            k4a = (drive - a4) / tau
+            x, v = _plant_rk4_step(x, v, a, a2, a3, a4, noise, m, c, k, h, half, sixth, code, p)
             a += sixth * (k1a + 2 * k2a + 2 * k3a + k4a)
-            x += sixth * (k1x + 2 * k2x + 2 * k3x + k4x)
-            v += sixth * (k1v + 2 * k2v + 2 * k3v + k4v)
             out[row, 0], out[row, 1], out[row, 2] = a, x, v
             row += 1
 
@@ -331,6 +353,106 @@ def rk4_chain(
     return out
 
 
+class PdLoop(NamedTuple):
+    """A digital PD position loop: the force it holds over sample ``j`` (N).
+
+    ``kp·(r[j] − y[j] + d[j]) − kd·(y[j] − y[j−1])/dt`` (the velocity term 0 at ``j = 0``), ``y``
+    the measured position (the plant's plus the measurement noise), ``r`` the ``reference``
+    and ``d`` the ``dither``, each shape ``(n,)``.
+    """
+
+    kp: float
+    kd: float
+    reference: np.ndarray
+    dither: np.ndarray
+
+
+@njit(cache=True)
+def _plant_loop(
+    stages, held, closed, gains, reference, dither, noise, steps, substeps, code, p, out
+):
+    dt, m, c, k, h, half, sixth = steps
+    kp, kd = gains
+    x, v, previous = 0.0, 0.0, 0.0
+    for j in range(len(held)):
+        out[j, 0], out[j, 1] = x, v
+        if closed:  # the PD loop on the position measured at the sample
+            measured = x + noise[j]
+            velocity = (measured - previous) / dt if j else 0.0
+            previous = measured
+            held[j] = kp * (reference[j] - measured + dither[j]) - kd * velocity
+        for s in range(substeps):
+            f0 = f_half = f1 = held[j]
+            if len(stages):  # the drive at the step's Runge-Kutta instants
+                at = (j * substeps + s) * 3
+                f0, f_half, f1 = stages[at], stages[at + 1], stages[at + 2]
+            x, v = _plant_rk4_step(
+                x, v, f0, f_half, f_half, f1, 0.0, m, c, k, h, half, sixth, code, p
+            )
+
+
+def rk4_plant(
+    force: np.ndarray,
+    m: float,
+    c: float,
+    k: float,
+    dt: float,
+    substeps: int,
+    law: ForceLaw | None = None,
+    loop: PdLoop | None = None,
+    noise: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return a driven plant's states ``(x, v)`` at the samples, ``(n, 2)``, and its held force.
+
+    Classical Runge-Kutta (``substeps`` steps of ``h = dt/substeps`` per sample, from rest) of
+    ``ẋ = v``, ``m·v̇ = f(t) − c·v − k·x − F(x, v)``, ``F`` the force of ``law`` (None: none), by
+    the step of :func:`rk4_chain`. The drive ``f`` (N) is ``force``: shape ``(n,)``, held over
+    each sample (a DAC), or ``(n, substeps, 3)``, its values at each step's instants ``t``,
+    ``t + h/2`` and ``t + h``; with ``loop``, the force a digital PD loop holds over each sample,
+    computed from the position at the sample plus ``noise`` (shape ``(n,)``, default zeros;
+    ``force`` then gives only ``n``). The second array, shape ``(n,)``, is the force held over
+    each sample (zeros for a drive of shape ``(n, substeps, 3)``). Compiled where numba is
+    installed; without it the same loop runs in Python, the same bits.
+    """
+    force = np.asarray(force, dtype=float)
+    n = len(force)
+    held = np.array(force) if force.ndim == 1 and loop is None else np.zeros(n)
+    stages = force.ravel() if force.ndim == 3 else np.zeros(0)
+    gains, reference, dither = (0.0, 0.0), np.zeros(n), np.zeros(n)
+    if loop is not None:
+        gains = (float(loop.kp), float(loop.kd))
+        reference, dither = loop.reference, loop.dither
+    noise = np.zeros(n) if noise is None else noise
+    law_params = law.params if law is not None else (0.0,)
+    arrays = [
+        np.ascontiguousarray(a, dtype=float)
+        for a in (stages, held, reference, dither, noise, law_params)
+    ]
+    if not HAVE_NUMBA:  # the interpreter runs the loop faster on floats than on numpy scalars
+        arrays = [a.tolist() for a in arrays]
+    stages, held, reference, dither, noise, law_params = arrays
+    h = dt / substeps
+    steps = tuple(float(value) for value in (dt, m, c, k, h, h / 2, h / 6))
+    code = -1 if law is None else _law_code(law)
+    out = np.zeros((n, 2))
+    closed = loop is not None
+    _plant_loop(
+        stages,
+        held,
+        closed,
+        gains,
+        reference,
+        dither,
+        noise,
+        steps,
+        int(substeps),
+        code,
+        law_params,
+        out,
+    )
+    return out, np.asarray(held, dtype=float)
+
+
 def warm_up() -> None:
     """Compile the loops for the argument types their callers pass, or load them from the cache.
 
@@ -353,3 +475,4 @@ def warm_up() -> None:
         1.0,
     )
     rk4_chain(np.zeros(2), 1.0, 1.0, 0.0, 0.0, 1.0, np.zeros(2), np.zeros(2), 1)
+    rk4_plant(np.zeros(2), 1.0, 0.0, 0.0, 1.0, 1, ForceLaw(LAWS[0], (1.0, 1.0)))

@@ -158,28 +158,25 @@ def _multisine(rng: np.random.Generator, low: float, high: float, n_lines: int =
 def _rig_coulomb(strength, rig, u_std, x_rms, v_rms):
     fc = strength * u_std
     smooth = 0.002 * v_rms
-    return (lambda x, v: fc * math.tanh(v / smooth)), {"Fc": fc}
+    return ("tanh_friction", (fc, smooth)), {"Fc": fc}
 
 
 def _rig_cubic(strength, rig, u_std, x_rms, v_rms):
     k3 = strength * rig["plant"]["k"] / x_rms**2
-    return (lambda x, v: k3 * x * x * x), {"k3": k3}
+    return ("cubic_spring", (k3, 0.0)), {"k3": k3}
 
 
 def _rig_quadratic_damping(strength, rig, u_std, x_rms, v_rms):
     c2 = strength * rig["plant"]["c"] / v_rms
-    return (lambda x, v: c2 * v * abs(v)), {"c2": c2}
+    return ("quadratic_damping", (c2,)), {"c2": c2}
 
 
 def _rig_stribeck(strength, rig, u_std, x_rms, v_rms):
     fc = strength * u_std
     fs, vs = fc * rig["breakaway"], rig["stribeck_velocity"] * v_rms
     smooth = 0.002 * v_rms
-
-    def stribeck(x, v):
-        return (fc + (fs - fc) * math.exp(-((v / vs) ** 2))) * math.tanh(v / smooth)
-
-    return stribeck, {"Fc": fc, "Fs": fs, "vs": vs}
+    law = ("stribeck_friction", (fc, fs - fc, vs, smooth))
+    return law, {"Fc": fc, "Fs": fs, "vs": vs}
 
 
 @dataclass(frozen=True)
@@ -189,8 +186,9 @@ class RigForce:
     Attributes
     ----------
     law : callable
-        ``law(strength, rig, u_std, x_rms, v_rms) -> (F(x, v) in N, its parameters in physical
-        units)``.
+        ``law(strength, rig, u_std, x_rms, v_rms) -> ((name, params), its parameters in
+        physical units)``: the force ``F(x, v)`` (N) as a law of
+        :data:`dtwin._force_kernels.LAWS` and its parameters (a case effect's ``force``).
     strength : (float, float)
         Strength (relative to the linear force it competes with) at magnitude 0 and 1.
     size : str
@@ -201,7 +199,7 @@ class RigForce:
         so such a case never draws one.
     """
 
-    law: Callable[..., tuple[Callable[[float, float], float], dict[str, float]]]
+    law: Callable[..., tuple[tuple[str, tuple[float, ...]], dict[str, float]]]
     strength: tuple[float, float]
     size: str
     spring: bool = False
@@ -224,37 +222,35 @@ def _needs_spring(effect: str) -> bool:
 
 
 def _force_law(effect: str, strength: float, rig: dict, u_std: float, x_rms: float, v_rms: float):
-    """Return the withheld force ``F(x, v)`` (N) and its parameters in physical units."""
+    """Return the withheld force ``F(x, v)`` (N; a law, None for none) and its parameters."""
     force = RIG_FORCES.get(effect)
     return (None, {}) if force is None else force.law(strength, rig, u_std, x_rms, v_rms)
 
 
-def _integrate(rig: dict, drive: _Drive, force, n: int, noise: np.ndarray) -> np.ndarray:
+def _integrate(rig: dict, drive: _Drive, law, n: int, noise: np.ndarray) -> np.ndarray:
     """Runge-Kutta integration; return the states ``(x, v)`` at the sample instants, ``(n, 2)``.
 
-    ``drive.measure(j, x_meas)`` closes the loop at sample ``j`` and ``drive.over_sample(j)``
-    gives the force at each sub-step's three Runge-Kutta instants (``t``, ``t + h/2``, ``t + h``).
+    :func:`dtwin._force_kernels.rk4_plant` (the step of the continuous asset's loop) under
+    ``drive``'s force, or its PD loop closed on the position plus ``noise`` (``drive.held``
+    becomes the force the loop held); ``law`` is the withheld force ``(name, params)``, None
+    for none. ``n`` is the drive's length.
     """
-    m, c, k = rig["plant"]["m"], rig["plant"]["c"], rig["plant"]["k"]
-    h = rig["dt"] / _SUBSTEPS
-    half = h / 2
-    sixth = h / 6
-    extra = force or (lambda x, v: 0.0)
-    x, v = 0.0, 0.0
-    states = np.zeros((n, 2))
-    for j in range(n):
-        states[j] = x, v
-        drive.measure(j, x + noise[j])
-        for f0, f_half, f1 in drive.over_sample(j):
-            a1 = (f0 - c * v - k * x - extra(x, v)) / m
-            x2, v2 = x + half * v, v + half * a1
-            a2 = (f_half - c * v2 - k * x2 - extra(x2, v2)) / m
-            x3, v3 = x + half * (v + half * a1), v + half * a2
-            a3 = (f_half - c * v3 - k * x3 - extra(x3, v3)) / m
-            x4, v4 = x + h * (v + half * a2), v + h * a3
-            a4 = (f1 - c * v4 - k * x4 - extra(x4, v4)) / m
-            x += h * (v + sixth * (a1 + a2 + a3))
-            v += sixth * (a1 + 2 * a2 + 2 * a3 + a4)
+    from dtwin._force_kernels import ForceLaw, PdLoop, rk4_plant  # numba (~0.5 s) only when run
+
+    plant = rig["plant"]
+    force = drive.held if drive.continuous is None else drive.continuous
+    loop = None if not drive.closed else PdLoop(drive.kp, drive.kd, drive.reference, drive.dither)
+    states, drive.held = rk4_plant(
+        force[:n],
+        plant["m"],
+        plant["c"],
+        plant["k"],
+        rig["dt"],
+        _SUBSTEPS,
+        None if law is None else ForceLaw(*law),
+        loop,
+        noise,
+    )
     return states
 
 
@@ -272,14 +268,14 @@ class _Drive:
         self.closed = rig["closed_loop"]
         self.held_input = False
         self.dt = dt
-        self.held = [0.0] * n
+        self.held = np.zeros(n)
         self.continuous = None
         band_high = min(3.0 * omega / (2 * math.pi), 0.4 * nyquist)
         if not self.closed:
             self.excite = _multisine(rng, 0.1 * omega / (2 * math.pi), band_high)
             self.held_input = rig.get("hold", False)
             if self.held_input:  # a DAC: the force held over each sample
-                self.held = self.excite(np.arange(n) * dt).tolist()
+                self.held = self.excite(np.arange(n) * dt)
             else:
                 self.continuous = _runge_kutta_values(self.excite, dt, n)
             return
@@ -288,26 +284,8 @@ class _Drive:
         self.kp = m * loop**2
         self.kd = max(2 * 0.7 * m * loop - c, 0.0)
         reference = _multisine(rng, 0.05 * loop / (2 * math.pi), 0.7 * loop / (2 * math.pi))
-        self.reference = reference(np.arange(n) * dt).tolist()
-        self.dither = (rng.standard_normal(n) * 0.1).tolist()
-        self.previous = 0.0
-
-    def measure(self, j: int, x_measured: float) -> None:
-        """Compute the force held over sample ``j`` from the measured position (closed loop)."""
-        if not self.closed:
-            return
-        x_measured = float(x_measured)
-        velocity = (x_measured - self.previous) / self.dt if j else 0.0
-        self.previous = x_measured
-        error = self.reference[j] - x_measured
-        self.held[j] = self.kp * (error + self.dither[j]) - self.kd * velocity
-
-    def over_sample(self, j: int) -> list:
-        """Return the force (N) at each sub-step of sample ``j``: ``(t, t + h/2, t + h)``."""
-        if self.continuous is not None:
-            return self.continuous[j].tolist()
-        force = self.held[j]
-        return [(force, force, force)] * _SUBSTEPS
+        self.reference = reference(np.arange(n) * dt)
+        self.dither = rng.standard_normal(n) * 0.1
 
     def recorded(self, n: int) -> np.ndarray:
         """Return the force at the sample instants, shape ``(n,)``."""
