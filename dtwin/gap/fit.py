@@ -59,6 +59,7 @@ __all__ = [
     "training_view",
     "linear_typical",
     "fit_candidate",
+    "fit_diff_step",
     "refit_delay",
     "calibrate_linear",
 ]
@@ -83,6 +84,18 @@ FIT_XTOL = 1e-6
 #: optimum by about half a step (the rig families' friction fits have 95 % intervals of ±0.1 %
 #: to ±20 % of their value).
 FORCE_DIFF_STEP = 1e-3
+
+
+def fit_diff_step(data: ModuleData, effect: Effect | None) -> float | None:
+    """Return the finite-difference step of a candidate's fit, relative to each typical size.
+
+    :data:`FORCE_DIFF_STEP` for a candidate force on the exact plant (a training error rough on
+    small scales), None (SciPy's default) elsewhere. SciPy steps each parameter, in units of its
+    typical size ``z = θ/typical``, by ``step·max(1, |z|)``; the intervals' Jacobian
+    (:mod:`dtwin.gap.intervals`) reads the same error with the same step.
+    """
+    rough = data.discretisation != EULER and effect is not None and effect.stage == "force"
+    return FORCE_DIFF_STEP if rough else None
 
 
 @dataclass(frozen=True)
@@ -319,8 +332,7 @@ def fit_candidate(
         return CandidateFit(lin_start, (), 0, float(np.sqrt(np.mean(r**2))) * scale)
     n_used = max(1, sum(b - a - 1 for a, b in segments or [(0, n_train)]))
     to_beat = math.inf if incumbent is None else (incumbent.train_rms / scale) ** 2 * n_used
-    rough = exact and effect is not None and effect.stage == "force"
-    diff_step = FORCE_DIFF_STEP if rough else None
+    diff_step = fit_diff_step(data, effect)
     best_x, best_cost = _refine_starts(
         residual, starts, (low, high), x_scale, n_refine, to_beat, diff_step
     )

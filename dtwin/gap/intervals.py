@@ -35,7 +35,13 @@ import numpy as np
 from scipy.stats import t as student_t
 
 from dtwin.gap.effects import Effect
-from dtwin.gap.fit import FIT_XTOL, fit_candidate, linear_typical, training_view
+from dtwin.gap.fit import (
+    FIT_XTOL,
+    fit_candidate,
+    fit_diff_step,
+    linear_typical,
+    training_view,
+)
 from dtwin.gap.models import LINEAR_PARAMS, ModuleData, module_part, simulate_module
 from dtwin.modules import EULER
 
@@ -51,8 +57,12 @@ __all__ = [
 N_BLOCKS = 20
 #: Coverage of the intervals.
 LEVEL = 0.95
-#: Central-difference step, relative to each parameter's typical size.
+#: Central-difference step, relative to each parameter's typical size, where the fit takes
+#: SciPy's default (a smooth training error); elsewhere the fit's own step
+#: (:func:`dtwin.gap.fit.fit_diff_step`).
 _STEP = 1e-4
+#: Jacobian column, relative to the largest, below which a parameter is held at its value.
+_UNSEEN = 1e-7
 #: Sharpness starts of a smoothed form's fit (with the answer's own parameters).
 _SHARPNESS_STARTS = (4.0, 12.0, 40.0)
 
@@ -132,6 +142,20 @@ def _jacobian(residual, theta: np.ndarray, steps: np.ndarray) -> np.ndarray:
     return np.column_stack(columns)
 
 
+def _steps(data: ModuleData, effect, beta: np.ndarray, typical: np.ndarray) -> np.ndarray:
+    """Return each parameter's central-difference step, in its own units, ``(p,)``.
+
+    Where the fit reads a rough training error with a wider step
+    (:func:`dtwin.gap.fit.fit_diff_step`), the Jacobian takes that step as the fit does,
+    ``step·max(1, |θ/typical|)·typical``: at a smaller one it is the slope of the error's
+    small-scale steps, not of its trend. Elsewhere ``_STEP·typical``.
+    """
+    step = fit_diff_step(data, effect)
+    if step is None:
+        return _STEP * typical
+    return step * np.maximum(1.0, np.abs(beta / typical)) * typical
+
+
 def _linearised(data: ModuleData, effect, lin, theta, n_train: int):
     """Return a fitted candidate's ``(linear, names, θ, typical, r, J)`` over the training part.
 
@@ -147,22 +171,30 @@ def _linearised(data: ModuleData, effect, lin, theta, n_train: int):
     typical = _typical(data, lin, effect, names)
     with np.errstate(all="ignore"):
         r0 = residual(beta)
-        jac = _jacobian(residual, beta, _STEP * typical) * typical
+        jac = _jacobian(residual, beta, _steps(data, effect, beta, typical)) * typical
     return linear, names, beta, typical, r0, jac
 
 
 def _block_influences(jac: np.ndarray, r0: np.ndarray, n_blocks: int) -> np.ndarray | None:
     """Return each block's influence ``(JᵀJ)⁻¹·J_bᵀ·r_b`` on the fit, ``(n_blocks, p)``.
 
-    The batch-means sandwich covariance is ``B/(B − p)·Σ_b ψ_b ψ_bᵀ`` of these; None when
-    ``JᵀJ`` is singular or not finite (a parameter the data do not determine).
+    The batch-means sandwich covariance is ``B/(B − p)·Σ_b ψ_b ψ_bᵀ`` of these. A parameter
+    whose Jacobian column is below ``_UNSEEN`` of the largest (in typical units) is one the
+    residuals do not see at its step: a plant's ``k`` fitted at 1e-15 of its mode's size on an
+    integrating rig, whose fit's box is then as narrow. It is held at its value, so its column
+    is NaN and the others' influences are conditional on it. None when the rest of ``JᵀJ`` is
+    singular or not finite (a parameter the data do not determine).
     """
-    hessian = jac.T @ jac
-    if not np.all(np.isfinite(hessian)) or np.linalg.cond(hessian) > 1e14:
+    norms = np.sqrt(np.sum(jac**2, axis=0))
+    seen = norms > _UNSEEN * np.max(norms, initial=0.0)
+    hessian = jac[:, seen].T @ jac[:, seen]
+    if not np.any(seen) or not np.all(np.isfinite(hessian)) or np.linalg.cond(hessian) > 1e14:
         return None
     bread = np.linalg.inv(hessian)
-    blocks = zip(np.array_split(jac, n_blocks), np.array_split(r0, n_blocks), strict=True)
-    return np.array([bread @ (j.T @ r) for j, r in blocks])
+    influence = np.full((n_blocks, jac.shape[1]), np.nan)
+    blocks = zip(np.array_split(jac[:, seen], n_blocks), np.array_split(r0, n_blocks), strict=True)
+    influence[:, seen] = [bread @ (j.T @ r) for j, r in blocks]
+    return influence
 
 
 def _contrast_bias(names, beta, influence, wide, used, n_blocks: int) -> np.ndarray:
@@ -181,13 +213,15 @@ def _contrast_bias(names, beta, influence, wide, used, n_blocks: int) -> np.ndar
     if wide_influence is None:
         return bias
     wide_influence = wide_influence * wide_typical
+    wide_p = int(np.sum(np.isfinite(wide_influence[0])))
     for index, name in enumerate(names):
         if name in wide_names:
             other = wide_names.index(name)
             d = beta[index] - wide_beta[other]
             blocks = influence[:, index] - wide_influence[:, other]
-            spread = np.sum(blocks**2) * n_blocks / (n_blocks - len(wide_beta))
-            bias[index] = max(d * d - spread, 0.0)
+            spread = np.sum(blocks**2) * n_blocks / (n_blocks - wide_p)
+            if math.isfinite(spread):  # else held in one of the fits
+                bias[index] = max(d * d - spread, 0.0)
     return bias
 
 
@@ -253,8 +287,9 @@ def parameter_intervals(
     influence = _block_influences(jac[used], r0[used], n_blocks) if n_blocks > p + 1 else None
     if influence is None:
         return {}
-    influence = influence * typical  # parameters' own units, (n_blocks, p)
-    variance = np.sum(influence**2, axis=0) * n_blocks / (n_blocks - p)
+    influence = influence * typical  # parameters' own units, (n_blocks, p); NaN: held
+    p_seen = int(np.sum(np.isfinite(influence[0])))
+    variance = np.sum(influence**2, axis=0) * n_blocks / (n_blocks - p_seen)
     if other_part is not None:
         variance = variance + 0.5 * (beta - _refit(data, effect, lin, other_part, linear)) ** 2
     if wider is not None:

@@ -115,3 +115,39 @@ def test_a_rounded_dead_zone_read_as_the_hard_one_is_covered_through_its_smoothe
             assert not plain[0] <= 0.2 <= plain[1]
         else:
             assert (low, high) == pytest.approx(plain, rel=1e-3)
+
+
+def test_a_parameter_the_residuals_do_not_see_is_held_and_the_others_keep_their_intervals():
+    """A Jacobian column at 0 (a plant's k fitted at 1e-15 of its mode's size on an integrating
+    rig) made JᵀJ singular and left the whole answer without an interval; the parameter is held
+    at its value instead (NaN influence) and the others' influences are those without it."""
+    from dtwin.gap.intervals import _block_influences
+
+    rng = np.random.default_rng(5)
+    jac = rng.standard_normal((400, 2))
+    r0 = 0.1 * rng.standard_normal(400)
+    alone = _block_influences(jac, r0, 20)
+    held = _block_influences(np.column_stack([jac[:, 0], np.zeros(400), jac[:, 1]]), r0, 20)
+    assert np.all(np.isnan(held[:, 1]))
+    np.testing.assert_allclose(held[:, [0, 2]], alone, rtol=1e-12)
+
+
+def test_a_force_on_the_exact_plant_has_its_jacobian_taken_with_the_fits_step():
+    """The interval's Jacobian reads the training error with the step its fit used
+    (fit.fit_diff_step): FORCE_DIFF_STEP·max(1, |θ/typical|) of each typical size for a force on
+    the exact plant, _STEP of it elsewhere."""
+    from dataclasses import replace
+
+    from dtwin.gap.fit import FORCE_DIFF_STEP
+    from dtwin.gap.intervals import _STEP, _steps
+
+    data, _ = _sensor(noise=0.0, n=200)
+    beta, typical = np.array([0.5, 30.0]), np.array([1.0, 2.0])
+    force = effect_by_name("coulomb_friction")
+    exact = replace(data, discretisation="zoh")
+    np.testing.assert_allclose(
+        _steps(exact, force, beta, typical), FORCE_DIFF_STEP * np.array([1.0, 30.0])
+    )
+    np.testing.assert_allclose(_steps(data, force, beta, typical), _STEP * typical)
+    sensor = effect_by_name("sensor_scale_error")
+    np.testing.assert_allclose(_steps(exact, sensor, beta, typical), _STEP * typical)
