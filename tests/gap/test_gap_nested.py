@@ -163,3 +163,29 @@ def test_each_windows_initial_state_is_profiled_out_of_the_error():
     assert np.all(np.isfinite(profiled))
     assert np.nanmean(plain**2) > 1.4 * sigma**2
     assert np.mean(profiled**2) == pytest.approx(sigma**2 * (1 - 2 / horizon), rel=0.05)
+
+
+def test_the_linear_alternative_fits_a_linear_chain_the_twin_cannot():
+    """A fourth-order linear chain (two lightly damped sections), noise 0.01 on the output.
+
+    The nested test's OE(6, 6) alternative (docs/gap.md §Where), its window states fitted to
+    each window, leaves about the noise on the choosing part; no effect is needed to explain
+    what a linear model of higher order removes.
+    """
+    from dtwin.gap.models import ModuleData
+    from dtwin.gap.oe_reference import plain_linear_error
+    from dtwin.modules import ZOH
+
+    n, dt, sigma = 4000, 0.01, 0.01
+    rng = np.random.default_rng(13)
+    u = lfilter([1.0], [1.0, -0.9], rng.standard_normal(n))
+    section = [1.0, -1.8, 0.9]  # poles at radius 0.95
+    x = lfilter([0.0, 0.05], np.convolve(section, [1.0, -1.7, 0.8]), u)
+    x = x / np.std(x) + sigma * rng.standard_normal(n)
+    t = np.arange(n) * dt
+    data = ModuleData("M1", {"u_act": u}, x, dt, t, np.gradient(x) / dt, None, ZOH, 500)
+    error = plain_linear_error(data, 0, n // 2, 6, 1)
+    assert np.all(np.isfinite(error))
+    assert np.sqrt(np.mean(error[n // 2 :] ** 2)) < 1.3 * sigma  # measured 0.00996
+    second_order = plain_linear_error(data, 0, n // 2, 2, 1)  # the twin's order: 0.158
+    assert np.sqrt(np.mean(second_order[n // 2 :] ** 2)) > 5 * sigma
