@@ -416,19 +416,21 @@ def _linear_alternative(part: ModuleWork, split: Split, whiten, scored) -> float
     return float(innovations @ innovations)
 
 
-def _linear_bar(name, part, split, whitening, candidate_sum, removed, settings) -> str | None:
+def _linear_bar(
+    part: ModuleWork, split: Split, whiten, scored, candidate_sum: float, removed: float, min_gap
+) -> str | None:
     """Return the bar a nested-test candidate clears, or None when it does not.
 
     The windowed exact plant: the candidate's whitened choosing-part sum of squares
-    ``candidate_sum`` must be below the plain linear alternative's (:func:`_linear_alternative`,
-    ``whitening = (whiten, scored)``); any other module: it must remove at least ``min_gap``
-    of the linear twin's error (docs/gap.md §Where).
+    ``candidate_sum`` (over the ``scored`` samples, whitened by ``whiten``) must be below the
+    plain linear alternative's (:func:`_linear_alternative`); any other module: it must remove
+    at least ``min_gap`` of the linear twin's error (``removed``; docs/gap.md §Where).
     """
-    alternative = _linear_alternative(part, split, *whitening)
+    alternative = _linear_alternative(part, split, whiten, scored)
     if alternative is None:
-        return ">= min_gap" if removed >= settings.min_gap else None
-    beaten = int(np.count_nonzero(whitening[1])) * math.log(alternative / candidate_sum)
-    logger.debug("%s nested test: the candidate beats OE alternative by T %.2f", name, beaten)
+        return ">= min_gap" if removed >= min_gap else None
+    beaten = int(np.count_nonzero(scored)) * math.log(alternative / candidate_sum)
+    logger.debug("%s nested test: the candidate beats OE alternative by T %.2f", part.name, beaten)
     order = LINEAR_ALTERNATIVE_ORDER
     return f"more than a plain linear OE({order}, {order}) model does" if beaten > 0 else None
 
@@ -530,12 +532,11 @@ def nested_test(work: ModuleWork, split: Split, settings: GapSettings) -> str | 
         gaps[linear],
         gaps[0],
     )
-    whitening = (whiten, scored)  # the alternative is fitted only for a significant candidate
-    if (
-        statistic < critical
-        or (bar := _linear_bar(work.name, part, part_split, whitening, sums[0], removed, settings))
-        is None
-    ):
+    if statistic < critical:
+        return None
+    # the linear alternative is fitted only for a significant candidate
+    bar = _linear_bar(part, part_split, whiten, scored, sums[0], removed, settings.min_gap)
+    if bar is None:
         return None
     fit_candidates(work, split)  # the answer's candidates: every start refined, whole part
     return (
