@@ -115,6 +115,18 @@ FORBIDDEN = {
     "reference": ("dtwin.figures", "dtwin.gap", "dtwin.gapbench"),
     "gap": ("dtwin.stages", "dtwin.figures", "dtwin.reference", "dtwin.gapbench"),
     "gapbench": ("dtwin.stages", "dtwin.figures", "dtwin.reference"),
+    "twin": (
+        "dtwin.stages",
+        "dtwin.figures",
+        "dtwin.reference",
+        "dtwin.gap",
+        "dtwin.gapbench",
+        "dtwin.hmm",
+        "dtwin.claims",
+        "dtwin.cli",
+        "yaml",
+        "snakemake",
+    ),
 }
 
 
