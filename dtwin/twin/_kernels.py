@@ -1,0 +1,241 @@
+"""Compiled loops of the twin package: the postfix interpreter and the windowed RK4 integrator.
+
+:func:`run_program` executes one expression's postfix program (:mod:`dtwin.twin.expressions`:
+opcodes ``OP_CONST`` … ``OP_IPOW``) over a vector of named slots; :func:`simulate_windows`
+integrates a unit's states with the classical Runge-Kutta method over each window, every window
+restarted from given states, and records the unit's outputs at every sample. Without numba the
+same functions run in Python (:mod:`dtwin._jit`), with the same arithmetic.
+
+Slots: one float64 vector per run holding ``t``, the unit's inputs, states, params, algebraic
+signals and state derivatives (:class:`dtwin.twin.simulate.UnitModel` lays it out). Arrays are
+time-first.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dtwin._jit import njit
+
+__all__ = ["run_program", "simulate_windows", "warm_up"]
+
+
+@njit(cache=True)
+def _unary(code: int, x: float) -> float:  # pragma: no cover - compiled
+    if code == 0:
+        return math.sqrt(x) if x >= 0.0 else math.nan
+    if code == 1:
+        return math.exp(x) if x < 709.0 else math.inf
+    if code == 2:
+        if x > 0.0:
+            return math.log(x)
+        return -math.inf if x == 0.0 else math.nan
+    if code == 3:
+        return math.sin(x)
+    if code == 4:
+        return math.cos(x)
+    if code == 5:
+        return math.tan(x)
+    if code == 6:
+        return math.tanh(x)
+    if code == 7:
+        return abs(x)
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    return x  # sign(0) = 0, sign(nan) = nan
+
+
+@njit(cache=True)
+def _power(base: float, exponent: float) -> float:  # pragma: no cover - compiled
+    if base < 0.0 and exponent != math.floor(exponent):
+        return math.nan
+    if base == 0.0 and exponent < 0.0:
+        return math.inf
+    try_value = abs(exponent) * math.log(abs(base)) if base != 0.0 else 0.0
+    if try_value > 709.0 and exponent > 0.0:
+        return math.inf if base > 0.0 or exponent % 2.0 == 0.0 else -math.inf
+    return base**exponent
+
+
+@njit(cache=True)
+def run_program(code, consts, start, stop, slots, stack) -> float:  # pragma: no cover - compiled
+    """Run ``code[start:stop]`` (postfix, slot-bound) over ``slots``; return the top of stack."""
+    sp = 0
+    for pc in range(start, stop):
+        op = code[pc, 0]
+        arg = code[pc, 1]
+        if op == 0:
+            stack[sp] = consts[arg]
+            sp += 1
+        elif op == 1:
+            stack[sp] = slots[arg]
+            sp += 1
+        elif op == 7:
+            stack[sp - 1] = -stack[sp - 1]
+        elif op == 8:
+            stack[sp - 1] = _unary(arg, stack[sp - 1])
+        elif op == 10:
+            base = stack[sp - 1]
+            value = base
+            for _ in range(arg - 1):
+                value = value * base
+            stack[sp - 1] = value
+        else:
+            sp -= 1
+            left = stack[sp - 1]
+            right = stack[sp]
+            if op == 2:
+                stack[sp - 1] = left + right
+            elif op == 3:
+                stack[sp - 1] = left - right
+            elif op == 4:
+                stack[sp - 1] = left * right
+            elif op == 5:
+                stack[sp - 1] = (
+                    left / right
+                    if right != 0.0
+                    else (
+                        math.nan
+                        if left == 0.0
+                        else math.copysign(math.inf, left) * math.copysign(1.0, right)
+                    )
+                )
+            elif op == 6:
+                stack[sp - 1] = _power(left, right)
+            elif arg == 0:
+                stack[sp - 1] = left if left < right else right
+            else:
+                stack[sp - 1] = left if left > right else right
+    return stack[0]
+
+
+@njit(cache=True)
+def _evaluate(code, consts, bounds, targets, slots, stack):  # pragma: no cover - compiled
+    for a in range(targets.shape[0]):
+        slots[targets[a]] = run_program(code, consts, bounds[a], bounds[a + 1], slots, stack)
+
+
+@njit(cache=True)
+def _load(slots, t, state, state_slots, u, k, frac, linear, in_slots):  # pragma: no cover
+    """Write ``t``, the inputs at sample ``k`` + ``frac`` and the state into the slots."""
+    slots[0] = t
+    last = u.shape[0] - 1
+    for i in range(in_slots.shape[0]):
+        value = u[k, i]
+        if linear[i] and frac > 0.0 and k < last:
+            value = value + frac * (u[k + 1, i] - value)
+        slots[in_slots[i]] = value
+    for j in range(state_slots.shape[0]):
+        slots[state_slots[j]] = state[j]
+
+
+@njit(cache=True)
+def _slope(program, slots, stack, t, state, layout, u, k, frac, out):  # pragma: no cover
+    code, consts, bounds, targets = program
+    state_slots, deriv_slots, in_slots, linear = layout
+    _load(slots, t, state, state_slots, u, k, frac, linear, in_slots)
+    _evaluate(code, consts, bounds, targets, slots, stack)
+    for j in range(deriv_slots.shape[0]):
+        out[j] = slots[deriv_slots[j]]
+
+
+@njit(cache=True)
+def _clamp(state, lo, hi):  # pragma: no cover - compiled
+    for j in range(state.shape[0]):
+        if state[j] < lo[j]:
+            state[j] = lo[j]
+        elif state[j] > hi[j]:
+            state[j] = hi[j]
+
+
+@njit(cache=True)
+def _rk4_sample(program, slots, stack, state, layout, u, k, dt, t0, substeps, lo, hi, work):
+    """Advance ``state`` from sample ``k`` to ``k + 1`` in ``substeps`` RK4 steps, clamped."""
+    k1, k2, k3, k4, trial = work[0], work[1], work[2], work[3], work[4]
+    h = dt / substeps
+    n = state.shape[0]
+    for j in range(substeps):
+        f0 = j / substeps
+        fm = (j + 0.5) / substeps
+        f1 = (j + 1.0) / substeps
+        t_start = t0 + (k + f0) * dt
+        _slope(program, slots, stack, t_start, state, layout, u, k, f0, k1)
+        for i in range(n):
+            trial[i] = state[i] + 0.5 * h * k1[i]
+        _slope(program, slots, stack, t_start + 0.5 * h, trial, layout, u, k, fm, k2)
+        for i in range(n):
+            trial[i] = state[i] + 0.5 * h * k2[i]
+        _slope(program, slots, stack, t_start + 0.5 * h, trial, layout, u, k, fm, k3)
+        for i in range(n):
+            trial[i] = state[i] + h * k3[i]
+        _slope(program, slots, stack, t_start + h, trial, layout, u, k, f1, k4)
+        for i in range(n):
+            state[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+        _clamp(state, lo, hi)
+
+
+@njit(cache=True)
+def _record(program, slots, stack, t, state, layout, u, k, out_slots, y):  # pragma: no cover
+    code, consts, bounds, targets = program
+    state_slots, deriv_slots, in_slots, linear = layout
+    _load(slots, t, state, state_slots, u, k, 0.0, linear, in_slots)
+    _evaluate(code, consts, bounds, targets, slots, stack)
+    for o in range(out_slots.shape[0]):
+        y[k, o] = slots[out_slots[o]]
+
+
+@njit(cache=True)
+def simulate_windows(
+    program, base, layout, u, out_slots, lo, hi, starts, stops, x0, dt, t0, substeps, depth
+):  # pragma: no cover - compiled
+    """Integrate a unit over windows; return its outputs, shape ``(n_samples, n_outputs)``.
+
+    ``program`` is ``(code, consts, bounds, targets)``; ``layout`` is ``(state_slots,
+    deriv_slots, in_slots, linear)``; ``base`` the slot vector with params filled; ``u`` the
+    inputs at the samples ``(n_samples, n_inputs)``; window ``w`` runs from sample
+    ``starts[w]`` (state ``x0[w]``) to ``stops[w] - 1``; samples outside every window are NaN.
+    """
+    n_samples = u.shape[0]
+    y = np.full((n_samples, out_slots.shape[0]), np.nan)
+    slots = base.copy()
+    stack = np.empty(depth + 1)
+    n_states = x0.shape[1]
+    state = np.empty(n_states)
+    work = np.empty((5, n_states))
+    for w in range(starts.shape[0]):
+        a = starts[w]
+        state[:] = x0[w]
+        _clamp(state, lo, hi)
+        _record(program, slots, stack, t0 + a * dt, state, layout, u, a, out_slots, y)
+        for k in range(a, stops[w] - 1):
+            _rk4_sample(program, slots, stack, state, layout, u, k, dt, t0, substeps, lo, hi, work)
+            _record(program, slots, stack, t0 + (k + 1) * dt, state, layout, u, k + 1, out_slots, y)
+    return y
+
+
+def warm_up() -> None:
+    """Compile the loops into numba's on-disk cache (``make venv`` calls this once)."""
+    code = np.array([[1, 2], [1, 1], [3, 0], [0, 0], [4, 0]], dtype=np.int64)
+    program = (
+        code,
+        np.array([0.5]),
+        np.array([0, 5], dtype=np.int64),
+        np.array([3], dtype=np.int64),
+    )
+    layout = (
+        np.array([2], dtype=np.int64),
+        np.array([3], dtype=np.int64),
+        np.array([1], dtype=np.int64),
+        np.array([True]),
+    )
+    u = np.ones((4, 1))
+    inf = np.full(1, np.inf)
+    starts, stops = np.array([0], dtype=np.int64), np.array([4], dtype=np.int64)
+    simulate_windows(
+        program, np.zeros(4), layout, u, np.array([2], dtype=np.int64), -inf, inf,
+        starts, stops, np.zeros((1, 1)), 0.1, 0.0, 2, 3,
+    )  # fmt: skip
