@@ -192,7 +192,10 @@ def _record(program, slots, stack, t, state, layout, u, k, out_slots, y):  # pra
 def simulate_windows(
     program, base, layout, u, out_slots, lo, hi, starts, stops, x0, dt, t0, substeps, depth
 ):  # pragma: no cover - compiled
-    """Integrate a unit over windows; return its outputs, shape ``(n_samples, n_outputs)``.
+    """Integrate a unit over windows; return its outputs and states at every sample.
+
+    Returns ``(outputs, states)``, shapes ``(n_samples, n_outputs)`` and ``(n_samples,
+    n_states)``.
 
     ``program`` is ``(code, consts, bounds, targets)``; ``layout`` is ``(state_slots,
     deriv_slots, in_slots, linear)``; ``base`` the slot vector with params filled; ``u`` the
@@ -201,6 +204,7 @@ def simulate_windows(
     """
     n_samples = u.shape[0]
     y = np.full((n_samples, out_slots.shape[0]), np.nan)
+    states = np.full((n_samples, x0.shape[1]), np.nan)
     slots = base.copy()
     stack = np.empty(depth + 1)
     n_states = x0.shape[1]
@@ -211,10 +215,12 @@ def simulate_windows(
         state[:] = x0[w]
         _clamp(state, lo, hi)
         _record(program, slots, stack, t0 + a * dt, state, layout, u, a, out_slots, y)
+        states[a] = state
         for k in range(a, stops[w] - 1):
             _rk4_sample(program, slots, stack, state, layout, u, k, dt, t0, substeps, lo, hi, work)
             _record(program, slots, stack, t0 + (k + 1) * dt, state, layout, u, k + 1, out_slots, y)
-    return y
+            states[k + 1] = state
+    return y, states
 
 
 def warm_up() -> None:

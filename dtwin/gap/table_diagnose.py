@@ -1,0 +1,595 @@
+"""The gap diagnoser on a user's twin table: where, which and how far, on any wiring.
+
+Specification: docs/gap.md §Twin file. :func:`diagnose_table` takes a recording and a
+:class:`~dtwin.twin.table.TwinTable` and answers as :func:`dtwin.gap.diagnose.diagnose` does
+for the paper's chain, in three steps:
+
+1. **Where.** Each unit (a module whose inputs and outputs are recorded, or modules joined by
+   unrecorded signals, :func:`dtwin.twin.simulate.units_of`) is fitted on the training part (its
+   params within the calibration tolerance of the declared values, or freely with
+   ``calibrate``; every window's initial states), and its gap on the choosing part is tested
+   against its noise floor (the declared noise, reconciled with the floor read from the
+   residual's spectrum, :mod:`dtwin.gap.noise`). The **source** is the first unit with a gap in
+   the table's order, so a sensor error on a signal that feeds another module is blamed on the
+   module producing it.
+2. **Which.** The source's candidates (:func:`dtwin.gap.table_effects.candidate_variants`) are
+   screened with the twin's params held, the best re-fitted with them, and chosen on the
+   choosing part; an effect must remove ``min_share`` of the excess gap and beat the twin
+   re-fitted (``parameter_mismatch``) by a likelihood-ratio test, else ``unexplained``.
+3. **How far.** Gaps before, re-fitted and after on the scoring part, the three shrinks, a free
+   run, intervals of the fitted params and the combinations of params the data cannot separate.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from dtwin._validation import DtwinValueError
+from dtwin.gap.confidence import calibrated_confidence
+from dtwin.gap.noise import (
+    NoiseFloor,
+    effective_samples,
+    gap_threshold,
+    reconcile_noise_floor,
+    spectral_noise_floor,
+)
+from dtwin.gap.recording import Recording
+from dtwin.gap.results import GapSettings
+from dtwin.gap.table_effects import candidate_variants, twin_variant
+from dtwin.gap.table_fit import (
+    UnitData,
+    VariantFit,
+    combined,
+    fit_variant,
+    part_error,
+    require_finite_fit,
+    rms_by_output,
+    state_guess,
+)
+from dtwin.gap.which import _excess, shrink_pct
+from dtwin.twin.simulate import UnitModel, UnitSpec, choose_substeps, units_of
+
+__all__ = ["UnitReport", "TableDiagnosis", "diagnose_table", "SCREENED"]
+
+progress = logging.getLogger("dtwin.gap.diagnose.progress")
+
+#: Candidates re-fitted with the twin's params after screening (the best by training cost).
+SCREENED = 4
+#: Training samples of a screening fit.
+SCREEN_SAMPLES = 2000
+#: Fewest and most samples of a window.
+MIN_WINDOW, MAX_WINDOW = 40, 1000
+#: Window length in time constants of the unit's slowest mode.
+WINDOW_TIME_CONSTANTS = 10.0
+#: Operating points at which the Jacobian is probed.
+_PROBES = 12
+
+
+@dataclass(frozen=True)
+class UnitReport:
+    """One unit's twin, floor and gap (``diagnosis.json``'s ``units``)."""
+
+    modules: tuple[str, ...]
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    internal: tuple[str, ...]
+    gap_choose: float
+    floor: float
+    threshold: float
+    flagged: bool
+    params_used: dict[str, float]
+    window: int
+    substeps: int
+    hold: str
+    floor_source: str
+
+
+@dataclass(frozen=True)
+class TableDiagnosis:
+    """The diagnosis of a recording against a twin table (the content of ``diagnosis.json``).
+
+    ``module`` is the source module (the first of the source unit's modules), ``modules`` all
+    of them; ``effect`` an effect name, ``none`` or ``unexplained``; ``at`` where it attaches.
+    The gaps, shrinks and free-run errors are as :class:`dtwin.gap.results.Diagnosis`'s.
+    """
+
+    module: str | None
+    modules: tuple[str, ...]
+    effect: str
+    at: str | None
+    params: dict[str, float]
+    param_intervals: dict[str, tuple[float, float]]
+    fixed_combinations: tuple[str, ...]
+    confidence: float | None
+    bic_weight: float | None
+    gap_before: float | None
+    gap_refit: float | None
+    gap_after: float | None
+    raw_shrink_pct: float | None
+    own_shrink_pct: float | None
+    excess_shrink_pct: float | None
+    free_run_rms_before: float | None
+    free_run_rms_after: float | None
+    units: dict[str, UnitReport]
+    candidates: list[dict[str, Any]]
+    also_needed: tuple[str, ...]
+    notes: tuple[str, ...]
+    n_samples: int
+    n_train: int
+    n_choose: int
+    dt: float
+    series: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+
+def _split(n: int, train_frac: float, choose_frac: float) -> dict[str, tuple[int, int]]:
+    n_train = int(round(train_frac * n))
+    n_choose = n_train + int(round(choose_frac * (n - n_train)))
+    if n_train < 100 or min(n_choose - n_train, n - n_choose) < 50:
+        raise DtwinValueError(
+            f"recording too short to split: {n_train} training, {n_choose - n_train} choosing "
+            f"and {n - n_choose} scoring samples (needs 100, 50 and 50)"
+        )
+    return {"train": (0, n_train), "choose": (n_train, n_choose), "score": (n_choose, n)}
+
+
+def _unit_arrays(spec: UnitSpec, recording: Recording, train: slice):
+    inputs = (
+        np.column_stack([recording.signals[s] for s in spec.inputs])
+        if spec.inputs
+        else (np.zeros((recording.n_samples, 0)))
+    )
+    outputs = np.column_stack([recording.signals[s] for s in spec.outputs])
+    norm = outputs[train].std(axis=0)
+    for signal, value in zip(spec.outputs, norm):
+        if not value > 0:
+            raise DtwinValueError(
+                f"recording column '{signal}' must vary over the training part (a constant output "
+                "cannot be diagnosed)"
+            )
+    return (
+        np.ascontiguousarray(inputs, dtype=float),
+        np.ascontiguousarray(outputs, dtype=float),
+        norm,
+    )
+
+
+def _dynamics(model: UnitModel, theta, guess, inputs, dt, train) -> tuple[int, int, float]:
+    """``(substeps, window, bandwidth_hz)`` from the Jacobian along the twin's states."""
+    rows = np.linspace(train.start, train.stop - 1, _PROBES).astype(int)
+    states, probe_inputs = guess[rows], inputs[rows]
+    ok = np.all(np.isfinite(states), axis=1)
+    states, probe_inputs = states[ok], probe_inputs[ok]
+    values = [theta[name] for name in model.param_names]
+    substeps = choose_substeps(model, values, states, probe_inputs, dt) if len(states) else 8
+    slowest, fastest = _time_scales(model, values, states, probe_inputs)
+    window = int(np.clip(round(WINDOW_TIME_CONSTANTS * slowest / dt), MIN_WINDOW, MAX_WINDOW))
+    window = min(window, max(MIN_WINDOW, (train.stop - train.start) // 4))
+    return substeps, window, fastest / (2 * math.pi)
+
+
+def _time_scales(model, values, states, inputs) -> tuple[float, float]:
+    """The slowest time constant (s) and the fastest rate (1/s) of the linearised unit."""
+    n = len(model.spec.states)
+    rates = []
+    for state, u in zip(states, inputs):
+        jac = np.empty((n, n))
+        scale = np.maximum(np.abs(state), 1e-6)
+        for j in range(n):
+            step = np.zeros(n)
+            step[j] = 1e-4 * scale[j]
+            jac[:, j] = (
+                model.derivatives(state + step, u, values)
+                - model.derivatives(state - step, u, values)
+            ) / (2 * step[j])
+        if np.all(np.isfinite(jac)):
+            rates.extend(np.abs(np.linalg.eigvals(jac)))
+    rates = np.asarray(rates)
+    positive = rates[rates > 1e-9]
+    if not len(positive):
+        return math.inf, 0.0
+    return 1.0 / float(np.median(positive[positive <= np.quantile(positive, 0.25)])), float(
+        positive.max()
+    )
+
+
+def _prepare_unit(spec, recording, table, parts, settings, calibrate) -> UnitData:
+    """Arrays, holds, substeps and windows of one unit."""
+    train = slice(*parts["train"])
+    inputs, outputs, norm = _unit_arrays(spec, recording, train)
+    model = UnitModel.from_spec(spec)
+    produced = {s for m in table.modules for s in m.outputs}
+    hold = getattr(table, "discretisation", None)
+    linear = np.array([s in produced or hold != "zoh" for s in spec.inputs], dtype=bool)
+    data = UnitData(
+        spec, model, inputs, outputs, recording.dt, norm, linear, 8, 200, parts, dict(spec.params)
+    )
+    guess = state_guess(data, dict(spec.params), twin_variant(data))
+    data.substeps, data.window, bandwidth = _dynamics(
+        model, dict(spec.params), guess, inputs, recording.dt, train
+    )
+    data.bandwidth = bandwidth
+    if hold is None and any(s not in produced for s in spec.inputs):
+        data.linear = _chosen_hold(data, spec, produced, settings, calibrate)
+    return data
+
+
+def _chosen_hold(data, spec, produced, settings, calibrate) -> np.ndarray:
+    """The exogenous inputs' hold (zoh or foh) with the smaller training cost of the twin."""
+    best = None
+    for held in (False, True):
+        data.linear = np.array([s in produced or held for s in spec.inputs], dtype=bool)
+        fit = _nominal_fit(data, settings, calibrate, cap=SCREEN_SAMPLES)
+        if best is None or fit.cost < best[0]:
+            best = (fit.cost, data.linear.copy())
+    return best[1]
+
+
+def _nominal_fit(data, settings, calibrate, cap=None) -> VariantFit:
+    mode = "free" if calibrate else "band"
+    kwargs = {"cap": cap} if cap else {}
+    return fit_variant(
+        data, twin_variant(data), data.declared, mode=mode, band=settings.calibration_tolerance,
+        **kwargs,
+    )  # fmt: skip
+
+
+def _floors(data, fit, noise, settings) -> tuple[list[NoiseFloor], list[float]]:
+    """Each output's noise floor and its normalised threshold on the choosing part."""
+    error, _ = part_error(data, fit, "train")
+    train = slice(*data.parts["train"])
+    n_choose = data.parts["choose"][1] - data.parts["choose"][0]
+    floors, thresholds = [], []
+    for o, signal in enumerate(data.spec.outputs):
+        residual = error[train, o]
+        residual = residual[np.isfinite(residual)]
+        spectral = spectral_noise_floor(residual, data.dt, max(data.bandwidth, 1e-12))
+        twin = NoiseFloor(noise[signal], "twin", np.ones(1)) if signal in noise else None
+        floor = reconcile_noise_floor(twin, spectral, settings.noise_tolerance)
+        floors.append(floor)
+        thresholds.append(
+            gap_threshold(
+                floor.rms / data.norm[o], effective_samples(floor.acf, n_choose),
+                noise_tolerance=settings.noise_tolerance, significance=settings.significance,
+                min_gap=settings.min_gap,
+            )
+        )  # fmt: skip
+    return floors, thresholds
+
+
+@dataclass
+class _UnitWork:
+    data: UnitData
+    nominal: VariantFit
+    floors: list[NoiseFloor]
+    thresholds: list[float]
+    gaps: np.ndarray
+    flagged: bool
+
+    @property
+    def excess(self) -> float:
+        return float(np.max(self.gaps / np.asarray(self.thresholds)))
+
+    @property
+    def floor(self) -> float:
+        return combined([f.rms / n for f, n in zip(self.floors, self.data.norm)])
+
+
+def _analyse_unit(spec, recording, table, parts, settings, calibrate) -> _UnitWork:
+    progress.info("%s: twin, windows and noise floor", "+".join(spec.modules))
+    data = _prepare_unit(spec, recording, table, parts, settings, calibrate)
+    nominal = _nominal_fit(data, settings, calibrate)
+    require_finite_fit(nominal, "+".join(spec.modules))
+    data.guess = state_guess(data, nominal.theta, nominal.variant)
+    floors, thresholds = _floors(data, nominal, table.noise, settings)
+    error, _ = part_error(data, nominal, "choose")
+    gaps = rms_by_output(error, slice(*parts["choose"]), data.norm)
+    flagged = bool(np.any(gaps > np.asarray(thresholds)))
+    return _UnitWork(data, nominal, floors, thresholds, gaps, flagged)
+
+
+@dataclass
+class _Candidate:
+    fit: VariantFit
+    gap_choose: float
+    n_params: int
+    weight: float = 0.0
+
+
+def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candidate]:
+    """Screen every candidate with the twin's params held; re-fit the best with them."""
+    data = work.data
+    blocks = {m.name: m.block for m in table.modules}
+    variants = candidate_variants(data, data.guess, blocks, calibrate=calibrate)
+    screened = []
+    screen_x0 = _screening_states(work)
+    for variant in variants:
+        if variant.refits_linear:
+            continue
+        fit = fit_variant(
+            data, variant, work.nominal.theta, mode="fixed", cap=SCREEN_SAMPLES, max_nfev=25,
+            x0=screen_x0,
+        )  # fmt: skip
+        screened.append((fit.cost, variant))
+    screened.sort(key=lambda item: item[0])
+    for cost, variant in screened:
+        progress.debug("screened %s at %s: %.6g", variant.name, variant.at, cost)
+    chosen = [v for _, v in screened[:SCREENED]] + [v for v in variants if v.refits_linear]
+    mode = "free" if calibrate else "band"
+    out = []
+    for variant in chosen:
+        progress.info("%s: fitting %s at %s", data.spec.name, variant.name, variant.at)
+        fit = fit_variant(
+            data, variant, work.nominal.theta, mode="free" if variant.refits_linear else mode,
+            band=settings.calibration_tolerance,
+        )  # fmt: skip
+        error, _ = part_error(data, fit, "choose")
+        gap = combined(rms_by_output(error, slice(*data.parts["choose"]), data.norm))
+        n_params = len([p for p in variant.effect_params if p not in variant.fixed])
+        out.append(_Candidate(fit, gap, n_params or len(fit.free)))
+    return out
+
+
+def _screening_states(work: _UnitWork) -> np.ndarray:
+    """The twin's fitted states at the screening windows' starts (params as fitted)."""
+    data = work.data
+    fit = fit_variant(
+        data, work.nominal.variant, work.nominal.theta, mode="fixed", cap=SCREEN_SAMPLES,
+        max_nfev=20,
+    )  # fmt: skip
+    return fit.x0
+
+
+def _weights(candidates: list[_Candidate], n_eff: float) -> None:
+    """BIC weights on the choosing part: ``n_eff·ln(gap²) + k·ln(n_eff)``."""
+    bic = np.array([n_eff * math.log(max(c.gap_choose, 1e-300) ** 2) + c.n_params * math.log(n_eff)
+                    for c in candidates])  # fmt: skip
+    w = np.exp(-0.5 * (bic - bic.min()))
+    for c, value in zip(candidates, w / w.sum()):
+        c.weight = float(value)
+
+
+def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, list[str]]:
+    """The candidate that explains the choosing part's gap, or None (``unexplained``)."""
+    from scipy.stats import chi2
+
+    notes = []
+    gap = combined(work.gaps)
+    floor = work.floor
+    n_choose = work.data.parts["choose"][1] - work.data.parts["choose"][0]
+    n_eff = float(np.mean([effective_samples(f.acf, n_choose) for f in work.floors]))
+    _weights(candidates, n_eff)
+    refit = next((c for c in candidates if c.fit.variant.refits_linear), None)
+    reference = refit.gap_choose if refit is not None else gap
+    for candidate in sorted(candidates, key=lambda c: c.gap_choose):
+        variant = candidate.fit.variant
+        removed = 1.0 - _excess(candidate.gap_choose, floor) ** 2 / max(
+            _excess(gap, floor) ** 2, 1e-300
+        )
+        share = settings.min_linear_share if variant.linear_form else settings.min_share
+        if removed < share:
+            notes.append(f"{variant.name} at {variant.at}: removes {removed:.0%} of the excess")
+            break
+        if variant.refits_linear:
+            return candidate, notes
+        statistic = n_eff * math.log(
+            max(reference, 1e-300) ** 2 / max(candidate.gap_choose, 1e-300) ** 2
+        )
+        if statistic >= chi2.isf(settings.significance, max(candidate.n_params, 1)):
+            return candidate, notes
+        notes.append(
+            f"{variant.name} at {variant.at}: no better than the re-fitted twin (T = {statistic:.1f})"
+        )
+    return None, notes
+
+
+def _score_gap(data: UnitData, fit: VariantFit) -> float:
+    error, _ = part_error(data, fit, "score")
+    return combined(rms_by_output(error, slice(*data.parts["score"]), data.norm))
+
+
+def _free_run(data: UnitData, fit: VariantFit) -> float | None:
+    """RMS error (output units) of a free run over the scoring part from its fitted start."""
+    start, stop = data.parts["score"]
+    saved = data.parts
+    data.parts = {**saved, "free": (start, stop)}
+    window, data.window = data.window, stop - start
+    try:
+        error, _ = part_error(data, fit, "free")
+    finally:
+        data.parts, data.window = saved, window
+    value = float(np.sqrt(np.nanmean(error[start:stop] ** 2)))
+    return value if math.isfinite(value) else None
+
+
+def _reported(fit: VariantFit, nominal: Mapping[str, float]) -> tuple[dict, str | None]:
+    """The answer's params in report units, and ``at`` for a re-fit (the param furthest off)."""
+    variant = fit.variant
+    if variant.refits_linear:
+        changes = {
+            name: fit.theta[name]
+            for name in nominal
+            if abs(fit.theta[name] - nominal[name]) > 1e-9 * max(abs(nominal[name]), 1e-12)
+        }
+        relative = {
+            n: abs(v - nominal[n]) / max(abs(nominal[n]), 1e-12) for n, v in changes.items()
+        }
+        at = max(relative, key=relative.get) if relative else None
+        return changes, at
+    params = {}
+    for name in variant.effect_params:
+        label = name[3:].rsplit("_", 1)[0] if name[3:].rsplit("_", 1)[-1].isdigit() else name[3:]
+        params[label] = float(fit.theta[name])
+    if variant.report is not None:
+        label, factor, mass, sigma = variant.report
+        params = {label: float(factor(fit.theta[mass], sigma) * fit.theta["_e_theta"])}
+    return params, variant.at
+
+
+def _intervals(fit: VariantFit) -> tuple[dict[str, tuple[float, float]], tuple[str, ...]]:
+    """95 % intervals of the free params (Gauss–Newton covariance, window states profiled)
+    and the combinations of params the data cannot separate (relative singular value < 1e-6)."""
+    if fit.jacobian is None or not fit.free:
+        return {}, ()
+    jac = fit.jacobian
+    n, p = jac.shape
+    sigma2 = fit.cost / max(n - p, 1)
+    u, s, vt = np.linalg.svd(jac, full_matrices=False)
+    keep = s > 1e-9 * s[0]
+    cov = (vt[keep].T / s[keep] ** 2) @ vt[keep] * sigma2
+    k = len(fit.free)
+    out = {}
+    for i, name in enumerate(fit.free):
+        half = 1.96 * math.sqrt(max(cov[i, i], 0.0))
+        out[name] = (fit.theta[name] - half, fit.theta[name] + half)
+    params = jac[:, :k]
+    scale = np.linalg.norm(params, axis=0)
+    scale[scale == 0] = 1.0
+    _, s_p, vt_p = np.linalg.svd(params / scale, full_matrices=False)
+    fixed = []
+    for value, row in zip(s_p, vt_p):
+        if value < 1e-3 * s_p[0]:
+            weights = row / scale
+            terms = [
+                f"{w:+.3g}*{name}"
+                for w, name in zip(weights, fit.free)
+                if abs(w) > 1e-3 * np.abs(weights).max()
+            ]
+            fixed.append(" ".join(terms) + " (not separable)")
+    return out, tuple(fixed)
+
+
+def diagnose_table(
+    recording: Recording,
+    table,
+    *,
+    calibrate: bool = False,
+    train_frac: float = 0.5,
+    settings: GapSettings | None = None,
+) -> TableDiagnosis:
+    """Diagnose the sim-to-real gap of a recording against a twin table.
+
+    Parameters
+    ----------
+    recording : Recording
+        The validated recording (:func:`read_table_recording`), every signal the table reads
+        from the recording present.
+    table : dtwin.twin.table.TwinTable
+        The twin.
+    calibrate : bool, default False
+        Re-fit every param freely on the training part (no ``parameter_mismatch`` candidate).
+    train_frac : float, default 0.5
+        Share of the samples, from the start, used for fitting; the rest is split into the
+        choosing and the scoring part (``settings.choose_frac``).
+    settings : GapSettings, optional
+
+    Returns
+    -------
+    TableDiagnosis
+
+    Raises
+    ------
+    DtwinValueError
+        On a recording too short to split, a dt that disagrees with the table's, no unit with
+        recorded outputs, a constant output, or a twin that does not simulate.
+    """
+    with threadpool_limits(limits=1):
+        return _diagnose_table(recording, table, calibrate, train_frac, settings or GapSettings())
+
+
+def _diagnose_table(recording, table, calibrate, train_frac, settings) -> TableDiagnosis:
+    if table.dt is not None and abs(recording.dt - table.dt) > 0.01 * table.dt:
+        raise DtwinValueError(
+            f"recording dt ({recording.dt:.6g} s, from column 't') disagrees with the twin's dt "
+            f"({table.dt:.6g} s) by more than 1%"
+        )
+    parts = _split(recording.n_samples, train_frac, settings.choose_frac)
+    specs = units_of(table, list(recording.signals))
+    if not specs:
+        raise DtwinValueError("no module of the twin has a recorded output")
+    works = {s.name: _analyse_unit(s, recording, table, parts, settings, calibrate) for s in specs}
+    flagged = [w for w in works.values() if w.flagged]
+    notes: list[str] = []
+    units = {name: _unit_report(w) for name, w in works.items()}
+    base = dict(units=units, n_samples=recording.n_samples, n_train=parts["train"][1],
+                n_choose=parts["choose"][1], dt=recording.dt)  # fmt: skip
+    if not flagged:
+        return _none_answer(works, base, notes)
+    source = flagged[0]
+    also = tuple(w.data.spec.name for w in flagged[1:])
+    candidates = _fit_candidates(source, table, calibrate, settings)
+    chosen, choose_notes = _choose(source, candidates, settings)
+    notes.extend(choose_notes)
+    return _answer(source, candidates, chosen, base, notes, also)
+
+
+def _unit_report(work: _UnitWork) -> UnitReport:
+    data = work.data
+    holds = ["foh" if flag else "zoh" for flag in data.linear]
+    return UnitReport(
+        modules=data.spec.modules, inputs=data.spec.inputs, outputs=data.spec.outputs,
+        internal=data.spec.internal, gap_choose=combined(work.gaps), floor=work.floor,
+        threshold=combined(work.thresholds), flagged=work.flagged,
+        params_used={k: float(v) for k, v in work.nominal.theta.items() if not k.startswith("_e_")},
+        window=data.window, substeps=data.substeps, hold=",".join(holds) or "none",
+        floor_source=",".join(f.source for f in work.floors),
+    )  # fmt: skip
+
+
+def _none_answer(works, base, notes) -> TableDiagnosis:
+    return TableDiagnosis(
+        module=None, modules=(), effect="none", at=None, params={}, param_intervals={},
+        fixed_combinations=(), confidence=None, bic_weight=None, gap_before=None, gap_refit=None,
+        gap_after=None, raw_shrink_pct=None, own_shrink_pct=None, excess_shrink_pct=None,
+        free_run_rms_before=None, free_run_rms_after=None, candidates=[], also_needed=(),
+        notes=tuple(notes), **base,
+    )  # fmt: skip
+
+
+def _candidate_rows(candidates: list[_Candidate], nominal) -> list[dict[str, Any]]:
+    rows = []
+    for c in sorted(candidates, key=lambda c: c.gap_choose):
+        params, at = _reported(c.fit, nominal)
+        rows.append({"effect": c.fit.variant.name, "at": at, "gap_choose": c.gap_choose,
+                     "bic_weight": c.weight, "params": params})  # fmt: skip
+    return rows
+
+
+def _answer(source: _UnitWork, candidates, chosen, base, notes, also) -> TableDiagnosis:
+    data = source.data
+    nominal = source.nominal
+    refit = next((c.fit for c in candidates if c.fit.variant.refits_linear), nominal)
+    before, refit_gap = _score_gap(data, nominal), _score_gap(data, refit)
+    common = dict(
+        module=data.spec.modules[0], modules=data.spec.modules,
+        candidates=_candidate_rows(candidates, data.declared), also_needed=also,
+        free_run_rms_before=_free_run(data, nominal), gap_before=before, gap_refit=refit_gap, **base,
+    )  # fmt: skip
+    if chosen is None:
+        return TableDiagnosis(
+            effect="unexplained", at=None, params={}, param_intervals={}, fixed_combinations=(),
+            confidence=None, bic_weight=None, gap_after=None, raw_shrink_pct=None,
+            own_shrink_pct=None, excess_shrink_pct=None, free_run_rms_after=None,
+            notes=tuple(notes), **common,
+        )  # fmt: skip
+    fit = chosen.fit
+    after = _score_gap(data, fit)
+    reference = before if fit.variant.refits_linear else refit_gap
+    floor = source.floor
+    params, at = _reported(fit, data.declared)
+    intervals, fixed = _intervals(fit)
+    return TableDiagnosis(
+        effect=fit.variant.name, at=at, params=params,
+        param_intervals={k: v for k, v in intervals.items()}, fixed_combinations=fixed,
+        confidence=calibrated_confidence(chosen.weight), bic_weight=chosen.weight, gap_after=after,
+        raw_shrink_pct=shrink_pct(before, after),
+        own_shrink_pct=shrink_pct(_excess(reference, floor), _excess(after, floor)),
+        excess_shrink_pct=shrink_pct(_excess(before, floor), _excess(after, floor)),
+        free_run_rms_after=_free_run(data, fit), notes=tuple(notes), **common,
+    )  # fmt: skip

@@ -1,0 +1,273 @@
+"""The candidate effects of a unit of a twin table: where a user would look for them.
+
+Specification: docs/gap.md §Twin file (Which, on any module). Effects attach
+
+- at a unit's **input** signal: ``input_saturation`` (symmetric limit ``U`` about 0),
+  ``input_deadzone`` (``sign(u)·max(|u| − D, 0)``), ``input_delay`` (``delay`` s, fractional);
+- at a recorded **output**: ``output_saturation`` (clipped to ``[low, high]``),
+  ``output_bias_drift`` (``b0 + b1·τ + b2·τ²``, ``τ`` the time over the recording's length),
+  ``output_scale_error`` (``gain·y``), ``output_delay`` (``delay`` s), ``output_quantization``
+  (a lattice of step ``q`` found in the recorded values);
+- at a **state**: ``state_limit`` (an upper or a lower bound, ``limit``: an overflow, an end
+  stop) and a missing term ``θ·f(z)`` in a state's derivative, ``z = (s_i − c)/σ`` a state the
+  derivative reads, scaled by its spread ``σ`` (and centred on its mean ``c`` for the cubic):
+  ``state_cubic`` (``z³``), ``state_abs_square`` (``|z|·z``), ``state_sign`` (``tanh(z/0.01)``,
+  a smoothed sign);
+- ``parameter_mismatch``: every declared param re-fitted (not with ``--calibrate``, whose twin
+  already is that re-fit).
+
+A ``mass_spring_damper`` block keeps its named effects: the sign, cubic and ``|v|·v`` terms of
+its own states in its velocity's derivative are ``coulomb_friction`` (``Fc``),
+``cubic_stiffness`` (``k3``) and ``quadratic_damping`` (``c2``), reported in force units.
+``Variant.at`` names the signal, the state whose derivative gains the term (or the limited
+state), or nothing for a re-fit (the report names the param furthest off).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dtwin.gap.effects import find_lattice
+from dtwin.gap.table_fit import UnitData, Variant
+from dtwin.twin.simulate import Assignment
+
+__all__ = ["STATE_TERMS", "candidate_variants", "twin_variant"]
+
+#: The missing terms of a state's derivative: name → the function of ``z`` (text).
+STATE_TERMS: dict[str, str] = {
+    "state_cubic": "{z}**3",
+    "state_abs_square": "abs({z})*({z})",
+    "state_sign": "tanh(({z})/0.01)",
+}
+#: The mass-spring-damper's names for the terms of its own states in ``dv/dt``:
+#: (term, state) → (effect, reported param, force per unit of θ as a function of m and σ).
+MSD_NAMES = {
+    ("state_sign", "v"): ("coulomb_friction", "Fc", lambda m, s: -m),
+    ("state_cubic", "x"): ("cubic_stiffness", "k3", lambda m, s: -m / s**3),
+    ("state_abs_square", "v"): ("quadratic_damping", "c2", lambda m, s: -m / s**2),
+}
+#: Delays tried before fitting a delay, in samples.
+DELAY_GRID = (0.5, 1, 2, 4, 6, 9, 13, 18, 25)
+
+
+def twin_variant(data: UnitData) -> Variant:
+    """The unit's twin as a :class:`Variant` (no effect)."""
+    return Variant("linear", None, data.model)
+
+
+def _number(value: float) -> str:
+    return repr(float(value))
+
+
+def _shift(values: np.ndarray, delay: float, dt: float) -> np.ndarray:
+    """``values`` delayed by ``delay`` s (linear interpolation; the first value held before)."""
+    n = len(values)
+    samples = np.clip(np.arange(n) - delay / dt, 0.0, n - 1)
+    low = np.floor(samples).astype(int)
+    high = np.minimum(low + 1, n - 1)
+    frac = (samples - low)[:, None] if values.ndim == 2 else samples - low
+    return values[low] + frac * (values[high] - values[low])
+
+
+def _input_variants(data: UnitData) -> list[Variant]:
+    out = []
+    for i, signal in enumerate(data.spec.inputs):
+        u = data.inputs[:, i]
+        reach = float(np.max(np.abs(u)))
+        spread = float(np.std(u)) or 1.0
+        u_name, d_name, delay_name = f"_e_U_{i}", f"_e_D_{i}", f"_e_delay_{i}"
+
+        def saturate(values, theta, _data, i=i, name=u_name):
+            out = values.copy()
+            out[:, i] = np.clip(values[:, i], -theta[name], theta[name])
+            return out
+
+        def deadzone(values, theta, _data, i=i, name=d_name):
+            out = values.copy()
+            out[:, i] = np.sign(values[:, i]) * np.maximum(np.abs(values[:, i]) - theta[name], 0)
+            return out
+
+        def delay(values, theta, data, i=i, name=delay_name):
+            out = values.copy()
+            out[:, i] = _shift(values[:, i], theta[name], data.dt)
+            return out
+
+        model = data.model
+        out += [
+            Variant("input_saturation", signal, model, (u_name,), {u_name: 0.8 * reach},
+                    {u_name: (1e-3 * spread, 2 * reach)}, {u_name: spread}, input_map=saturate),
+            Variant("input_deadzone", signal, model, (d_name,), {d_name: 0.1 * spread},
+                    {d_name: (0.0, reach)}, {d_name: spread}, input_map=deadzone),
+            Variant("input_delay", signal, model, (delay_name,), {delay_name: data.dt},
+                    {delay_name: (0.0, 30 * data.dt)}, {delay_name: data.dt}, input_map=delay),
+        ]  # fmt: skip
+    return out
+
+
+def _output_variants(data: UnitData) -> list[Variant]:
+    out = []
+    train = slice(*data.parts["train"])
+    duration = data.n_samples * data.dt
+    for o, signal in enumerate(data.spec.outputs):
+        y = data.outputs[train, o]
+        spread = float(np.std(y)) or 1.0
+        mid = float(np.median(y))
+        names = [f"_e_{p}_{o}" for p in ("low", "high", "b0", "b1", "b2", "gain", "delay")]
+        low, high, b0, b1, b2, gain, delay = names
+
+        def clip(values, theta, _data, o=o, low=low, high=high):
+            out = values.copy()
+            out[:, o] = np.clip(values[:, o], theta[low], theta[high])
+            return out
+
+        def drift(values, theta, data, o=o, b=(b0, b1, b2)):
+            tau = np.arange(len(values)) * data.dt / duration
+            out = values.copy()
+            out[:, o] += theta[b[0]] + theta[b[1]] * tau + theta[b[2]] * tau**2
+            return out
+
+        def scale(values, theta, _data, o=o, gain=gain):
+            out = values.copy()
+            out[:, o] *= theta[gain]
+            return out
+
+        def lag(values, theta, data, o=o, delay=delay):
+            out = values.copy()
+            out[:, o] = _shift(values[:, o], theta[delay], data.dt)
+            return out
+
+        wide = (float(np.min(y)) - spread, float(np.max(y)) + spread)
+        model = data.model
+        out += [
+            Variant("output_saturation", signal, model, (low, high),
+                    {low: float(np.min(y)), high: float(np.max(y))},
+                    {low: (wide[0], mid), high: (mid, wide[1])}, {low: spread, high: spread},
+                    output_map=clip),
+            Variant("output_bias_drift", signal, model, (b0, b1, b2), dict.fromkeys((b0, b1, b2), 0.0),
+                    dict.fromkeys((b0, b1, b2), (-np.inf, np.inf)), dict.fromkeys((b0, b1, b2), spread),
+                    output_map=drift),
+            Variant("output_scale_error", signal, model, (gain,), {gain: 1.0}, {gain: (0.0, 10.0)},
+                    {gain: 0.1}, output_map=scale, linear_form=True),
+            Variant("output_delay", signal, model, (delay,), {delay: data.dt},
+                    {delay: (0.0, 30 * data.dt)}, {delay: data.dt}, output_map=lag),
+        ]  # fmt: skip
+        out += _quantization_variant(data, o, signal, y, spread)
+    return out
+
+
+def _quantization_variant(data, o, signal, y, spread) -> list[Variant]:
+    """``output_quantization`` when the recorded values sit on a lattice (else nothing)."""
+    step, offset, concentration = find_lattice(y, 1e-4 * spread, 0.5 * spread)
+    if concentration < 0.5:
+        return []
+    q_name, o_name = f"_e_q_{o}", f"_e_offset_{o}"
+
+    def quantize(values, theta, _data, o=o):
+        out = values.copy()
+        q, c = theta[q_name], theta[o_name]
+        out[:, o] = c + q * np.round((values[:, o] - c) / q)
+        return out
+
+    fixed = {q_name: step, o_name: offset}
+    return [
+        Variant("output_quantization", signal, data.model, (q_name, o_name), fixed,
+                {}, {}, output_map=quantize, fixed=fixed)
+    ]  # fmt: skip
+
+
+def _local_name(assignment: Assignment, slot: str) -> str | None:
+    return next((local for local, target in assignment.symbols.items() if target == slot), None)
+
+
+def _state_variants(data: UnitData, guess: np.ndarray, blocks: dict[str, str | None]):
+    """The missing-term and limit candidates of every state of the unit."""
+    spec, model = data.spec, data.model
+    train = slice(*data.parts["train"])
+    out = []
+    derivatives = {a.target[2:]: a for a in model.assignments if a.target.startswith("d/")}
+    for j, state in enumerate(spec.states):
+        assignment = derivatives[state]
+        path = guess[train, j]
+        rate = float(np.nanstd(np.diff(path))) / data.dt or 1.0
+        read = [s for s in spec.states if _local_name(assignment, s) is not None]
+        for source in read:
+            i = spec.states.index(source)
+            values = guess[train, i]
+            for term, form in STATE_TERMS.items():
+                out.append(
+                    _term_variant(data, assignment, state, source, values, term, form, rate, blocks)
+                )
+        out += _limit_variants(data, state, j, path)
+    return out
+
+
+def _term_variant(data, assignment, state, source, values, term, form, rate, blocks) -> Variant:
+    """One missing term ``θ·f(z)`` of state ``source`` in the derivative of ``state``."""
+    centre = float(np.nanmean(values)) if term == "state_cubic" else 0.0
+    sigma = float(np.nanstd(values - centre)) or 1.0
+    if term != "state_cubic":
+        sigma = float(np.sqrt(np.nanmean(values**2))) or 1.0
+    local = _local_name(assignment, source)
+    z = f"(({local} - {_number(centre)})/{_number(sigma)})"
+    theta = "_e_theta"
+    text = f"({assignment.text}) + {theta}*{form.format(z=z)}"
+    model = data.model.variant({assignment.target: text}, extra=(theta,))
+    name, report = term, None
+    module, own = state.split(".", 1)[0], state.split(".", 1)[1]
+    if blocks.get(module) == "mass_spring_damper" and own == "v":
+        named = MSD_NAMES.get((term, source.split(".", 1)[1]))
+        if named is not None:
+            name, report = named[0], (named[1], named[2], f"{module}.m", sigma)
+    return Variant(
+        name, state, model, (theta,), {theta: 0.0}, {theta: (-np.inf, np.inf)}, {theta: rate},
+        report=report,
+    )  # fmt: skip
+
+
+def _limit_variants(data, state, j, path) -> list[Variant]:
+    n_states = len(data.spec.states)
+    low_q, mid, high_q = np.nanquantile(path, [0.03, 0.5, 0.97])
+    spread = float(np.nanstd(path)) or 1.0
+    out = []
+    for side, start, bounds in (
+        ("upper", high_q, (mid, float(np.nanmax(path)) + spread)),
+        ("lower", low_q, (float(np.nanmin(path)) - spread, mid)),
+    ):
+        name = f"_e_limit_{side}"
+
+        def limits(theta, name=name, side=side):
+            lo, hi = np.full(n_states, -np.inf), np.full(n_states, np.inf)
+            (hi if side == "upper" else lo)[j] = theta[name]
+            return lo, hi
+
+        variant = Variant("state_limit", state, data.model, (name,), {name: float(start)},
+                          {name: bounds}, {name: spread}, limits=limits)  # fmt: skip
+        out.append(variant)
+    return out
+
+
+def candidate_variants(
+    data: UnitData, guess: np.ndarray, blocks: dict[str, str | None], *, calibrate: bool
+) -> list[Variant]:
+    """Every candidate effect of a unit (input, output and state effects; a re-fit).
+
+    Parameters
+    ----------
+    data : UnitData
+    guess : numpy.ndarray, shape (n_samples, n_states)
+        The twin's states along the recording (:func:`dtwin.gap.table_fit.state_guess`),
+        for the centres, spreads and start values of the state effects.
+    blocks : dict of str to str or None
+        Each module's built-in block (None for an equations module).
+    calibrate : bool
+        The twin is calibrated (no ``parameter_mismatch`` candidate).
+    """
+    out = (
+        []
+        if calibrate
+        else [Variant("parameter_mismatch", None, data.model, refits_linear=True, linear_form=True)]
+    )
+    out += _input_variants(data)
+    out += _output_variants(data)
+    out += _state_variants(data, guess, blocks)
+    return out

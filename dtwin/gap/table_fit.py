@@ -1,0 +1,441 @@
+"""Fitting a unit of a twin table to a recording: windows, initial states and parameters.
+
+Specification: docs/gap.md §Twin file (Where, Which on any wiring).
+
+A unit (:func:`dtwin.twin.simulate.units_of`) is compared with the recording over **windows**
+of :attr:`UnitData.window` samples that tile each part of the recording (training, choosing,
+scoring) separately; every window restarts from its own initial states. Those states are
+nuisance parameters fitted per window by least squares (started from the recording for a state
+that is a recorded output, and from the end of the previous window otherwise), so neither an
+unrecorded state nor the noise on a recorded one biases the comparison. A :class:`Variant` is
+the unit's twin or the twin with one candidate effect: its compiled model, its extra params
+and the maps applied to the recorded inputs and to the simulated outputs. :func:`fit_variant`
+fits a variant's params (and every training window's states) on the training part with
+``scipy.optimize.least_squares`` and a sparse Jacobian (a window's states touch only its own
+rows); :func:`part_error` re-fits only the window states of another part with the params held.
+
+Arrays are time-first: ``(n_samples,)`` or ``(n_samples, n_channels)``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dtwin._validation import DtwinValueError
+from dtwin.twin.simulate import UnitModel, UnitSpec
+
+__all__ = [
+    "MAX_FIT_SAMPLES",
+    "UnitData",
+    "Variant",
+    "VariantFit",
+    "windows_of",
+    "fit_variant",
+    "part_error",
+    "state_guess",
+]
+
+#: Most training samples a fit uses (evenly spaced windows beyond it).
+MAX_FIT_SAMPLES = 6000
+#: Largest normalised residual of a diverged simulation (keeps least squares finite).
+_DIVERGED = 1e3
+
+
+def windows_of(start: int, stop: int, length: int) -> tuple[np.ndarray, np.ndarray]:
+    """Tile samples ``start … stop − 1`` with windows of ``length`` (the last one absorbs a rest).
+
+    Returns
+    -------
+    (starts, stops) : numpy.ndarray of int64, shape (n_windows,)
+    """
+    n = stop - start
+    count = max(1, n // max(length, 2))
+    edges = start + np.round(np.linspace(0, n, count + 1)).astype(np.int64)
+    return edges[:-1].copy(), edges[1:].copy()
+
+
+@dataclass
+class UnitData:
+    """A unit with its recorded signals and the diagnoser's layout.
+
+    Attributes
+    ----------
+    spec, model : UnitSpec, UnitModel
+        The unit and its compiled twin.
+    inputs : numpy.ndarray, shape (n_samples, n_inputs)
+        Recorded inputs, in ``spec.inputs`` order.
+    outputs : numpy.ndarray, shape (n_samples, n_outputs)
+        Recorded outputs, in ``spec.outputs`` order.
+    dt : float
+        Sample period, s.
+    norm : numpy.ndarray, shape (n_outputs,)
+        Standard deviation of each recorded output over the training part (the gaps' unit).
+    linear : numpy.ndarray of bool, shape (n_inputs,)
+        Each input linear between samples (True) or held (False).
+    substeps : int
+        Runge-Kutta steps per sample.
+    window : int
+        Samples per window.
+    parts : dict of str to (int, int)
+        ``train``, ``choose`` and ``score``: sample ranges.
+    declared : dict of str to float
+        The twin's declared params (qualified names).
+    """
+
+    spec: UnitSpec
+    model: UnitModel
+    inputs: np.ndarray
+    outputs: np.ndarray
+    dt: float
+    norm: np.ndarray
+    linear: np.ndarray
+    substeps: int
+    window: int
+    parts: dict[str, tuple[int, int]]
+    declared: dict[str, float]
+    guess: np.ndarray | None = field(default=None, repr=False)
+    bandwidth: float = 0.0
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples."""
+        return len(self.outputs)
+
+    def windows(self, part: str, cap: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The windows of a part; with ``cap``, at most ``cap`` samples (evenly spaced windows)."""
+        starts, stops = windows_of(*self.parts[part], self.window)
+        if cap is not None and int(np.sum(stops - starts)) > cap:
+            keep = max(1, cap // self.window)
+            chosen = np.unique(np.round(np.linspace(0, len(starts) - 1, keep)).astype(int))
+            starts, stops = starts[chosen], stops[chosen]
+        return starts, stops
+
+
+def _identity(values: np.ndarray, theta: Mapping[str, float], data: UnitData) -> np.ndarray:
+    return values
+
+
+@dataclass(frozen=True)
+class Variant:
+    """The unit's twin, or the twin with one candidate effect.
+
+    Attributes
+    ----------
+    name : str
+        ``linear`` for the twin itself, else the effect's name.
+    at : str or None
+        Where the effect attaches: a signal, a qualified state or a param.
+    model : UnitModel
+        The compiled model (its ``param_names`` end with the effect's in-program params).
+    effect_params : tuple of str
+        Every param of the effect (in-program and map params), in report order.
+    starts, bounds, scales : dict
+        Start value, ``(low, high)`` and typical size of each effect param.
+    input_map, output_map : callable
+        ``(values, theta, data) → values`` on the recorded inputs and on the simulated outputs.
+    limits : callable or None
+        ``theta → (lo, hi)`` state bounds (a ``state_limit``).
+    refits_linear : bool
+        The candidate is the twin with every param re-fitted (``parameter_mismatch``).
+    linear_form : bool
+        The candidate keeps the twin's model class (a re-fit or an output gain).
+    fixed : dict
+        Effect params set, not fitted (a quantizer's lattice).
+    report : tuple or None
+        A named effect's ``(param, factor(m, σ), mass param, σ)``: its reported param is
+        ``factor·θ`` (a mass-spring-damper's force).
+    """
+
+    name: str
+    at: str | None
+    model: UnitModel
+    effect_params: tuple[str, ...] = ()
+    starts: Mapping[str, float] = field(default_factory=dict)
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    scales: Mapping[str, float] = field(default_factory=dict)
+    input_map: Callable = _identity
+    output_map: Callable = _identity
+    limits: Callable | None = None
+    refits_linear: bool = False
+    linear_form: bool = False
+    fixed: Mapping[str, float] = field(default_factory=dict)
+    report: tuple | None = None
+
+
+@dataclass
+class VariantFit:
+    """A variant fitted on the training part.
+
+    ``theta`` holds every param (the twin's and the effect's) by name; ``x0`` the training
+    windows' states; ``cost`` the training sum of squares of the normalised residual;
+    ``jacobian`` its Jacobian over the free params (columns ``free``) at the optimum, rows the
+    residual's, ``residual`` the residual itself.
+    """
+
+    variant: Variant
+    theta: dict[str, float]
+    free: tuple[str, ...]
+    x0: np.ndarray
+    cost: float
+    n_residuals: int
+    jacobian: np.ndarray | None = field(default=None, repr=False)
+    residual: np.ndarray | None = field(default=None, repr=False)
+    success: bool = True
+
+
+def _simulate(data, variant, theta, starts, stops, x0):
+    """The variant's mapped outputs over the windows, shape ``(n_samples, n_outputs)``."""
+    inputs = variant.input_map(data.inputs, theta, data)
+    values = [theta[name] for name in variant.model.param_names]
+    limits = variant.limits(theta) if variant.limits is not None else None
+    with np.errstate(all="ignore"):
+        y, _ = variant.model.simulate(
+            inputs,
+            values,
+            starts,
+            stops,
+            x0,
+            data.dt,
+            substeps=data.substeps,
+            linear=data.linear,
+            limits=limits,
+        )
+        return variant.output_map(y, theta, data)
+
+
+def _window_rows(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    return np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)])
+
+
+def _normalised(data, y, rows):
+    """Residual rows ``(simulated − recorded)/norm``, flattened; diverged values clipped."""
+    residual = (y[rows] - data.outputs[rows]) / data.norm
+    residual = np.where(np.isfinite(residual), residual, _DIVERGED)
+    return np.clip(residual, -_DIVERGED, _DIVERGED).ravel()
+
+
+def state_guess(data: UnitData, theta: Mapping[str, float], variant: Variant) -> np.ndarray:
+    """Start states at every sample, shape ``(n_samples, n_states)``: a chained run.
+
+    Windows of the whole recording are run in turn, each from the end of the previous one, a
+    recorded state reset to its recorded value at each start; the first starts from the
+    declared initial states, the recorded ones, and 0 for the rest.
+    """
+    spec = data.spec
+    n_states = len(spec.states)
+    starts, stops = windows_of(0, data.n_samples, data.window)
+    guess = np.zeros((data.n_samples, n_states))
+    state = np.array([spec.initial.get(s, 0.0) for s in spec.states])
+    recorded = {spec.states.index(s): spec.outputs.index(o) for o, s in spec.output_states.items()}
+    values = [theta[name] for name in variant.model.param_names]
+    inputs = variant.input_map(data.inputs, theta, data)
+    for a, b in zip(starts, stops):
+        for j, o in recorded.items():
+            state[j] = data.outputs[a, o]
+        with np.errstate(all="ignore"):
+            _, states = variant.model.simulate(
+                inputs, values, np.array([a]), np.array([b]), state[None, :], data.dt,
+                substeps=data.substeps, linear=data.linear,
+            )  # fmt: skip
+        guess[a:b] = states[a:b]
+        end = states[b - 1]
+        state = np.where(np.isfinite(end), end, state)
+    return guess
+
+
+def _free_layout(data, variant, mode, nominal, band):
+    """The free params, their starts, bounds and scales for a fit in ``mode``."""
+    names, start, low, high, scale = [], [], [], [], []
+    tolerance = {"band": band, "free": math.inf}.get(mode)
+    if tolerance is not None:
+        for name, value in nominal.items():
+            declared = abs(data.declared.get(name, value))
+            if mode == "band" and declared == 0.0:
+                continue  # a param declared 0 (no offset) stays 0 within any relative band
+            typical = declared if declared > 0 else 1.0
+            width = tolerance * typical
+            lo, hi = value - width, value + width
+            if mode == "free" and data.declared.get(name, value) > 0:
+                lo = 0.0
+            names.append(name)
+            start.append(value)
+            low.append(lo)
+            high.append(hi)
+            scale.append(typical)
+    for name in variant.effect_params:
+        if name in variant.fixed:
+            continue
+        names.append(name)
+        start.append(variant.starts[name])
+        low.append(variant.bounds[name][0])
+        high.append(variant.bounds[name][1])
+        scale.append(variant.scales[name])
+    start = np.clip(start, np.nextafter(low, np.inf), np.nextafter(high, -np.inf))
+    return names, np.array(start), np.array(low), np.array(high), np.array(scale)
+
+
+def fit_variant(
+    data: UnitData,
+    variant: Variant,
+    nominal: Mapping[str, float],
+    *,
+    mode: str = "fixed",
+    cap: int | None = MAX_FIT_SAMPLES,
+    max_nfev: int = 60,
+    fit_states: bool = True,
+    band: float = 0.05,
+    x0: np.ndarray | None = None,
+) -> VariantFit:
+    """Fit a variant's params and every training window's states on the training part.
+
+    Parameters
+    ----------
+    data : UnitData
+    variant : Variant
+    nominal : mapping of str to float
+        The twin's params (qualified) to start from.
+    mode : {"fixed", "band", "free"}
+        The twin's params held (``fixed``), re-fitted within 5 % of their declared value
+        (``band``: ``band`` of their declared value, the calibration tolerance; a param
+        declared 0 stays 0) or re-fitted freely (``free``, sign kept for a
+        positive declared param).
+    cap : int, optional
+        Most training samples used (:data:`MAX_FIT_SAMPLES`).
+    max_nfev : int
+        Most residual evaluations of least squares.
+    fit_states : bool
+        Fit the windows' states (True) or keep their start values.
+    band : float
+        The calibration tolerance of ``mode="band"``.
+    x0 : numpy.ndarray, shape (n_windows, n_states), optional
+        The training windows' start states (default: :func:`state_guess` at their starts).
+
+    Returns
+    -------
+    VariantFit
+    """
+    from scipy.optimize import least_squares
+
+    starts, stops = data.windows("train", cap)
+    names, p0, low, high, scale = _free_layout(data, variant, mode, nominal, band)
+    theta = {**nominal, **variant.starts, **variant.fixed}
+    guess = data.guess if data.guess is not None else state_guess(data, theta, variant)
+    x0 = np.ascontiguousarray(guess[starts] if x0 is None else x0)
+    rows = _window_rows(starts, stops)
+    n_states = x0.shape[1] if fit_states else 0
+    state_scale = _state_scales(guess, n_states)
+
+    def unpack(z):
+        values = dict(theta)
+        values.update(zip(names, z[: len(names)]))
+        states = z[len(names) :].reshape(len(starts), n_states) if n_states else x0
+        return values, states
+
+    def residual(z):
+        values, states = unpack(z)
+        return _normalised(data, _simulate(data, variant, values, starts, stops, states), rows)
+
+    z0 = np.concatenate([p0, x0.ravel() if n_states else []])
+    lower = np.concatenate([low, np.full(len(starts) * n_states, -np.inf)])
+    upper = np.concatenate([high, np.full(len(starts) * n_states, np.inf)])
+    scales = np.concatenate([scale, np.tile(state_scale, len(starts))])
+    # scipy's sparse trust region fails on one or two columns; dense is as cheap there
+    sparsity = _sparsity(data, starts, stops, len(names), n_states) if n_states else None
+    if len(z0) == 0:
+        r = residual(z0)
+        return VariantFit(variant, dict(theta), (), x0, float(r @ r), len(r), None, r)
+    result = least_squares(
+        residual, z0, bounds=(lower, upper), x_scale=scales, jac_sparsity=sparsity,
+        max_nfev=max_nfev, xtol=1e-6, ftol=1e-8,
+    )  # fmt: skip
+    values, states = unpack(result.x)
+    jac = result.jac.toarray() if hasattr(result.jac, "toarray") else np.asarray(result.jac)
+    return VariantFit(
+        variant, values, tuple(names), np.ascontiguousarray(states), float(result.fun @ result.fun),
+        len(result.fun), jac, result.fun, bool(result.status > 0),
+    )  # fmt: skip
+
+
+def _state_scales(guess: np.ndarray, n_states: int) -> np.ndarray:
+    if not n_states:
+        return np.zeros(0)
+    spread = np.nanstd(guess, axis=0)
+    level = np.nanmax(np.abs(guess), axis=0)
+    return np.where(spread > 0, spread, np.where(level > 0, level, 1.0))
+
+
+def _sparsity(data, starts, stops, n_params, n_states):
+    """Jacobian sparsity: params touch every row, a window's states its own rows."""
+    from scipy.sparse import lil_matrix
+
+    n_out = data.outputs.shape[1]
+    n_rows = int(np.sum(stops - starts)) * n_out
+    sparsity = lil_matrix((n_rows, n_params + len(starts) * n_states), dtype=np.int8)
+    sparsity[:, :n_params] = 1
+    row = 0
+    for w, (a, b) in enumerate(zip(starts, stops)):
+        height = (b - a) * n_out
+        first = n_params + w * n_states
+        sparsity[row : row + height, first : first + n_states] = 1
+        row += height
+    return sparsity
+
+
+def part_error(
+    data: UnitData, fit: VariantFit, part: str, *, fit_states: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """The fitted variant's error on a part, its window states re-fitted (params held).
+
+    Returns
+    -------
+    (error, simulated) : numpy.ndarray, shape (n_samples, n_outputs)
+        ``simulated − recorded`` and the simulation, NaN outside the part.
+    """
+    from scipy.optimize import least_squares
+
+    variant, theta = fit.variant, fit.theta
+    starts, stops = data.windows(part)
+    guess = data.guess if data.guess is not None else state_guess(data, theta, variant)
+    x0 = np.ascontiguousarray(guess[starts])
+    rows = _window_rows(starts, stops)
+    n_states = x0.shape[1]
+    if fit_states and n_states:
+
+        def residual(z):
+            states = z.reshape(len(starts), n_states)
+            y = _simulate(data, variant, theta, starts, stops, states)
+            return _normalised(data, y, rows)
+
+        result = least_squares(
+            residual, x0.ravel(), x_scale=np.tile(_state_scales(guess, n_states), len(starts)),
+            jac_sparsity=_sparsity(data, starts, stops, 0, n_states), max_nfev=30, xtol=1e-6,
+        )  # fmt: skip
+        x0 = result.x.reshape(len(starts), n_states)
+    simulated = _simulate(data, variant, theta, starts, stops, x0)
+    return simulated - data.outputs, simulated
+
+
+def require_finite_fit(fit: VariantFit, unit: str) -> None:
+    """Refuse a twin whose simulation diverges everywhere (a clear error, not a traceback)."""
+    if fit.residual is not None and np.all(np.abs(fit.residual) >= _DIVERGED):
+        raise DtwinValueError(
+            f"unit {unit}: the twin's simulation is not finite on the recording (check its "
+            "params and initial states)"
+        )
+
+
+def rms_by_output(error: np.ndarray, rows: slice, norm: np.ndarray) -> np.ndarray:
+    """Normalised RMS of ``error`` over ``rows`` per output, shape ``(n_outputs,)``."""
+    part = error[rows] / norm
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.sqrt(np.nanmean(part**2, axis=0))
+
+
+def combined(gaps: Sequence[float]) -> float:
+    """One gap for several outputs: the RMS of their normalised gaps."""
+    values = np.asarray(gaps, dtype=float)
+    return float(np.sqrt(np.mean(values**2)))
