@@ -62,8 +62,10 @@ progress = logging.getLogger("dtwin.gap.diagnose.progress")
 
 #: Candidates re-fitted with the twin's params after screening (the best by training cost).
 SCREENED = 4
+#: Most residual evaluations of a full candidate fit.
+FULL_NFEV = 40
 #: Training samples of a screening fit.
-SCREEN_SAMPLES = 2000
+SCREEN_SAMPLES = 1500
 #: Fewest and most samples of a window.
 MIN_WINDOW, MAX_WINDOW = 40, 1000
 #: Window length in time constants of the unit's slowest mode.
@@ -233,7 +235,7 @@ def _chosen_hold(data, spec, produced, settings, calibrate) -> np.ndarray:
 
 def _nominal_fit(data, settings, calibrate, cap=None) -> VariantFit:
     mode = "free" if calibrate else "band"
-    kwargs = {"cap": cap} if cap else {}
+    kwargs = {"cap": cap, "max_nfev": 20} if cap else {}
     return fit_variant(
         data, twin_variant(data), data.declared, mode=mode, band=settings.calibration_tolerance,
         **kwargs,
@@ -313,21 +315,22 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
         if variant.refits_linear:
             continue
         fit = fit_variant(
-            data, variant, work.nominal.theta, mode="fixed", cap=SCREEN_SAMPLES, max_nfev=25,
+            data, variant, work.nominal.theta, mode="fixed", cap=SCREEN_SAMPLES, max_nfev=12,
             x0=screen_x0,
         )  # fmt: skip
-        screened.append((fit.cost, variant))
+        screened.append((fit.cost, variant, {p: fit.theta[p] for p in variant.effect_params}))
     screened.sort(key=lambda item: item[0])
-    for cost, variant in screened:
+    for cost, variant, _ in screened:
         progress.debug("screened %s at %s: %.6g", variant.name, variant.at, cost)
-    chosen = [v for _, v in screened[:SCREENED]] + [v for v in variants if v.refits_linear]
+    chosen = [(v, s) for _, v, s in screened[:SCREENED]]
+    chosen += [(v, {}) for v in variants if v.refits_linear]
     mode = "free" if calibrate else "band"
     out = []
-    for variant in chosen:
+    for variant, start in chosen:
         progress.info("%s: fitting %s at %s", data.spec.name, variant.name, variant.at)
         fit = fit_variant(
             data, variant, work.nominal.theta, mode="free" if variant.refits_linear else mode,
-            band=settings.calibration_tolerance,
+            band=settings.calibration_tolerance, start=start, max_nfev=FULL_NFEV,
         )  # fmt: skip
         error, _ = part_error(data, fit, "choose")
         gap = combined(rms_by_output(error, slice(*data.parts["choose"]), data.norm))

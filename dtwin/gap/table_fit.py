@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -40,7 +40,7 @@ __all__ = [
 ]
 
 #: Most training samples a fit uses (evenly spaced windows beyond it).
-MAX_FIT_SAMPLES = 6000
+MAX_FIT_SAMPLES = 4000
 #: Largest normalised residual of a diverged simulation (keeps least squares finite).
 _DIVERGED = 1e3
 
@@ -289,6 +289,7 @@ def fit_variant(
     fit_states: bool = True,
     band: float = 0.05,
     x0: np.ndarray | None = None,
+    start: Mapping[str, float] | None = None,
 ) -> VariantFit:
     """Fit a variant's params and every training window's states on the training part.
 
@@ -313,6 +314,9 @@ def fit_variant(
         The calibration tolerance of ``mode="band"``.
     x0 : numpy.ndarray, shape (n_windows, n_states), optional
         The training windows' start states (default: :func:`state_guess` at their starts).
+    start : mapping of str to float, optional
+        Start values of the effect's params (default ``variant.starts``: a screening fit's
+        values make the full fit shorter).
 
     Returns
     -------
@@ -321,6 +325,8 @@ def fit_variant(
     from scipy.optimize import least_squares
 
     starts, stops = data.windows("train", cap)
+    if start:
+        variant = replace(variant, starts={**variant.starts, **start})
     names, p0, low, high, scale = _free_layout(data, variant, mode, nominal, band)
     theta = {**nominal, **variant.starts, **variant.fixed}
     guess = data.guess if data.guess is not None else state_guess(data, theta, variant)
@@ -350,7 +356,7 @@ def fit_variant(
         return VariantFit(variant, dict(theta), (), x0, float(r @ r), len(r), None, r)
     result = least_squares(
         residual, z0, bounds=(lower, upper), x_scale=scales, jac_sparsity=sparsity,
-        max_nfev=max_nfev, xtol=1e-6, ftol=1e-8,
+        max_nfev=max_nfev, xtol=1e-5, ftol=1e-6,
     )  # fmt: skip
     values, states = unpack(result.x)
     jac = result.jac.toarray() if hasattr(result.jac, "toarray") else np.asarray(result.jac)

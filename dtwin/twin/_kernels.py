@@ -22,7 +22,7 @@ from dtwin._jit import njit
 __all__ = ["run_program", "simulate_windows", "warm_up"]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _unary(code: int, x: float) -> float:  # pragma: no cover - compiled
     if code == 0:
         return math.sqrt(x) if x >= 0.0 else math.nan
@@ -61,13 +61,13 @@ def _power(base: float, exponent: float) -> float:  # pragma: no cover - compile
     return base**exponent
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def run_program(code, consts, start, stop, slots, stack) -> float:  # pragma: no cover - compiled
     """Run ``code[start:stop]`` (postfix, slot-bound) over ``slots``; return the top of stack."""
     sp = 0
     for pc in range(start, stop):
-        op = code[pc, 0]
-        arg = code[pc, 1]
+        op = code[2 * pc]
+        arg = code[2 * pc + 1]
         if op == 0:
             stack[sp] = consts[arg]
             sp += 1
@@ -225,7 +225,7 @@ def simulate_windows(
 
 def warm_up() -> None:
     """Compile the loops into numba's on-disk cache (``make venv`` calls this once)."""
-    code = np.array([[1, 2], [1, 1], [3, 0], [0, 0], [4, 0]], dtype=np.int64)
+    code = np.array([1, 2, 1, 1, 3, 0, 0, 0, 4, 0], dtype=np.int64)
     program = (
         code,
         np.array([0.5]),

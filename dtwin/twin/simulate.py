@@ -271,7 +271,7 @@ class UnitModel:
             depth = max(depth, expr.depth)
         targets = np.array([slots[a.target] for a in assignments], dtype=np.int64)
         program = (
-            np.concatenate(codes) if codes else np.zeros((0, 2), dtype=np.int64),
+            np.concatenate(codes).ravel() if codes else np.zeros(0, dtype=np.int64),
             np.concatenate(consts) if consts else np.zeros(0),
             np.array(bounds, dtype=np.int64),
             targets,
