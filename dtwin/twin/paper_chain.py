@@ -1,0 +1,126 @@
+"""The paper's six-module twin (paper §3, Fig. 1) as a twin table.
+
+Specification: docs/gap.md §Twin file. :func:`paper_table` builds from the sections of the
+``twin:`` shape (``actuator``, ``plant``, ``sensor_A``, ``sensor_B``, ``fusion``, ``kpi``,
+``noise``, ``dt``, ``discretisation``) the table
+
+======  =======================  ==================  ==============  ====================
+module  block                    inputs              outputs         params
+======  =======================  ==================  ==============  ====================
+M0      ``lag``                  ``u_cmd``           ``u_act``       ``tau``
+M1      ``mass_spring_damper``   ``u_act``           ``x, v``        ``m, c, k``
+M2a     ``lag``                  ``x``               ``y_A``         ``tau, bias``
+M2b     ``lag``                  ``x``               ``y_B``         ``tau, bias``
+M3      ``weighted_sum``         ``y_A, y_B``        ``y_fused``     ``w1 = alpha``,
+                                                                     ``w2 = 1 − alpha``
+M4      ``weighted_sum``         ``x, v``            ``z``           ``w1, w2``
+======  =======================  ==================  ==============  ====================
+
+with noise ``actuator → u_act``, ``plant → x``, ``sensor_A → y_A``, ``sensor_B → y_B``. The
+table's modules are continuous-time (the lags' and the plant's derivatives); the paper's
+simulator is their explicit Euler discretisation. So a ``discretisation`` of ``zoh`` or
+``foh`` is kept and ``euler`` or ``bandlimited`` (the plant's, for the ``twin:`` shape) becomes
+None. M3's two weights are separate params of the table (a re-fit does not keep them summing
+to 1). The package stays below :mod:`dtwin.params`: it takes plain sections, a mapping of
+mappings, or any object with those attributes (a :class:`dtwin.params.TwinParams`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from dtwin.twin.table import TwinTable, TwinTableError, table_from_mapping
+
+__all__ = ["PAPER_NOISE_SIGNALS", "paper_table"]
+
+#: The ``noise`` section's channels → the signal each applies to.
+PAPER_NOISE_SIGNALS: dict[str, str] = {
+    "actuator": "u_act",
+    "plant": "x",
+    "sensor_A": "y_A",
+    "sensor_B": "y_B",
+}
+
+
+def _get(owner: Any, name: str) -> Any:
+    if isinstance(owner, Mapping):
+        return owner.get(name)
+    return getattr(owner, name, None)
+
+
+def _value(sections: Any, section: str, field: str) -> Any:
+    """``sections[section][field]``; a missing section or field refused in one line."""
+    part = _get(sections, section)
+    if part is None:
+        raise TwinTableError("missing (the paper's chain needs every module's section)",
+                             key=section, token=section)  # fmt: skip
+    value = _get(part, field)
+    if value is None:
+        raise TwinTableError("missing", key=f"{section}.{field}", token=field)
+    return value
+
+
+def _paper_modules(sections: Any) -> dict[str, dict[str, Any]]:
+    def sensor(name: str, output: str) -> dict[str, Any]:
+        params = {k: _value(sections, name, k) for k in ("tau", "bias")}
+        return {"block": "lag", "inputs": ["x"], "outputs": [output], "params": params}
+
+    alpha = _value(sections, "fusion", "alpha")
+    if isinstance(alpha, bool) or not isinstance(alpha, (int, float)):
+        raise TwinTableError(f"must be a number (got {alpha!r})", key="fusion.alpha",
+                             token=str(alpha))  # fmt: skip
+    return {
+        "M0": {"block": "lag", "inputs": ["u_cmd"], "outputs": ["u_act"],
+               "params": {"tau": _value(sections, "actuator", "tau")}},
+        "M1": {"block": "mass_spring_damper", "inputs": ["u_act"], "outputs": ["x", "v"],
+               "params": {k: _value(sections, "plant", k) for k in ("m", "c", "k")}},
+        "M2a": sensor("sensor_A", "y_A"),
+        "M2b": sensor("sensor_B", "y_B"),
+        "M3": {"block": "weighted_sum", "inputs": ["y_A", "y_B"], "outputs": ["y_fused"],
+               "params": {"weights": [alpha, 1.0 - alpha]}},
+        "M4": {"block": "weighted_sum", "inputs": ["x", "v"], "outputs": ["z"],
+               "params": {"weights": [_value(sections, "kpi", k) for k in ("w1", "w2")]}},
+    }  # fmt: skip
+
+
+def paper_table(sections: Any) -> TwinTable:
+    """Return the paper's six-module twin as a :class:`~dtwin.twin.table.TwinTable`.
+
+    Parameters
+    ----------
+    sections : mapping or object
+        The ``twin:`` sections (module docstring): ``actuator.tau``, ``plant.m/c/k``,
+        ``sensor_A.tau/bias``, ``sensor_B.tau/bias``, ``fusion.alpha``, ``kpi.w1/w2``;
+        optional ``noise`` (std devs by channel), ``dt`` (s) and ``discretisation``.
+
+    Returns
+    -------
+    TwinTable
+        Modules M0, M1, M2a, M2b, M3, M4 in that order.
+
+    Raises
+    ------
+    TwinTableError
+        A missing section or field, or a value the table refuses (``tau`` ≤ 0…).
+
+    Examples
+    --------
+    >>> table = paper_table({"actuator": {"tau": 0.15}, "plant": {"m": 1.0, "c": 0.4, "k": 4.0},
+    ...     "sensor_A": {"tau": 0.08, "bias": 0.0}, "sensor_B": {"tau": 0.25, "bias": 0.01},
+    ...     "fusion": {"alpha": 0.6}, "kpi": {"w1": 1.0, "w2": 0.2}, "dt": 0.02})
+    >>> [m.name for m in table.modules], table.exogenous, table.module("M3").params
+    (['M0', 'M1', 'M2a', 'M2b', 'M3', 'M4'], ('u_cmd',), {'w1': 0.6, 'w2': 0.4})
+    """
+    noise = _get(sections, "noise")
+    mapping: dict[str, Any] = {"modules": _paper_modules(sections)}
+    if noise is not None:
+        mapping["noise"] = {
+            signal: _get(noise, channel)
+            for channel, signal in PAPER_NOISE_SIGNALS.items()
+            if _get(noise, channel) is not None
+        }
+    discretisation = _get(sections, "discretisation")
+    if discretisation in ("zoh", "foh"):
+        mapping["discretisation"] = discretisation
+    return table_from_mapping(mapping, dt=_get(sections, "dt"))
