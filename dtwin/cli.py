@@ -46,8 +46,13 @@ class CliError(Exception):
 
 
 def load_twin_file(path: str | os.PathLike):
-    """Return the parsed YAML content of a twin file (any YAML value; validated later)."""
-    import yaml
+    """Return the parsed YAML content of a twin file (any YAML value; validated later).
+
+    Read as strict, safe YAML (:func:`dtwin.gap.twin_file.load_twin_text`: no aliases,
+    duplicate keys or merge keys, at most 1 MB, ``1e-5`` a number).
+    """
+    from dtwin._validation import DtwinValueError
+    from dtwin.gap.twin_file import load_twin_text
 
     try:
         text = Path(path).read_text(encoding="utf-8")
@@ -56,10 +61,14 @@ def load_twin_file(path: str | os.PathLike):
     except (OSError, UnicodeDecodeError) as error:
         raise CliError(f"twin file could not be read: {path}: {error}") from error
     try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        first = str(error).strip().splitlines()[0]
-        raise CliError(f"twin file is not valid YAML: {path}: {first}") from error
+        return load_twin_text(text)
+    except DtwinValueError as error:
+        message = str(error)
+        if message.startswith("twin file is not valid YAML: "):
+            message = message.replace(
+                "twin file is not valid YAML: ", f"twin file is not valid YAML: {path}: ", 1
+            )
+        raise CliError(message) from error
 
 
 def _read_heldout(path: str):
@@ -107,9 +116,11 @@ def _diagnose(args: argparse.Namespace) -> int:
     from dtwin.gap.diagnose import diagnose
     from dtwin.gap.recording import read_recording
     from dtwin.gap.report import write_report
-    from dtwin.gap.twin_file import twin_discretisation, twin_from_mapping
+    from dtwin.gap.twin_file import is_table, twin_discretisation, twin_from_mapping
 
     twin_content = load_twin_file(args.twin)
+    if is_table(twin_content):
+        return _diagnose_table(args, twin_content)
     recording = read_recording(args.recording)
     heldout = None
     if args.heldout is not None:
@@ -135,6 +146,32 @@ def _diagnose(args: argparse.Namespace) -> int:
         else ""
     )
     print(f"{result.module or '-'}: {result.effect}{shrink} -> {args.out}")
+    return 0
+
+
+def _diagnose_table(args: argparse.Namespace, twin_content) -> int:
+    """``dtwin diagnose`` with a twin table (``modules:``): docs/gap.md §Twin file."""
+    from dtwin.artifacts import atomic_write_folder
+    from dtwin.gap.recording import read_recording
+    from dtwin.gap.table_diagnose import diagnose_table
+    from dtwin.gap.table_report import write_table_report
+    from dtwin.gap.twin_file import table_file
+    from dtwin.twin.table import check_recorded
+
+    if args.heldout is not None:
+        raise CliError("--heldout is not supported with a twin table yet (use --train-frac)")
+    table = table_file(twin_content)
+    recording = read_recording(args.recording, columns=(*table.signals, *table.exogenous))
+    check_recorded(table, recording.signals)
+    result = diagnose_table(
+        recording, table, calibrate=args.calibrate, train_frac=args.train_frac or 0.5
+    )
+    atomic_write_folder(args.out, lambda tmp: write_table_report(result, tmp))
+    where = " + ".join(result.modules) or "-"
+    at = f" at {result.at}" if result.at else ""
+    own = result.own_shrink_pct
+    shrink = f", removes {own:.0f} % of the gap a re-fitted twin leaves" if own is not None else ""
+    print(f"{where}: {result.effect}{at}{shrink} -> {args.out}")
     return 0
 
 

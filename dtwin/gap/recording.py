@@ -16,7 +16,7 @@ from __future__ import annotations
 import io
 import logging
 import os
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,6 +34,7 @@ __all__ = [
     "Recording",
     "read_recording",
     "recording_from_frame",
+    "recording_with_columns",
     "DERIVED_INPUTS",
     "diagnosable_modules",
 ]
@@ -305,13 +306,47 @@ def recording_from_frame(frame: pd.DataFrame) -> Recording:
     return Recording(t=t, dt=dt, signals=signals, ignored=ignored, time_resolution=resolution)
 
 
-def read_recording(source: str | os.PathLike | io.TextIOBase) -> Recording:
+def recording_with_columns(frame: pd.DataFrame, wanted: Collection[str]) -> Recording:
+    """Return a validated :class:`Recording` of the columns ``wanted`` (a twin table's signals).
+
+    As :func:`recording_from_frame`, but the signals are the table's, not the paper chain's:
+    every column of ``wanted`` present becomes a signal (checked for non-numeric, non-finite
+    and outlying values), the others are ignored.
+    """
+    frame = frame.rename(columns=lambda name: str(name).strip())
+    duplicated = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
+    if duplicated:
+        raise DtwinValueError(f"recording has duplicate column(s): {', '.join(duplicated)}")
+    if "t" not in frame.columns:
+        raise DtwinValueError(
+            f"recording is missing column 't' (got columns: {', '.join(frame.columns) or 'none'})"
+        )
+    if len(frame) < MIN_SAMPLES:
+        raise DtwinValueError(
+            f"recording must have at least {MIN_SAMPLES} samples (got {len(frame)})"
+        )
+    present = [name for name in frame.columns if name in set(wanted)]
+    ignored = tuple(c for c in frame.columns if c != "t" and c not in set(wanted))
+    signals = {name: _numeric_column(name, frame[name]) for name in present}
+    for name, values in signals.items():
+        _check_outliers(name, values)
+    resolution = _time_resolution(frame["t"])
+    t = _numeric_column("t", frame["t"])
+    dt = _check_time(t, resolution)
+    return Recording(t=t, dt=dt, signals=signals, ignored=ignored, time_resolution=resolution)
+
+
+def read_recording(
+    source: str | os.PathLike | io.TextIOBase, columns: Collection[str] | None = None
+) -> Recording:
     """Read ``RECORDING.csv`` and return a validated :class:`Recording`.
 
     Parameters
     ----------
     source : path or text stream
         A CSV file with a header row (see the module docstring).
+    columns : collection of str, optional
+        A twin table's signals (:func:`recording_with_columns`); default the paper chain's.
 
     Raises
     ------
@@ -326,6 +361,8 @@ def read_recording(source: str | os.PathLike | io.TextIOBase) -> Recording:
         first_line = str(error).strip().splitlines()[0] if str(error).strip() else "empty file"
         raise DtwinValueError(f"recording could not be parsed as CSV: {first_line}") from error
     frame = frame.replace({"": np.nan})
+    if columns is not None:
+        return recording_with_columns(frame, columns)
     return recording_from_frame(frame)
 
 

@@ -397,6 +397,16 @@ def _score_gap(data: UnitData, fit: VariantFit) -> float:
     return combined(rms_by_output(error, slice(*data.parts["score"]), data.norm))
 
 
+def _series(data: UnitData, nominal: VariantFit, fit: VariantFit | None) -> dict[str, np.ndarray]:
+    """Scoring-part series of the source's first output: recorded, twin, with the effect."""
+    rows = slice(*data.parts["score"])
+    out = {"t": np.arange(data.n_samples)[rows] * data.dt, "recorded": data.outputs[rows, 0]}
+    out["twin"] = part_error(data, nominal, "score")[1][rows, 0]
+    if fit is not None:
+        out["with_effect"] = part_error(data, fit, "score")[1][rows, 0]
+    return out
+
+
 def _free_run(data: UnitData, fit: VariantFit) -> float | None:
     """RMS error (output units) of a free run over the scoring part from its fitted start."""
     start, stop = data.parts["score"]
@@ -425,14 +435,34 @@ def _reported(fit: VariantFit, nominal: Mapping[str, float]) -> tuple[dict, str 
         }
         at = max(relative, key=relative.get) if relative else None
         return changes, at
-    params = {}
-    for name in variant.effect_params:
-        label = name[3:].rsplit("_", 1)[0] if name[3:].rsplit("_", 1)[-1].isdigit() else name[3:]
-        params[label] = float(fit.theta[name])
+    params = {_label(name): float(fit.theta[name]) for name in variant.effect_params}
     if variant.report is not None:
         label, factor, mass, sigma = variant.report
         params = {label: float(factor(fit.theta[mass], sigma) * fit.theta["_e_theta"])}
     return params, variant.at
+
+
+def _label(name: str) -> str:
+    """An effect param's reported name: ``_e_U_0`` → ``U``, ``_e_limit_upper`` → ``limit_upper``."""
+    if not name.startswith("_e_"):
+        return name
+    stem = name[3:]
+    head, _, tail = stem.rpartition("_")
+    return head if tail.isdigit() and head else stem
+
+
+def _reported_intervals(fit: VariantFit, intervals: Mapping[str, tuple[float, float]]) -> dict:
+    """Intervals under the reported names (a named effect's in its force units)."""
+    out = {}
+    report = fit.variant.report
+    for name, (low, high) in intervals.items():
+        if report is not None and name == "_e_theta":
+            label, factor, mass, sigma = report
+            scale = factor(fit.theta[mass], sigma)
+            out[label] = (min(low * scale, high * scale), max(low * scale, high * scale))
+        else:
+            out[_label(name)] = (low, high)
+    return out
 
 
 def _intervals(fit: VariantFit) -> tuple[dict[str, tuple[float, float]], tuple[str, ...]]:
@@ -575,6 +605,7 @@ def _answer(source: _UnitWork, candidates, chosen, base, notes, also) -> TableDi
         free_run_rms_before=_free_run(data, nominal), gap_before=before, gap_refit=refit_gap, **base,
     )  # fmt: skip
     if chosen is None:
+        common["series"] = _series(data, nominal, None)
         return TableDiagnosis(
             effect="unexplained", at=None, params={}, param_intervals={}, fixed_combinations=(),
             confidence=None, bic_weight=None, gap_after=None, raw_shrink_pct=None,
@@ -583,13 +614,14 @@ def _answer(source: _UnitWork, candidates, chosen, base, notes, also) -> TableDi
         )  # fmt: skip
     fit = chosen.fit
     after = _score_gap(data, fit)
+    common["series"] = _series(data, nominal, fit)
     reference = before if fit.variant.refits_linear else refit_gap
     floor = source.floor
     params, at = _reported(fit, data.declared)
     intervals, fixed = _intervals(fit)
     return TableDiagnosis(
         effect=fit.variant.name, at=at, params=params,
-        param_intervals={k: v for k, v in intervals.items()}, fixed_combinations=fixed,
+        param_intervals=_reported_intervals(fit, intervals), fixed_combinations=fixed,
         confidence=calibrated_confidence(chosen.weight), bic_weight=chosen.weight, gap_after=after,
         raw_shrink_pct=shrink_pct(before, after),
         own_shrink_pct=shrink_pct(_excess(reference, floor), _excess(after, floor)),
