@@ -286,14 +286,16 @@ def _scalar(key: str, value, rule: str) -> float:
         shown = f"{type(value).__name__} {value!r}"
         if isinstance(value, bool):
             shown = str(value).lower()
-        raise BlockError(key, f"must be a number (got {shown})", str(value))
+        raise BlockError(
+            key, f"must be a number (got {shown})", shown if isinstance(value, bool) else str(value)
+        )
     number = float(value)
     if not np.isfinite(number):
-        raise BlockError(key, f"must be finite (got {number})", str(value))
+        raise BlockError(key, f"must be finite (got {value!r})", str(value))
     if rule == "positive" and number <= 0:
-        raise BlockError(key, f"must be > 0 (got {number:g})", str(value))
+        raise BlockError(key, f"must be > 0 (got {value!r})", str(value))
     if rule == "nonnegative" and number < 0:
-        raise BlockError(key, f"must be >= 0 (got {number:g})", str(value))
+        raise BlockError(key, f"must be >= 0 (got {value!r})", str(value))
     return number
 
 
@@ -402,7 +404,7 @@ def lower_block(
     if not isinstance(params, Mapping):
         raise BlockError(
             "params", f"must be a mapping of param names to numbers (got "
-            f"{type(params).__name__})", str(params)[:40],
+            f"{type(params).__name__} {params!r:.40})", str(params)[:40],
         )  # fmt: skip
     _check_counts(block, inputs, outputs)
     lowered = block.lower(tuple(inputs), tuple(outputs), _read_params(block, params))

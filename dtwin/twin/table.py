@@ -232,6 +232,10 @@ class TwinTable:
         return tuple(dict.fromkeys(s for m in self.modules for s in m.inputs if s not in produced))
 
 
+def _token(value: Any) -> str:
+    return str(value).lower() if isinstance(value, bool) else str(value)
+
+
 def _shown(value: Any) -> str:
     if isinstance(value, bool):
         return str(value).lower()
@@ -243,7 +247,7 @@ def _name(value: Any, *, module: str | None, key: str) -> str:
     if not isinstance(value, str):
         raise TwinTableError(
             f"{_shown(value)} is not a name (got {type(value).__name__})", module=module,
-            key=key, token=str(value),
+            key=key, token=_token(value),
         )  # fmt: skip
     if not NAME_PATTERN.match(value):
         raise TwinTableError(
@@ -278,12 +282,12 @@ def _number(value: Any, *, module: str | None, key: str, positive: bool = False)
     is_number = isinstance(value, (int, float, np.integer, np.floating))
     if isinstance(value, bool) or not is_number:
         raise TwinTableError(f"must be a number (got {_shown(value)})", module=module, key=key,
-                             token=str(value))  # fmt: skip
+                             token=_token(value))  # fmt: skip
     number = float(value)
     if not np.isfinite(number) or (positive and number <= 0):
         rule = "a finite number > 0" if positive else "finite"
-        raise TwinTableError(f"must be {rule} (got {number:g})", module=module, key=key,
-                             token=str(value))  # fmt: skip
+        raise TwinTableError(f"must be {rule} (got {_shown(value)})", module=module, key=key,
+                             token=_token(value))  # fmt: skip
     return number
 
 
@@ -307,7 +311,7 @@ def _texts(module: str, key: str, raw: Any) -> dict[str, str]:
         if not isinstance(text, str) and not is_number:
             raise TwinTableError(
                 f"must be an expression text (got {_shown(text)})", module=module,
-                key=f"{key}.{name}", token=str(text),
+                key=f"{key}.{name}", token=_token(text),
             )  # fmt: skip
         out[name] = repr(float(text)) if is_number else text
     return out
@@ -389,7 +393,7 @@ def _block_parts(module: str, entry: Mapping, inputs, outputs) -> Lowered:
         )  # fmt: skip
     if not isinstance(block, str):
         raise TwinTableError(f"must be a block name (got {_shown(block)})", module=module,
-                             key="block", token=str(block))  # fmt: skip
+                             key="block", token=_token(block))  # fmt: skip
     try:
         return lower_block(block, inputs, outputs, entry.get("params"))
     except BlockError as error:
@@ -543,6 +547,10 @@ def _check_algebraic_loops(modules: list[ModuleSpec]) -> None:
     if cycle is None:
         return
     signals, through = cycle
+    order = [m.name for m in modules]
+    first = min(range(len(through)), key=lambda k: order.index(through[k]))
+    signals = [*signals[first:-1], *signals[:first], signals[first]]
+    through = [*through[first:], *through[:first]]
     names = ", ".join(f"'{m}'" for m in dict.fromkeys(through))
     raise TwinTableError(
         f"algebraic loop through module(s) {names} (signals {' -> '.join(signals)}): a loop "
@@ -618,7 +626,7 @@ def _discretisation(value: Any) -> str | None:
         return value
     raise TwinTableError(
         f"must be zoh or foh (got {_shown(value)}; euler and bandlimited are the paper "
-        "plant's, for the twin: shape)", key="discretisation", token=str(value),
+        "plant's, for the twin: shape)", key="discretisation", token=_token(value),
     )  # fmt: skip
 
 
