@@ -149,7 +149,7 @@ def _unit_arrays(spec: UnitSpec, recording: Recording, train: slice):
     )
     outputs = np.column_stack([recording.signals[s] for s in spec.outputs])
     norm = outputs[train].std(axis=0)
-    for signal, value in zip(spec.outputs, norm):
+    for signal, value in zip(spec.outputs, norm, strict=False):
         if not value > 0:
             raise DtwinValueError(
                 f"recording column '{signal}' must vary over the training part (a constant output "
@@ -177,10 +177,10 @@ def _dynamics(model: UnitModel, theta, guess, inputs, dt, train) -> tuple[int, i
 
 
 def _time_scales(model, values, states, inputs) -> tuple[float, float]:
-    """The slowest time constant (s) and the fastest rate (1/s) of the linearised unit."""
+    """Return the slowest time constant (s) and the fastest rate (1/s) of the linearised unit."""
     n = len(model.spec.states)
     rates = []
-    for state, u in zip(states, inputs):
+    for state, u in zip(states, inputs, strict=False):
         jac = np.empty((n, n))
         scale = np.maximum(np.abs(state), 1e-6)
         for j in range(n):
@@ -223,7 +223,7 @@ def _prepare_unit(spec, recording, table, parts, settings, calibrate) -> UnitDat
 
 
 def _chosen_hold(data, spec, produced, settings, calibrate) -> np.ndarray:
-    """The exogenous inputs' hold (zoh or foh) with the smaller training cost of the twin."""
+    """Return the exogenous inputs' hold (zoh or foh) with the smaller training cost of the twin."""
     best = None
     for held in (False, True):
         data.linear = np.array([s in produced or held for s in spec.inputs], dtype=bool)
@@ -280,7 +280,7 @@ class _UnitWork:
 
     @property
     def floor(self) -> float:
-        return combined([f.rms / n for f, n in zip(self.floors, self.data.norm)])
+        return combined([f.rms / n for f, n in zip(self.floors, self.data.norm, strict=False)])
 
 
 def _analyse_unit(spec, recording, table, parts, settings, calibrate) -> _UnitWork:
@@ -340,7 +340,7 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
 
 
 def _screening_states(work: _UnitWork) -> np.ndarray:
-    """The twin's fitted states at the screening windows' starts (params as fitted)."""
+    """Return the twin's fitted states at the screening windows' starts (params as fitted)."""
     data = work.data
     fit = fit_variant(
         data, work.nominal.variant, work.nominal.theta, mode="fixed", cap=SCREEN_SAMPLES,
@@ -354,12 +354,12 @@ def _weights(candidates: list[_Candidate], n_eff: float) -> None:
     bic = np.array([n_eff * math.log(max(c.gap_choose, 1e-300) ** 2) + c.n_params * math.log(n_eff)
                     for c in candidates])  # fmt: skip
     w = np.exp(-0.5 * (bic - bic.min()))
-    for c, value in zip(candidates, w / w.sum()):
+    for c, value in zip(candidates, w / w.sum(), strict=False):
         c.weight = float(value)
 
 
 def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, list[str]]:
-    """The candidate that explains the choosing part's gap, or None (``unexplained``)."""
+    """Return the candidate that explains the choosing part's gap, or None (``unexplained``)."""
     from scipy.stats import chi2
 
     notes = []
@@ -387,7 +387,8 @@ def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, l
         if statistic >= chi2.isf(settings.significance, max(candidate.n_params, 1)):
             return candidate, notes
         notes.append(
-            f"{variant.name} at {variant.at}: no better than the re-fitted twin (T = {statistic:.1f})"
+            f"{variant.name} at {variant.at}: no better than the re-fitted twin "
+            f"(T = {statistic:.1f})"
         )
     return None, notes
 
@@ -422,7 +423,7 @@ def _free_run(data: UnitData, fit: VariantFit) -> float | None:
 
 
 def _reported(fit: VariantFit, nominal: Mapping[str, float]) -> tuple[dict, str | None]:
-    """The answer's params in report units, and ``at`` for a re-fit (the param furthest off)."""
+    """Return the answer's params in report units and ``at`` for a re-fit (furthest param)."""
     variant = fit.variant
     if variant.refits_linear:
         changes = {
@@ -443,7 +444,7 @@ def _reported(fit: VariantFit, nominal: Mapping[str, float]) -> tuple[dict, str 
 
 
 def _label(name: str) -> str:
-    """An effect param's reported name: ``_e_U_0`` → ``U``, ``_e_limit_upper`` → ``limit_upper``."""
+    """Return an effect param's reported name (``_e_U_0`` → ``U``, ``_e_limit_upper`` kept)."""
     if not name.startswith("_e_"):
         return name
     stem = name[3:]
@@ -466,14 +467,17 @@ def _reported_intervals(fit: VariantFit, intervals: Mapping[str, tuple[float, fl
 
 
 def _intervals(fit: VariantFit) -> tuple[dict[str, tuple[float, float]], tuple[str, ...]]:
-    """95 % intervals of the free params (Gauss–Newton covariance, window states profiled)
-    and the combinations of params the data cannot separate (relative singular value < 1e-6)."""
+    """Return 95 % intervals of the free params and the combinations the data cannot separate.
+
+    The covariance is Gauss–Newton's (window states profiled); a combination is inseparable
+    when its scaled singular value is below 1e-3 of the largest.
+    """
     if fit.jacobian is None or not fit.free:
         return {}, ()
     jac = fit.jacobian
     n, p = jac.shape
     sigma2 = fit.cost / max(n - p, 1)
-    u, s, vt = np.linalg.svd(jac, full_matrices=False)
+    _u, s, vt = np.linalg.svd(jac, full_matrices=False)
     keep = s > 1e-9 * s[0]
     cov = (vt[keep].T / s[keep] ** 2) @ vt[keep] * sigma2
     k = len(fit.free)
@@ -486,12 +490,12 @@ def _intervals(fit: VariantFit) -> tuple[dict[str, tuple[float, float]], tuple[s
     scale[scale == 0] = 1.0
     _, s_p, vt_p = np.linalg.svd(params / scale, full_matrices=False)
     fixed = []
-    for value, row in zip(s_p, vt_p):
+    for value, row in zip(s_p, vt_p, strict=False):
         if value < 1e-3 * s_p[0]:
             weights = row / scale
             terms = [
                 f"{w:+.3g}*{name}"
-                for w, name in zip(weights, fit.free)
+                for w, name in zip(weights, fit.free, strict=False)
                 if abs(w) > 1e-3 * np.abs(weights).max()
             ]
             fixed.append(" ".join(terms) + " (not separable)")
@@ -559,7 +563,7 @@ def _diagnose_table(recording, table, calibrate, train_frac, settings) -> TableD
     candidates = _fit_candidates(source, table, calibrate, settings)
     chosen, choose_notes = _choose(source, candidates, settings)
     notes.extend(choose_notes)
-    return _answer(source, candidates, chosen, base, notes, also)
+    return _answer(source, candidates, chosen, base, notes, also, table)
 
 
 def _unit_report(work: _UnitWork) -> UnitReport:
@@ -594,15 +598,35 @@ def _candidate_rows(candidates: list[_Candidate], nominal) -> list[dict[str, Any
     return rows
 
 
-def _answer(source: _UnitWork, candidates, chosen, base, notes, also) -> TableDiagnosis:
+def _module_of(data: UnitData, fit: VariantFit | None, table) -> str:
+    """Return the module an answer names: where the effect attaches, else the unit's first module.
+
+    A state or a param belongs to its module; an input signal to the unit's module reading it,
+    an output signal to the module producing it.
+    """
+    at = fit.variant.at if fit is not None else None
+    if fit is not None and fit.variant.refits_linear:
+        at = _reported(fit, data.declared)[1]
+    if at is None:
+        return data.spec.modules[0]
+    if "." in at:
+        return at.split(".", 1)[0]
+    for module in table.modules:
+        if module.name in data.spec.modules and (at in module.outputs or at in module.inputs):
+            return module.name
+    return data.spec.modules[0]
+
+
+def _answer(source: _UnitWork, candidates, chosen, base, notes, also, table) -> TableDiagnosis:
     data = source.data
     nominal = source.nominal
     refit = next((c.fit for c in candidates if c.fit.variant.refits_linear), nominal)
     before, refit_gap = _score_gap(data, nominal), _score_gap(data, refit)
     common = dict(
-        module=data.spec.modules[0], modules=data.spec.modules,
-        candidates=_candidate_rows(candidates, data.declared), also_needed=also,
-        free_run_rms_before=_free_run(data, nominal), gap_before=before, gap_refit=refit_gap, **base,
+        module=_module_of(data, chosen.fit if chosen else None, table),
+        modules=data.spec.modules, candidates=_candidate_rows(candidates, data.declared),
+        also_needed=also, free_run_rms_before=_free_run(data, nominal), gap_before=before,
+        gap_refit=refit_gap, **base,
     )  # fmt: skip
     if chosen is None:
         common["series"] = _series(data, nominal, None)

@@ -51,7 +51,7 @@ DELAY_GRID = (0.5, 1, 2, 4, 6, 9, 13, 18, 25)
 
 
 def twin_variant(data: UnitData) -> Variant:
-    """The unit's twin as a :class:`Variant` (no effect)."""
+    """Return the unit's twin as a :class:`Variant` (no effect)."""
     return Variant("linear", None, data.model)
 
 
@@ -137,14 +137,15 @@ def _output_variants(data: UnitData) -> list[Variant]:
             return out
 
         wide = (float(np.min(y)) - spread, float(np.max(y)) + spread)
+        drifts = (b0, b1, b2)
         model = data.model
         out += [
             Variant("output_saturation", signal, model, (low, high),
                     {low: float(np.min(y)), high: float(np.max(y))},
                     {low: (wide[0], mid), high: (mid, wide[1])}, {low: spread, high: spread},
                     output_map=clip),
-            Variant("output_bias_drift", signal, model, (b0, b1, b2), dict.fromkeys((b0, b1, b2), 0.0),
-                    dict.fromkeys((b0, b1, b2), (-np.inf, np.inf)), dict.fromkeys((b0, b1, b2), spread),
+            Variant("output_bias_drift", signal, model, drifts, dict.fromkeys(drifts, 0.0),
+                    dict.fromkeys(drifts, (-np.inf, np.inf)), dict.fromkeys(drifts, spread),
                     output_map=drift),
             Variant("output_scale_error", signal, model, (gain,), {gain: 1.0}, {gain: (0.0, 10.0)},
                     {gain: 0.1}, output_map=scale, linear_form=True),
@@ -180,7 +181,7 @@ def _local_name(assignment: Assignment, slot: str) -> str | None:
 
 
 def _state_variants(data: UnitData, guess: np.ndarray, blocks: dict[str, str | None]):
-    """The missing-term and limit candidates of every state of the unit."""
+    """Return the missing-term and limit candidates of every state of the unit."""
     spec, model = data.spec, data.model
     train = slice(*data.parts["train"])
     out = []

@@ -106,7 +106,7 @@ class UnitData:
         return len(self.outputs)
 
     def windows(self, part: str, cap: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """The windows of a part; with ``cap``, at most ``cap`` samples (evenly spaced windows)."""
+        """Return the windows of a part; with ``cap``, at most ``cap`` samples (spaced evenly)."""
         starts, stops = windows_of(*self.parts[part], self.window)
         if cap is not None and int(np.sum(stops - starts)) > cap:
             keep = max(1, cap // self.window)
@@ -188,7 +188,7 @@ class VariantFit:
 
 
 def _simulate(data, variant, theta, starts, stops, x0):
-    """The variant's mapped outputs over the windows, shape ``(n_samples, n_outputs)``."""
+    """Return the variant's mapped outputs over the windows, shape ``(n_samples, n_outputs)``."""
     inputs = variant.input_map(data.inputs, theta, data)
     values = [theta[name] for name in variant.model.param_names]
     limits = variant.limits(theta) if variant.limits is not None else None
@@ -208,7 +208,7 @@ def _simulate(data, variant, theta, starts, stops, x0):
 
 
 def _window_rows(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
-    return np.concatenate([np.arange(a, b) for a, b in zip(starts, stops)])
+    return np.concatenate([np.arange(a, b) for a, b in zip(starts, stops, strict=False)])
 
 
 def _normalised(data, y, rows):
@@ -233,7 +233,7 @@ def state_guess(data: UnitData, theta: Mapping[str, float], variant: Variant) ->
     recorded = {spec.states.index(s): spec.outputs.index(o) for o, s in spec.output_states.items()}
     values = [theta[name] for name in variant.model.param_names]
     inputs = variant.input_map(data.inputs, theta, data)
-    for a, b in zip(starts, stops):
+    for a, b in zip(starts, stops, strict=False):
         for j, o in recorded.items():
             state[j] = data.outputs[a, o]
         with np.errstate(all="ignore"):
@@ -248,7 +248,7 @@ def state_guess(data: UnitData, theta: Mapping[str, float], variant: Variant) ->
 
 
 def _free_layout(data, variant, mode, nominal, band):
-    """The free params, their starts, bounds and scales for a fit in ``mode``."""
+    """Return the free params, their starts, bounds and scales for a fit in ``mode``."""
     names, start, low, high, scale = [], [], [], [], []
     tolerance = {"band": band, "free": math.inf}.get(mode)
     if tolerance is not None:
@@ -337,7 +337,7 @@ def fit_variant(
 
     def unpack(z):
         values = dict(theta)
-        values.update(zip(names, z[: len(names)]))
+        values.update(zip(names, z[: len(names)], strict=False))
         states = z[len(names) :].reshape(len(starts), n_states) if n_states else x0
         return values, states
 
@@ -383,7 +383,7 @@ def _sparsity(data, starts, stops, n_params, n_states):
     sparsity = lil_matrix((n_rows, n_params + len(starts) * n_states), dtype=np.int8)
     sparsity[:, :n_params] = 1
     row = 0
-    for w, (a, b) in enumerate(zip(starts, stops)):
+    for w, (a, b) in enumerate(zip(starts, stops, strict=False)):
         height = (b - a) * n_out
         first = n_params + w * n_states
         sparsity[row : row + height, first : first + n_states] = 1
@@ -394,7 +394,7 @@ def _sparsity(data, starts, stops, n_params, n_states):
 def part_error(
     data: UnitData, fit: VariantFit, part: str, *, fit_states: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The fitted variant's error on a part, its window states re-fitted (params held).
+    """Return the fitted variant's error on a part, its window states re-fitted (params held).
 
     Returns
     -------

@@ -1,4 +1,4 @@
-"""The output files of a diagnosis against a twin table: ``diagnosis.json``, ``report.md``, ``gap.png``.
+"""The files of a diagnosis against a twin table: ``diagnosis.json``, ``report.md``, ``gap.png``.
 
 Specification: docs/gap.md §Twin file (the answer) and §Output files. The JSON holds the answer
 (``module``, ``modules``, ``effect``, ``at``, ``params`` and their 95 % intervals, the
@@ -31,7 +31,7 @@ _KEYS = (
 
 
 def table_diagnosis_to_dict(d: TableDiagnosis) -> dict[str, Any]:
-    """The JSON payload of a table diagnosis (plain types, non-finite numbers as null)."""
+    """Return the JSON payload of a table diagnosis (plain types, non-finite numbers as null)."""
     payload = {"schema": TABLE_SCHEMA, **{key: getattr(d, key) for key in _KEYS}}
     payload["param_intervals"] = {k: list(v) for k, v in d.param_intervals.items()}
     payload["shrink_pct"] = d.own_shrink_pct
@@ -65,8 +65,8 @@ def _headline(d: TableDiagnosis) -> str:
 def render_table_markdown(d: TableDiagnosis, figure_name: str | None = "gap.png") -> str:
     """``report.md``: the answer, the units, the candidates, the intervals and the notes."""
     lines = ["# Gap diagnosis", "", _headline(d), ""]
-    lines += ["## Units", "", "| unit | inputs | outputs | gap | threshold | gap? | window | hold |",
-              "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    header = "| unit | inputs | outputs | gap | threshold | gap? | window | hold |"
+    lines += ["## Units", "", header, "|---|---|---|---|---|---|---|---|"]
     for name, u in d.units.items():
         lines.append(
             f"| {name} | {', '.join(u.inputs)} | {', '.join(u.outputs)} | {u.gap_choose:.4g} | "

@@ -181,7 +181,7 @@ def _rk4_sample(program, slots, stack, state, layout, u, k, dt, t0, substeps, lo
 @njit(cache=True)
 def _record(program, slots, stack, t, state, layout, u, k, out_slots, y):  # pragma: no cover
     code, consts, bounds, targets = program
-    state_slots, deriv_slots, in_slots, linear = layout
+    state_slots, _deriv_slots, in_slots, linear = layout
     _load(slots, t, state, state_slots, u, k, 0.0, linear, in_slots)
     _evaluate(code, consts, bounds, targets, slots, stack)
     for o in range(out_slots.shape[0]):

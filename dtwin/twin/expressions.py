@@ -184,10 +184,9 @@ class _Lowering:
         """Emit ``node``'s program; return the stack depth it needs."""
         self.nodes += 1
         if self.nodes > MAX_NODES or depth > MAX_DEPTH:
-            limit = "nodes" if self.nodes > MAX_NODES else "levels of nesting"
+            limit = f"{MAX_NODES} nodes" if self.nodes > MAX_NODES else f"{MAX_DEPTH} levels"
             raise ExpressionError(
-                f"expression is too large (more than {MAX_NODES if limit == 'nodes' else MAX_DEPTH} "
-                f"{limit})",
+                f"expression is too large (more than {limit})",
                 token=_token(node),
             )
         if isinstance(node, ast.Constant):
@@ -267,7 +266,7 @@ class _Lowering:
 
 
 def _integer_exponent(node: ast.BinOp) -> int | None:
-    """The exponent of ``x**n`` for a literal n in 2..4, lowered to multiplication; else None."""
+    """Return n of ``x**n`` for a literal n in 2..4 (lowered to multiplication), else None."""
     if not isinstance(node.op, ast.Pow) or not isinstance(node.right, ast.Constant):
         return None
     value = node.right.value
@@ -277,7 +276,7 @@ def _integer_exponent(node: ast.BinOp) -> int | None:
 
 
 def _token(node: ast.AST) -> str:
-    """The source text of a node, shortened, or its kind."""
+    """Return the source text of a node, shortened, or its kind."""
     try:
         text = ast.unparse(node)
     except (ValueError, RecursionError):  # pragma: no cover - defensive
@@ -348,4 +347,6 @@ def _parse_tree(text: str) -> ast.Expression:
         token = (error.text or text).strip()[max((error.offset or 1) - 1, 0) :][:10]
         raise ExpressionError(f"syntax error{where} ('{token}')", token) from None
     except (ValueError, RecursionError, MemoryError) as error:
-        raise ExpressionError(f"expression cannot be parsed ({type(error).__name__})", text[:20])
+        raise ExpressionError(
+            f"expression cannot be parsed ({type(error).__name__})", text[:20]
+        ) from None

@@ -108,7 +108,7 @@ class UnitSpec:
         return "+".join(self.modules)
 
     def module_of(self, qualified: str) -> str:
-        """The module of a qualified state or param name."""
+        """Return the module of a qualified state or param name."""
         return qualified.split(".", 1)[0]
 
 
@@ -117,7 +117,7 @@ def _derivative_slot(state: str) -> str:
 
 
 def _module_assignments(module, produced_in_unit: set[str]) -> list[Assignment]:
-    """The algebraic and derivative assignments of one module (qualified names)."""
+    """Return the algebraic and derivative assignments of one module (qualified names)."""
     local = {p: f"{module.name}.{p}" for p in module.params}
     local.update({s: f"{module.name}.{s}" for s in module.states})
     local.update({s: s for s in module.inputs})
@@ -288,7 +288,7 @@ class UnitModel:
     def variant(
         self, replaced: Mapping[str, str] = {}, added: Sequence[Assignment] = (), extra=()
     ) -> UnitModel:
-        """A copy with some assignments' texts replaced, others added and extra params.
+        """Return a copy with some assignments' texts replaced, others added and extra params.
 
         ``replaced`` maps an assignment's target to its new text (which may read the extra
         params by their own names); ``added`` assignments are placed right after the one
@@ -351,7 +351,7 @@ class UnitModel:
             Time of sample 0, s.
         """
         base = np.zeros(len(self.slots))
-        for name, value in zip(self.param_names, theta):
+        for name, value in zip(self.param_names, theta, strict=False):
             base[self.slots[name]] = value
         layout = self.layout
         if linear is not None:
@@ -377,11 +377,11 @@ class UnitModel:
         )
 
     def derivatives(self, state: np.ndarray, inputs: np.ndarray, theta, t: float = 0.0):
-        """The state derivatives at one point, shape ``(n_states,)`` (for Jacobians)."""
+        """Return the state derivatives at one point, shape ``(n_states,)`` (for Jacobians)."""
         values = {"t": t}
-        values.update(zip(self.spec.inputs, inputs))
-        values.update(zip(self.spec.states, state))
-        values.update(zip(self.param_names, theta))
+        values.update(zip(self.spec.inputs, inputs, strict=False))
+        values.update(zip(self.spec.states, state, strict=False))
+        values.update(zip(self.param_names, theta, strict=False))
         out = {}
         for a in self.assignments:
             expr = parse_expression(a.text, a.symbols)
