@@ -1,0 +1,123 @@
+"""The gap diagnoser on a user's twin table (docs/gap.md §Twin file): where, which, how far."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.integrate import solve_ivp
+
+from dtwin.cli import main
+from dtwin.gap.recording import recording_with_columns
+from dtwin.gap.table_diagnose import diagnose_table
+from dtwin.twin.table import table_from_mapping
+
+DT = 0.1
+TANK = {
+    "dt": DT,
+    "modules": {
+        "valve": {
+            "block": "lag",
+            "inputs": ["u"],
+            "outputs": ["q"],
+            "params": {"tau": 0.5, "gain": 1.0},
+        },
+        "tank": {
+            "inputs": ["q"],
+            "outputs": ["level"],
+            "states": ["h"],
+            "params": {"a": 0.8},
+            "derivatives": {"h": "q - a*sqrt(max(h, 0))"},
+            "equations": {"level": "h"},
+        },
+    },
+    "noise": {"level": 0.01, "q": 0.005},
+}
+
+
+def _asset(n: int, seed: int, *, level_limit=None, overflow=None) -> pd.DataFrame:
+    """A valve and a tank with Torricelli outflow, integrated finely; random input steps."""
+    rng = np.random.default_rng(seed)
+    u = np.repeat(rng.uniform(0.3, 1.6, n // 40 + 1), 40)[:n]
+
+    def rhs(t, s):
+        q, h = s
+        k = min(int(t / DT), n - 1)
+        dh = q - 0.8 * np.sqrt(max(h, 0.0))
+        if overflow is not None and h >= overflow and dh > 0:
+            dh = 0.0
+        return [(u[k] - q) / 0.5, dh]
+
+    times = np.arange(n) * DT
+    sol = solve_ivp(rhs, (0, times[-1]), [0.5, 1.0], t_eval=times, max_step=DT / 4, rtol=1e-9)
+    q, h = sol.y
+    level = h + 0.01 * rng.standard_normal(n)
+    if level_limit is not None:
+        level = np.minimum(level, level_limit)
+    return pd.DataFrame(
+        {"t": times, "u": u, "q": q + 0.005 * rng.standard_normal(n), "level": level}
+    )
+
+
+def _diagnose(frame: pd.DataFrame, **kwargs):
+    table = table_from_mapping(TANK)
+    recording = recording_with_columns(frame, (*table.signals, *table.exogenous))
+    return diagnose_table(recording, table, **kwargs)
+
+
+def test_a_clean_recording_of_a_two_module_twin_reads_none():
+    result = _diagnose(_asset(1500, 1))
+    assert result.effect == "none"
+    assert set(result.units) == {"valve", "tank"}
+    assert not any(unit.flagged for unit in result.units.values())
+
+
+def test_a_level_sensor_that_clips_is_an_output_saturation_of_the_tank():
+    frame = _asset(1500, 2)
+    limit = float(np.quantile(frame["level"], 0.85))
+    frame["level"] = np.minimum(frame["level"], limit)
+    result = _diagnose(frame)
+    assert (result.module, result.effect, result.at) == ("tank", "output_saturation", "level")
+    assert result.params["high"] == pytest.approx(limit, abs=0.02)
+    low, high = result.param_intervals["high"]
+    assert low <= result.params["high"] <= high
+
+
+@pytest.mark.slow
+def test_an_overflowing_tank_is_a_state_limit_when_the_flow_is_not_recorded():
+    frame = _asset(2000, 3, overflow=2.2)
+    frame = frame.drop(columns=["q"])
+    result = _diagnose(frame)
+    assert result.modules == ("valve", "tank")
+    assert (result.effect, result.at) == ("state_limit", "tank.h")
+    assert result.params["limit_upper"] == pytest.approx(2.2, abs=0.1)
+
+
+def test_the_cli_writes_the_answer_and_refuses_a_bad_table(tmp_path, capsys):
+    frame = _asset(1500, 2)
+    frame["level"] = np.minimum(frame["level"], float(np.quantile(frame["level"], 0.85)))
+    frame.to_csv(tmp_path / "rec.csv", index=False)
+    import yaml
+
+    (tmp_path / "twin.yaml").write_text(yaml.safe_dump(TANK))
+    out = tmp_path / "out"
+    assert main(["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "twin.yaml"),
+                 "--out", str(out)]) == 0  # fmt: skip
+    answer = json.loads((out / "diagnosis.json").read_text())
+    assert (answer["module"], answer["effect"], answer["at"]) == (
+        "tank",
+        "output_saturation",
+        "level",
+    )
+    assert answer["modules"] == ["tank"]
+    bad = dict(TANK, modules={**TANK["modules"], "tank": {**TANK["modules"]["tank"],
+               "derivatives": {"h": "q - a*sqrt(hh)"}}})  # fmt: skip
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump(bad))
+    bad_out = tmp_path / "bad_out"
+    assert main(["diagnose", str(tmp_path / "rec.csv"), "--twin", str(tmp_path / "bad.yaml"),
+                 "--out", str(bad_out)]) == 2  # fmt: skip
+    error = capsys.readouterr().err.strip().splitlines()
+    assert error[-1].endswith("module 'tank': derivatives.h: unknown name 'hh'")
+    assert not bad_out.exists()
