@@ -222,11 +222,27 @@ def _prepare_unit(spec, recording, table, parts, settings, calibrate) -> UnitDat
     return data
 
 
+#: Share of repeated consecutive samples above which an input is read as held (a staircase).
+HELD_SHARE = 0.5
+
+
 def _chosen_hold(data, spec, produced, settings, calibrate) -> np.ndarray:
-    """Return the exogenous inputs' hold (zoh or foh) with the smaller training cost of the twin."""
+    """Return the exogenous inputs' hold: zoh for a staircase, else the twin's better fit.
+
+    An input whose consecutive samples repeat in more than :data:`HELD_SHARE` of the training
+    part is a staircase (a controller's held output) and is held; otherwise the hold (zoh or
+    foh for all such inputs) with the smaller training cost of the twin is kept.
+    """
+    train = slice(*data.parts["train"])
+    repeats = np.mean(np.diff(data.inputs[train], axis=0) == 0, axis=0)
+    staircase = {s for s, share in zip(spec.inputs, repeats, strict=True) if share > HELD_SHARE}
+    if all(s in produced or s in staircase for s in spec.inputs):
+        return np.array([s in produced for s in spec.inputs], dtype=bool)
     best = None
     for held in (False, True):
-        data.linear = np.array([s in produced or held for s in spec.inputs], dtype=bool)
+        data.linear = np.array(
+            [s in produced or (held and s not in staircase) for s in spec.inputs], dtype=bool
+        )
         fit = _nominal_fit(data, settings, calibrate, cap=SCREEN_SAMPLES)
         if best is None or fit.cost < best[0]:
             best = (fit.cost, data.linear.copy())

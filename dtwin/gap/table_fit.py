@@ -253,12 +253,13 @@ def _free_layout(data, variant, mode, nominal, band):
     tolerance = {"band": band, "free": math.inf}.get(mode)
     if tolerance is not None:
         for name, value in nominal.items():
-            declared = abs(data.declared.get(name, value))
+            centre = data.declared.get(name, value)
+            declared = abs(centre)
             if mode == "band" and declared == 0.0:
                 continue  # a param declared 0 (no offset) stays 0 within any relative band
             typical = declared if declared > 0 else 1.0
             width = tolerance * typical
-            lo, hi = value - width, value + width
+            lo, hi = centre - width, centre + width
             if mode == "free" and data.declared.get(name, value) > 0:
                 lo = 0.0
             names.append(name)
