@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -40,6 +40,8 @@ __all__ = [
     "CORRECTED_SIGNALS",
     "exponential_moving_average",
     "rate_limit",
+    "BiasShaping",
+    "shaped_bias",
     "state_residual_means",
     "BiasCorrection",
     "correct_bias",
@@ -54,7 +56,15 @@ _SIGNAL_OF = {m.residual: m.output for m in MODULES}
 _OUTPUTS: tuple[str, ...] = tuple(m.output for m in MODULES)
 
 
-def exponential_moving_average(x: Any, alpha: float) -> np.ndarray:
+def _continued(name: str, initial: Any, x: np.ndarray) -> np.ndarray:
+    """Return ``initial`` as one row shaped like ``x[:1]`` (the output just before ``x[0]``)."""
+    row = require_finite_array(name, initial, ndim=None)
+    if row.size != int(np.prod(x.shape[1:], dtype=int)):
+        raise DtwinValueError(f"{name} must hold one value per channel (got shape {row.shape})")
+    return row.reshape(x[:1].shape)
+
+
+def exponential_moving_average(x: Any, alpha: float, initial: Any = None) -> np.ndarray:
     """Return the EMA ``out[0] = x[0]``, ``out[i] = α·x[i] + (1−α)·out[i−1]`` along time.
 
     Parameters
@@ -62,6 +72,9 @@ def exponential_moving_average(x: Any, alpha: float) -> np.ndarray:
     x : array, shape (T,) or (T, n_channels)
     alpha : float
         Smoothing weight of the newest sample, in (0, 1].
+    initial : array, shape () or (n_channels,), optional
+        The output just before ``x[0]``, to continue a series cut into pieces:
+        ``out[0] = α·x[0] + (1−α)·initial``, bit for bit the value of the uncut series.
 
     Returns
     -------
@@ -72,6 +85,8 @@ def exponential_moving_average(x: Any, alpha: float) -> np.ndarray:
     --------
     >>> exponential_moving_average([0.0, 1.0, 1.0], 0.5).tolist()
     [0.0, 0.5, 0.75]
+    >>> exponential_moving_average([1.0], 0.5, initial=0.5).tolist()
+    [0.75]
     """
     alpha = require_in_range("ema_alpha", alpha, 0.0, 1.0)
     if alpha == 0.0:
@@ -79,12 +94,13 @@ def exponential_moving_average(x: Any, alpha: float) -> np.ndarray:
     x = require_finite_array("x", x, ndim=None)
     if x.ndim not in (1, 2) or len(x) == 0:
         raise DtwinValueError(f"x must be (T,) or (T, n_channels) with T >= 1 (got {x.shape})")
-    initial = (1.0 - alpha) * x[:1]  # makes out[0] = α·x[0] + (1−α)·x[0] = x[0]
-    out, _ = lfilter([alpha], [1.0, -(1.0 - alpha)], x, axis=0, zi=initial)
+    before = x[:1] if initial is None else _continued("initial", initial, x)
+    zi = (1.0 - alpha) * before  # x[:1]: out[0] = α·x[0] + (1−α)·x[0] = x[0]
+    out, _ = lfilter([alpha], [1.0, -(1.0 - alpha)], x, axis=0, zi=zi)
     return out
 
 
-def rate_limit(x: Any, r_max: float) -> np.ndarray:
+def rate_limit(x: Any, r_max: float, initial: Any = None) -> np.ndarray:
     """Return ``x`` with every step clamped to ``±r_max``.
 
     ``out[0] = x[0]``, ``out[i] = out[i−1] + clip(x[i] − out[i−1], −r_max, r_max)``.
@@ -94,6 +110,9 @@ def rate_limit(x: Any, r_max: float) -> np.ndarray:
     x : array, shape (T,) or (T, n_channels)
     r_max : float
         Largest change per sample (signal units), ≥ 0.
+    initial : array, shape () or (n_channels,), optional
+        The output just before ``x[0]``, to continue a series cut into pieces: ``out[0]`` is
+        then ``initial`` plus the clamped step, bit for bit the value of the uncut series.
 
     Returns
     -------
@@ -103,6 +122,8 @@ def rate_limit(x: Any, r_max: float) -> np.ndarray:
     --------
     >>> rate_limit([0.0, 1.0, 1.0, -1.0], 0.4).tolist()
     [0.0, 0.4, 0.8, 0.4]
+    >>> rate_limit([1.0, 1.0], 0.4, initial=0.4).tolist()
+    [0.8, 1.0]
     """
     r_max = require_nonnegative("rate_max", r_max)
     x = require_finite_array("x", x, ndim=None)
@@ -111,17 +132,76 @@ def rate_limit(x: Any, r_max: float) -> np.ndarray:
     # One channel at a time in Python floats (the same IEEE operations as numpy's, without a
     # numpy call per sample): min(max(step, −r), r) is np.clip's value for finite steps.
     columns = x.reshape(len(x), -1)
+    before = None if initial is None else _continued("initial", initial, x).ravel().tolist()
     out = np.empty_like(columns)
     for channel in range(columns.shape[1]):
         values = columns[:, channel].tolist()
+        if before is not None:
+            values = [before[channel], *values]
         limited = [values[0]]
         previous = values[0]
         for value in values[1:]:
             step = value - previous
             previous = previous + (-r_max if step < -r_max else (r_max if step > r_max else step))
             limited.append(previous)
-        out[:, channel] = limited
+        out[:, channel] = limited if before is None else limited[1:]
     return out.reshape(x.shape)
+
+
+class BiasShaping(NamedTuple):
+    """Result of :func:`shaped_bias`: the applied bias and the EMA it was limited from.
+
+    Attributes
+    ----------
+    applied : ndarray, shape (T, n_channels)
+        ``rate_limit(EMA(κ·b̂))``, signal units.
+    smoothed : ndarray, shape (T, n_channels)
+        ``EMA(κ·b̂)`` before the rate limiter.
+    """
+
+    applied: np.ndarray
+    smoothed: np.ndarray
+
+
+def shaped_bias(
+    bias: Any,
+    *,
+    kappa: float,
+    ema_alpha: float,
+    rate_max: float,
+    initial: tuple[Any, Any] | None = None,
+) -> BiasShaping:
+    """Shape the posterior-weighted bias: gain κ, then the EMA, then the rate limiter (§4.3).
+
+    Parameters
+    ----------
+    bias : array, shape (T, n_channels)
+        The bias ``b̂(t) = Σ_k γ_t(k) μ_k`` of Eq. (25), signal units.
+    kappa, ema_alpha, rate_max : float
+        Gain, EMA weight (:func:`exponential_moving_average`) and step bound per sample
+        (:func:`rate_limit`, signal units).
+    initial : (smoothed, applied), optional
+        The last row of a previous call's ``smoothed`` and ``applied``, shape (n_channels,)
+        each: the series continues across calls bit for bit (a live twin shapes each chunk of
+        samples as it arrives).
+
+    Returns
+    -------
+    BiasShaping
+
+    Examples
+    --------
+    >>> bias = np.array([[0.0], [1.0], [1.0], [1.0]])
+    >>> whole = shaped_bias(bias, kappa=1.0, ema_alpha=0.5, rate_max=0.3)
+    >>> first = shaped_bias(bias[:2], kappa=1.0, ema_alpha=0.5, rate_max=0.3)
+    >>> rest = shaped_bias(bias[2:], kappa=1.0, ema_alpha=0.5, rate_max=0.3,
+    ...                    initial=(first.smoothed[-1], first.applied[-1]))
+    >>> whole.applied.ravel().tolist(), rest.applied.ravel().tolist()
+    ([0.0, 0.3, 0.6, 0.875], [0.6, 0.875])
+    """
+    smoothed_before, applied_before = (None, None) if initial is None else initial
+    smoothed = exponential_moving_average(kappa * bias, ema_alpha, initial=smoothed_before)
+    return BiasShaping(rate_limit(smoothed, rate_max, initial=applied_before), smoothed)
 
 
 def _require_posteriors(posteriors: Any, n_steps: int) -> np.ndarray:
@@ -315,9 +395,9 @@ def correct_bias(
             )
     bias = gamma @ means  # Eq. (25), (T, 6)
     corrected_index = [RESIDUALS.index(m.residual) for m in MODULES if m.surrogate == "arx"]
-    applied = rate_limit(
-        exponential_moving_average(kappa * bias[:, corrected_index], ema_alpha), rate_max
-    )
+    applied = shaped_bias(
+        bias[:, corrected_index], kappa=kappa, ema_alpha=ema_alpha, rate_max=rate_max
+    ).applied
     corrected_arx = {
         signal: surr[signal] - applied[:, i] for i, signal in enumerate(CORRECTED_SIGNALS)
     }

@@ -34,7 +34,7 @@ import logging
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -57,6 +57,7 @@ from dtwin._validation import (
     require_finite_array,
     require_positive,
 )
+from dtwin.state_tables import state_labels
 
 if TYPE_CHECKING:
     from hmmlearn.hmm import GaussianHMM
@@ -70,6 +71,9 @@ __all__ = [
     "zscore",
     "HmmFit",
     "fit_hmm",
+    "ScaledHmmFit",
+    "fit_zscored_hmm",
+    "hmm_summary",
     "n_hmm_params",
     "filtered_posteriors",
     "to_hmmlearn",
@@ -463,6 +467,72 @@ def fit_hmm(
         seeds = restart_seeds(seed, n_restarts)
         restarts, runs = _gaussian_starts(X, n_states, seeds, 1, options)
         return _assemble_fit(X, n_states, restarts, runs, options["engine"])
+
+
+class ScaledHmmFit(NamedTuple):
+    """Result of :func:`fit_zscored_hmm`: the z-scoring of the features and the fit on it."""
+
+    scaled: ZScored
+    fit: HmmFit
+
+
+def fit_zscored_hmm(
+    features: Any, n_states: int, *, seed: int | Sequence[int] = 0, **fit_options: Any
+) -> ScaledHmmFit:
+    """z-score ``features`` (R's ``scale``) and fit a K-state HMM to them (:func:`fit_hmm`).
+
+    The paper's regime fit (§4.2) on any residual channels: the DAG's regime stages and
+    ``dtwin regimes`` on a user's twin both fit through it.
+
+    Parameters
+    ----------
+    features : DataFrame or array, shape (T, D)
+        Raw feature columns, their own units.
+    n_states : int
+        K.
+    seed : int or sequence of int
+        Entropy of the EM starts (:func:`fit_hmm`).
+    **fit_options
+        ``n_restarts``, ``max_iter``, ``tol``, ``var_floor``, ``start``, ``engine``.
+
+    Returns
+    -------
+    ScaledHmmFit
+        ``scaled`` (:class:`ZScored`: the z-scored values, their means and sds) and ``fit``.
+    """
+    scaled = zscore(features)
+    return ScaledHmmFit(scaled, fit_hmm(scaled.values, n_states, seed=seed, **fit_options))
+
+
+def hmm_summary(fit: HmmFit, scaled: ZScored) -> dict[str, Any]:
+    """Return the fitted model as plain data (for JSON): parameters, likelihood, all starts.
+
+    Means and sds are in z-units of the training features; ``means_physical`` converts the
+    means back to the features' units (``mean + sd·μ``).
+    """
+    labels = state_labels(fit.n_states)
+    restarts = fit.restarts.copy()
+    return {
+        "n_states": fit.n_states,
+        "features": list(scaled.columns),
+        "n_samples": len(scaled.values),
+        "log_likelihood": fit.log_likelihood,
+        "n_params": fit.n_params,
+        "bic": fit.bic,
+        "n_iter": fit.n_iter,
+        "converged": fit.converged,
+        "best_restart": fit.best_restart,
+        "states": labels,
+        "startprob": fit.startprob,
+        "transmat": fit.transmat,
+        "means_z": fit.means,
+        "sds_z": fit.sds,
+        "means_physical": scaled.mean + scaled.sd * fit.means,
+        "feature_mean": scaled.mean,
+        "feature_sd": scaled.sd,
+        "occupancy": fit.smoothed.sum(axis=0),
+        "restarts": restarts.to_dict(orient="records"),
+    }
 
 
 def _require_usable(n_states: int, restarts: pd.DataFrame, runs: dict[int, EmRun]) -> None:

@@ -26,7 +26,7 @@ import pandas as pd
 from dtwin._validation import DtwinValueError
 from dtwin.config_sections import BicSettings, EmSettings, HmmSettings
 from dtwin.fault_injection import regime_features
-from dtwin.hmm import HmmFit, ZScored, bic_by_k, bic_row, fit_hmm, zscore
+from dtwin.hmm import HmmFit, ZScored, bic_by_k, bic_row, fit_zscored_hmm, hmm_summary, zscore
 from dtwin.state_tables import posterior_matrix, state_labels
 from dtwin.wiring import RESIDUALS
 
@@ -93,10 +93,9 @@ def fit_regimes(features: pd.DataFrame, hmm: Mapping[str, Any], use: str) -> tup
     (ZScored, HmmFit)
     """
     settings = HmmSettings.from_mapping(hmm)
-    scaled = zscore(features)
     start = time.perf_counter()
-    fit = fit_hmm(
-        scaled.values, settings.n_states, seed=hmm_seed(hmm, use), **settings.fit_options()
+    scaled, fit = fit_zscored_hmm(
+        features, settings.n_states, seed=hmm_seed(hmm, use), **settings.fit_options()
     )
     logger.info(
         "%s: K=%d, D=%d, T=%d, %d starts in %.3f s; best logL %.4f (start %d, %d EM iterations)",
@@ -130,37 +129,6 @@ def states_table(t: Any, fit: HmmFit, regime: Any = None) -> pd.DataFrame:
     for j, label in enumerate(labels):
         table[f"filtered_{label}"] = fit.filtered[:, j]
     return table
-
-
-def hmm_summary(fit: HmmFit, scaled: ZScored) -> dict[str, Any]:
-    """Return the fitted model as plain data (for JSON): parameters, likelihood, all starts.
-
-    Means and sds are in z-units of the training features; ``means_physical`` converts the
-    means back to the features' units (``mean + sd·μ``).
-    """
-    labels = state_labels(fit.n_states)
-    restarts = fit.restarts.copy()
-    return {
-        "n_states": fit.n_states,
-        "features": list(scaled.columns),
-        "n_samples": len(scaled.values),
-        "log_likelihood": fit.log_likelihood,
-        "n_params": fit.n_params,
-        "bic": fit.bic,
-        "n_iter": fit.n_iter,
-        "converged": fit.converged,
-        "best_restart": fit.best_restart,
-        "states": labels,
-        "startprob": fit.startprob,
-        "transmat": fit.transmat,
-        "means_z": fit.means,
-        "sds_z": fit.sds,
-        "means_physical": scaled.mean + scaled.sd * fit.means,
-        "feature_mean": scaled.mean,
-        "feature_sd": scaled.sd,
-        "occupancy": fit.smoothed.sum(axis=0),
-        "restarts": restarts.to_dict(orient="records"),
-    }
 
 
 def fit_nominal_regimes(
