@@ -65,7 +65,9 @@ SCREENED = 4
 #: Most residual evaluations of a full candidate fit.
 FULL_NFEV = 40
 #: Training samples of a screening fit.
-SCREEN_SAMPLES = 1500
+SCREEN_SAMPLES = 1000
+#: Samples of the scoring part drawn in ``gap.png``.
+SERIES_SAMPLES = 2000
 #: Fewest and most samples of a window.
 MIN_WINDOW, MAX_WINDOW = 40, 1000
 #: Window length in time constants of the unit's slowest mode.
@@ -326,13 +328,14 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
     blocks = {m.name: m.block for m in table.modules}
     variants = candidate_variants(data, data.guess, blocks, calibrate=calibrate)
     screened = []
+    mode = "free" if calibrate else "band"
     screen_x0 = _screening_states(work)
     for variant in variants:
         if variant.refits_linear:
             continue
         fit = fit_variant(
-            data, variant, work.nominal.theta, mode="fixed", cap=SCREEN_SAMPLES, max_nfev=12,
-            x0=screen_x0,
+            data, variant, work.nominal.theta, mode=mode, cap=SCREEN_SAMPLES, max_nfev=12,
+            x0=screen_x0, band=settings.calibration_tolerance,
         )  # fmt: skip
         screened.append((fit.cost, variant, {p: fit.theta[p] for p in variant.effect_params}))
     screened.sort(key=lambda item: item[0])
@@ -340,7 +343,6 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
         progress.debug("screened %s at %s: %.6g", variant.name, variant.at, cost)
     chosen = [(v, s) for _, v, s in screened[:SCREENED]]
     chosen += [(v, {}) for v in variants if v.refits_linear]
-    mode = "free" if calibrate else "band"
     out = []
     for variant, start in chosen:
         progress.info("%s: fitting %s at %s", data.spec.name, variant.name, variant.at)
@@ -416,11 +418,18 @@ def _score_gap(data: UnitData, fit: VariantFit) -> float:
 
 def _series(data: UnitData, nominal: VariantFit, fit: VariantFit | None) -> dict[str, np.ndarray]:
     """Scoring-part series of the source's first output: recorded, twin, with the effect."""
-    rows = slice(*data.parts["score"])
-    out = {"t": np.arange(data.n_samples)[rows] * data.dt, "recorded": data.outputs[rows, 0]}
-    out["twin"] = part_error(data, nominal, "score")[1][rows, 0]
-    if fit is not None:
-        out["with_effect"] = part_error(data, fit, "score")[1][rows, 0]
+    start, stop = data.parts["score"]
+    stop = min(stop, start + SERIES_SAMPLES)
+    rows = slice(start, stop)
+    saved = data.parts
+    data.parts = {**saved, "plot": (start, stop)}
+    try:
+        out = {"t": np.arange(data.n_samples)[rows] * data.dt, "recorded": data.outputs[rows, 0]}
+        out["twin"] = part_error(data, nominal, "plot")[1][rows, 0]
+        if fit is not None:
+            out["with_effect"] = part_error(data, fit, "plot")[1][rows, 0]
+    finally:
+        data.parts = saved
     return out
 
 

@@ -46,6 +46,8 @@ MSD_NAMES = {
     ("state_cubic", "x"): ("cubic_stiffness", "k3", lambda m, s: -m / s**3),
     ("state_abs_square", "v"): ("quadratic_damping", "c2", lambda m, s: -m / s**2),
 }
+#: Largest slope of each term's ``f(z)`` over ``|z| ≤ 4``, per unit of ``θ/σ``.
+TERM_SLOPES: dict[str, float] = {"state_cubic": 48.0, "state_abs_square": 8.0, "state_sign": 100.0}
 #: Delays tried before fitting a delay, in samples.
 DELAY_GRID = (0.5, 1, 2, 4, 6, 9, 13, 18, 25)
 
@@ -219,9 +221,10 @@ def _term_variant(data, assignment, state, source, values, term, form, rate, blo
         named = MSD_NAMES.get((term, source.split(".", 1)[1]))
         if named is not None:
             name, report = named[0], (named[1], named[2], f"{module}.m", sigma)
+    slope = TERM_SLOPES[term] / sigma
     return Variant(
         name, state, model, (theta,), {theta: 0.0}, {theta: (-np.inf, np.inf)}, {theta: rate},
-        report=report,
+        report=report, stiffness=lambda values: abs(values[theta]) * slope,
     )  # fmt: skip
 
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from dtwin._validation import DtwinValueError
-from dtwin.twin.simulate import UnitModel, UnitSpec
+from dtwin.twin.simulate import MAX_SUBSTEPS, UnitModel, UnitSpec
 
 __all__ = [
     "MAX_FIT_SAMPLES",
@@ -41,6 +41,10 @@ __all__ = [
 
 #: Most training samples a fit uses (evenly spaced windows beyond it).
 MAX_FIT_SAMPLES = 4000
+#: Most samples of a part a fitted variant is scored on (evenly spaced windows beyond it).
+MAX_PART_SAMPLES = 10000
+#: Largest ``h·ρ`` of a Runge-Kutta step for a candidate term's own slope.
+TERM_RHO = 2.0
 #: Largest normalised residual of a diverged simulation (keeps least squares finite).
 _DIVERGED = 1e3
 
@@ -148,6 +152,9 @@ class Variant:
     report : tuple or None
         A named effect's ``(param, factor(m, σ), mass param, σ)``: its reported param is
         ``factor·θ`` (a mass-spring-damper's force).
+    stiffness : callable or None
+        ``theta → ρ``, the largest rate (1/s) the effect's term adds to the unit's Jacobian:
+        the Runge-Kutta sub-steps grow with it (:func:`substeps_for`).
     """
 
     name: str
@@ -164,6 +171,7 @@ class Variant:
     linear_form: bool = False
     fixed: Mapping[str, float] = field(default_factory=dict)
     report: tuple | None = None
+    stiffness: Callable | None = None
 
 
 @dataclass
@@ -187,6 +195,24 @@ class VariantFit:
     success: bool = True
 
 
+def substeps_for(data: UnitData, variant: Variant, theta: Mapping[str, float]) -> int:
+    """Return the Runge-Kutta sub-steps of a variant: the unit's, doubled while a term is stiff.
+
+    A term whose slope reaches ``ρ`` (``variant.stiffness``) needs ``h·ρ ≤`` :data:`TERM_RHO`:
+    within RK4's stability interval (2.78 on the negative real axis); its accuracy matters only
+    where the slope is that steep (a friction's smoothed sign near rest), unlike the twin's own
+    modes (:func:`dtwin.twin.simulate.choose_substeps`). At most
+    :data:`~dtwin.twin.simulate.MAX_SUBSTEPS`.
+    """
+    substeps = data.substeps
+    if variant.stiffness is None:
+        return substeps
+    rho = variant.stiffness(theta)
+    while substeps < MAX_SUBSTEPS and data.dt / substeps * rho > TERM_RHO:
+        substeps *= 2
+    return substeps
+
+
 def _simulate(data, variant, theta, starts, stops, x0):
     """Return the variant's mapped outputs over the windows, shape ``(n_samples, n_outputs)``."""
     inputs = variant.input_map(data.inputs, theta, data)
@@ -200,7 +226,7 @@ def _simulate(data, variant, theta, starts, stops, x0):
             stops,
             x0,
             data.dt,
-            substeps=data.substeps,
+            substeps=substeps_for(data, variant, theta),
             linear=data.linear,
             limits=limits,
         )
@@ -393,9 +419,17 @@ def _sparsity(data, starts, stops, n_params, n_states):
 
 
 def part_error(
-    data: UnitData, fit: VariantFit, part: str, *, fit_states: bool = True
+    data: UnitData,
+    fit: VariantFit,
+    part: str,
+    *,
+    fit_states: bool = True,
+    cap: int | None = MAX_PART_SAMPLES,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Return the fitted variant's error on a part, its window states re-fitted (params held).
+
+    With ``cap``, at most that many samples of the part are simulated (evenly spaced windows,
+    :data:`MAX_PART_SAMPLES`); the others are NaN.
 
     Returns
     -------
@@ -405,7 +439,7 @@ def part_error(
     from scipy.optimize import least_squares
 
     variant, theta = fit.variant, fit.theta
-    starts, stops = data.windows(part)
+    starts, stops = data.windows(part, cap)
     guess = data.guess if data.guess is not None else state_guess(data, theta, variant)
     x0 = np.ascontiguousarray(guess[starts])
     rows = _window_rows(starts, stops)
@@ -419,7 +453,7 @@ def part_error(
 
         result = least_squares(
             residual, x0.ravel(), x_scale=np.tile(_state_scales(guess, n_states), len(starts)),
-            jac_sparsity=_sparsity(data, starts, stops, 0, n_states), max_nfev=30, xtol=1e-6,
+            jac_sparsity=_sparsity(data, starts, stops, 0, n_states), max_nfev=20, xtol=1e-5,
         )  # fmt: skip
         x0 = result.x.reshape(len(starts), n_states)
     simulated = _simulate(data, variant, theta, starts, stops, x0)

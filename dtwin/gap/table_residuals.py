@@ -87,7 +87,7 @@ def table_residuals(
             error = np.full_like(work.data.outputs, np.nan)
             model = np.full_like(work.data.outputs, np.nan)
             for part, (start, stop) in parts.items():
-                e, y = part_error(work.data, work.nominal, part)
+                e, y = part_error(work.data, work.nominal, part, cap=None)
                 error[start:stop], model[start:stop] = e[start:stop], y[start:stop]
             for o, signal in enumerate(spec.outputs):
                 residuals[f"{spec.name}:{signal}"] = -error[:, o]
