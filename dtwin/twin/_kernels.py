@@ -63,17 +63,24 @@ def _power(base: float, exponent: float) -> float:  # pragma: no cover - compile
 
 @njit(cache=True, inline="always")
 def run_program(code, consts, start, stop, slots, stack) -> float:  # pragma: no cover - compiled
-    """Run ``code[start:stop]`` (postfix, slot-bound) over ``slots``; return the top of stack."""
+    """Run ``code[start:stop]`` (postfix, slot-bound) over ``slots``; return the top of stack.
+
+    ``OP_STORE`` (11) pops the top into ``slots[arg]``: a unit's whole program of assignments
+    runs as one pass.
+    """
     sp = 0
     for pc in range(start, stop):
         op = code[2 * pc]
         arg = code[2 * pc + 1]
-        if op == 0:
-            stack[sp] = consts[arg]
-            sp += 1
-        elif op == 1:
+        if op == 1:
             stack[sp] = slots[arg]
             sp += 1
+        elif op == 0:
+            stack[sp] = consts[arg]
+            sp += 1
+        elif op == 11:
+            sp -= 1
+            slots[arg] = stack[sp]
         elif op == 7:
             stack[sp - 1] = -stack[sp - 1]
         elif op == 8:
@@ -113,15 +120,13 @@ def run_program(code, consts, start, stop, slots, stack) -> float:  # pragma: no
     return stack[0]
 
 
-@njit(cache=True)
-def _evaluate(code, consts, bounds, targets, slots, stack):  # pragma: no cover - compiled
-    for a in range(targets.shape[0]):
-        slots[targets[a]] = run_program(code, consts, bounds[a], bounds[a + 1], slots, stack)
+@njit(cache=True, inline="always")
+def _slope(code, consts, slots, stack, t, work, src, dst, layout, u, k, frac):  # pragma: no cover
+    """Write the derivatives at state ``work[src]`` (time ``t``) into ``work[dst]``.
 
-
-@njit(cache=True)
-def _load(slots, t, state, state_slots, u, k, frac, linear, in_slots):  # pragma: no cover
-    """Write ``t``, the inputs at sample ``k`` + ``frac`` and the state into the slots."""
+    Arrays are indexed, never sliced: a view in the loop costs a reference count each time.
+    """
+    state_slots, deriv_slots, in_slots, linear = layout
     slots[0] = t
     last = u.shape[0] - 1
     for i in range(in_slots.shape[0]):
@@ -130,62 +135,58 @@ def _load(slots, t, state, state_slots, u, k, frac, linear, in_slots):  # pragma
             value = value + frac * (u[k + 1, i] - value)
         slots[in_slots[i]] = value
     for j in range(state_slots.shape[0]):
-        slots[state_slots[j]] = state[j]
-
-
-@njit(cache=True)
-def _slope(program, slots, stack, t, state, layout, u, k, frac, out):  # pragma: no cover
-    code, consts, bounds, targets = program
-    state_slots, deriv_slots, in_slots, linear = layout
-    _load(slots, t, state, state_slots, u, k, frac, linear, in_slots)
-    _evaluate(code, consts, bounds, targets, slots, stack)
+        slots[state_slots[j]] = work[src, j]
+    run_program(code, consts, 0, code.shape[0] // 2, slots, stack)
     for j in range(deriv_slots.shape[0]):
-        out[j] = slots[deriv_slots[j]]
+        work[dst, j] = slots[deriv_slots[j]]
 
 
-@njit(cache=True)
-def _clamp(state, lo, hi):  # pragma: no cover - compiled
-    for j in range(state.shape[0]):
-        if state[j] < lo[j]:
-            state[j] = lo[j]
-        elif state[j] > hi[j]:
-            state[j] = hi[j]
+@njit(cache=True, inline="always")
+def _clamp(work, row, lo, hi):  # pragma: no cover - compiled
+    for j in range(work.shape[1]):
+        if work[row, j] < lo[j]:
+            work[row, j] = lo[j]
+        elif work[row, j] > hi[j]:
+            work[row, j] = hi[j]
 
 
-@njit(cache=True)
-def _rk4_sample(program, slots, stack, state, layout, u, k, dt, t0, substeps, lo, hi, work):
-    """Advance ``state`` from sample ``k`` to ``k + 1`` in ``substeps`` RK4 steps, clamped."""
-    k1, k2, k3, k4, trial = work[0], work[1], work[2], work[3], work[4]
+@njit(cache=True, inline="always")
+def _rk4_sample(code, consts, slots, stack, work, layout, u, k, dt, t0, substeps, lo, hi):
+    """Advance the state (``work[0]``) from sample ``k`` to ``k + 1`` in ``substeps`` steps.
+
+    ``work`` rows: 0 the state, 1–4 the four slopes, 5 the trial state. Clamped to
+    ``[lo, hi]`` after each step.
+    """
     h = dt / substeps
-    n = state.shape[0]
+    n = work.shape[1]
     for j in range(substeps):
         f0 = j / substeps
         fm = (j + 0.5) / substeps
         f1 = (j + 1.0) / substeps
         t_start = t0 + (k + f0) * dt
-        _slope(program, slots, stack, t_start, state, layout, u, k, f0, k1)
+        _slope(code, consts, slots, stack, t_start, work, 0, 1, layout, u, k, f0)
         for i in range(n):
-            trial[i] = state[i] + 0.5 * h * k1[i]
-        _slope(program, slots, stack, t_start + 0.5 * h, trial, layout, u, k, fm, k2)
+            work[5, i] = work[0, i] + 0.5 * h * work[1, i]
+        _slope(code, consts, slots, stack, t_start + 0.5 * h, work, 5, 2, layout, u, k, fm)
         for i in range(n):
-            trial[i] = state[i] + 0.5 * h * k2[i]
-        _slope(program, slots, stack, t_start + 0.5 * h, trial, layout, u, k, fm, k3)
+            work[5, i] = work[0, i] + 0.5 * h * work[2, i]
+        _slope(code, consts, slots, stack, t_start + 0.5 * h, work, 5, 3, layout, u, k, fm)
         for i in range(n):
-            trial[i] = state[i] + h * k3[i]
-        _slope(program, slots, stack, t_start + h, trial, layout, u, k, f1, k4)
+            work[5, i] = work[0, i] + h * work[3, i]
+        _slope(code, consts, slots, stack, t_start + h, work, 5, 4, layout, u, k, f1)
         for i in range(n):
-            state[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-        _clamp(state, lo, hi)
+            work[0, i] += h / 6.0 * (work[1, i] + 2.0 * work[2, i] + 2.0 * work[3, i] + work[4, i])
+        _clamp(work, 0, lo, hi)
 
 
-@njit(cache=True)
-def _record(program, slots, stack, t, state, layout, u, k, out_slots, y):  # pragma: no cover
-    code, consts, bounds, targets = program
-    state_slots, _deriv_slots, in_slots, linear = layout
-    _load(slots, t, state, state_slots, u, k, 0.0, linear, in_slots)
-    _evaluate(code, consts, bounds, targets, slots, stack)
+@njit(cache=True, inline="always")
+def _record(code, consts, slots, stack, t, work, layout, u, k, out_slots, y, states):
+    """Write the outputs and the state at sample ``k`` (time ``t``)."""
+    _slope(code, consts, slots, stack, t, work, 0, 5, layout, u, k, 0.0)
     for o in range(out_slots.shape[0]):
         y[k, o] = slots[out_slots[o]]
+    for j in range(work.shape[1]):
+        states[k, j] = work[0, j]
 
 
 @njit(cache=True)
@@ -202,30 +203,29 @@ def simulate_windows(
     inputs at the samples ``(n_samples, n_inputs)``; window ``w`` runs from sample
     ``starts[w]`` (state ``x0[w]``) to ``stops[w] - 1``; samples outside every window are NaN.
     """
+    code, consts = program[0], program[1]
     n_samples = u.shape[0]
     y = np.full((n_samples, out_slots.shape[0]), np.nan)
     states = np.full((n_samples, x0.shape[1]), np.nan)
     slots = base.copy()
     stack = np.empty(depth + 1)
-    n_states = x0.shape[1]
-    state = np.empty(n_states)
-    work = np.empty((5, n_states))
+    work = np.empty((6, x0.shape[1]))
     for w in range(starts.shape[0]):
         a = starts[w]
-        state[:] = x0[w]
-        _clamp(state, lo, hi)
-        _record(program, slots, stack, t0 + a * dt, state, layout, u, a, out_slots, y)
-        states[a] = state
+        for j in range(x0.shape[1]):
+            work[0, j] = x0[w, j]
+        _clamp(work, 0, lo, hi)
+        _record(code, consts, slots, stack, t0 + a * dt, work, layout, u, a, out_slots, y, states)
         for k in range(a, stops[w] - 1):
-            _rk4_sample(program, slots, stack, state, layout, u, k, dt, t0, substeps, lo, hi, work)
-            _record(program, slots, stack, t0 + (k + 1) * dt, state, layout, u, k + 1, out_slots, y)
-            states[k + 1] = state
+            _rk4_sample(code, consts, slots, stack, work, layout, u, k, dt, t0, substeps, lo, hi)
+            t = t0 + (k + 1) * dt
+            _record(code, consts, slots, stack, t, work, layout, u, k + 1, out_slots, y, states)
     return y, states
 
 
 def warm_up() -> None:
     """Compile the loops into numba's on-disk cache (``make venv`` calls this once)."""
-    code = np.array([1, 2, 1, 1, 3, 0, 0, 0, 4, 0], dtype=np.int64)
+    code = np.array([1, 2, 1, 1, 3, 0, 0, 0, 4, 0, 11, 3], dtype=np.int64)
     program = (
         code,
         np.array([0.5]),

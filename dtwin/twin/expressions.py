@@ -47,6 +47,8 @@ MAX_DEPTH = 40
 OP_CONST, OP_VAR, OP_ADD, OP_SUB, OP_MUL, OP_DIV, OP_POW, OP_NEG, OP_FUNC1, OP_FUNC2, OP_IPOW = (
     range(11)
 )
+#: Pop the top of the stack into slot ``arg`` (ends each assignment of a unit's program).
+OP_STORE = 11
 #: Functions of one argument, by their code in ``OP_FUNC1``.
 UNARY_FUNCTIONS: tuple[str, ...] = (
     "sqrt",

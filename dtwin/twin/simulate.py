@@ -31,7 +31,7 @@ import numpy as np
 
 from dtwin._validation import DtwinValueError
 from dtwin.twin._kernels import simulate_windows
-from dtwin.twin.expressions import parse_expression
+from dtwin.twin.expressions import OP_STORE, parse_expression
 
 __all__ = [
     "STEP_RHO",
@@ -265,6 +265,7 @@ class UnitModel:
             expr = parse_expression(a.text, a.symbols)
             code = expr.bound({n: slots[a.symbols[n]] for n in expr.names})
             code[code[:, 0] == 0, 1] += sum(len(c) for c in consts)
+            code = np.vstack([code, [[OP_STORE, slots[a.target]]]])
             codes.append(code)
             consts.append(expr.consts)
             bounds.append(bounds[-1] + len(code))
