@@ -30,6 +30,8 @@ load average before and after it), medians where repeated. Sections (`python ben
   same at T = 1000 for K = 4, 12, 20 (median of 7; the BIC sweeps' size);
 - ``gap``: `dtwin diagnose` on a 2,000-sample six-module recording and a 100,000-sample one,
   and `--calibrate` on a 130,000-sample plant-only rig (issue 10's target: ≤ 30 s);
+- ``table``: `dtwin diagnose --calibrate` on a two-state expression module written as a twin
+  table, 10,000 and 100,000 samples (benchmarks/table_cases.py): wall, CPU, peak RSS, answer;
 - ``tests``: `make test-fast` in the repository (its .venv set up): wall seconds, the CPU
   seconds of every process (``RUSAGE_CHILDREN`` around it: lint, both pytest-xdist workers and
   the subprocesses the tests start) and the tests passed.
@@ -348,6 +350,34 @@ def _plant_only_rig(folder: Path) -> float:
     return round(run([*diagnose, *options, "--calibrate"], REPO), 2)
 
 
+def table_benchmarks() -> dict:
+    """`dtwin diagnose --calibrate` on a two-state expression module written as a table.
+
+    The speed targets of a user's twin: 10,000 samples in ≤ 10 s, 100,000 in ≤ 30 s, peak
+    memory ≤ 1 GB (benchmarks/table_cases.py: an oscillator with a withheld friction). Wall
+    and CPU seconds of the whole command, the child's peak RSS (MB) and the answer.
+    """
+    results = {}
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        for n_samples in (10_000, 100_000):
+            case = folder / f"osc{n_samples}"
+            run([PY, str(REPO / "benchmarks" / "table_cases.py"), str(n_samples), str(case)], REPO)
+            cpu_before, start = children_cpu(), time.perf_counter()
+            diagnose = [PY, "-m", "dtwin", "diagnose", str(case / "recording.csv"), "--twin"]
+            out = folder / f"out{n_samples}"
+            run([*diagnose, str(case / "twin.yaml"), "--out", str(out), "--calibrate"], REPO)
+            answer = json.loads((out / "diagnosis.json").read_text())
+            results[f"diagnose_{n_samples}"] = {
+                "wall_s": round(time.perf_counter() - start, 2),
+                "cpu_s": round(children_cpu() - cpu_before, 2),
+                "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024),
+                "answer": f"{answer['effect']} at {answer['at']}",
+            }
+            print(n_samples, results[f"diagnose_{n_samples}"], flush=True)
+    return results
+
+
 def tests_benchmark() -> dict:
     """`make test-fast` once: wall s, CPU s of every process and the count of tests passed."""
     cpu_before, start = children_cpu(), time.perf_counter()
@@ -368,6 +398,7 @@ SECTIONS = {
     "figures": figures_benchmark,
     "imports": import_benchmarks,
     "gap": gap_benchmarks,
+    "table": table_benchmarks,
     "hmm": hmm_benchmarks,
     "tests": tests_benchmark,
 }
