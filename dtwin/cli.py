@@ -71,13 +71,13 @@ def load_twin_file(path: str | os.PathLike):
         raise CliError(message) from error
 
 
-def _read_heldout(path: str):
+def _read_heldout(path: str, columns=None):
     """Read ``--heldout`` like the recording; its errors name it as the held-out file."""
     from dtwin._validation import DtwinValueError
     from dtwin.gap.recording import read_recording
 
     try:
-        return read_recording(path)
+        return read_recording(path, columns=columns)
     except DtwinValueError as error:
         raise CliError(f"held-out {error}") from error
 
@@ -158,13 +158,16 @@ def _diagnose_table(args: argparse.Namespace, twin_content) -> int:
     from dtwin.gap.twin_file import table_file
     from dtwin.twin.table import check_recorded
 
-    if args.heldout is not None:
-        raise CliError("--heldout is not supported with a twin table yet (use --train-frac)")
     table = table_file(twin_content)
-    recording = read_recording(args.recording, columns=(*table.signals, *table.exogenous))
+    columns = (*table.signals, *table.exogenous)
+    recording = read_recording(args.recording, columns=columns)
     check_recorded(table, recording.signals)
+    heldout = None
+    if args.heldout is not None:
+        heldout = _read_heldout(args.heldout, columns)
+    train_frac = args.train_frac or (HELDOUT_TRAIN_FRAC if heldout is not None else 0.5)
     result = diagnose_table(
-        recording, table, calibrate=args.calibrate, train_frac=args.train_frac or 0.5
+        recording, table, calibrate=args.calibrate, train_frac=train_frac, heldout=heldout
     )
     atomic_write_folder(args.out, lambda tmp: write_table_report(result, tmp))
     where = " + ".join(result.modules) or "-"

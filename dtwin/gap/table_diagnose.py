@@ -132,9 +132,18 @@ class TableDiagnosis:
     series: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
 
-def _split(n: int, train_frac: float, choose_frac: float) -> dict[str, tuple[int, int]]:
+def _split(
+    n: int, train_frac: float, choose_frac: float, n_held: int = 0
+) -> dict[str, tuple[int, int]]:
+    """Return the training, choosing and scoring parts as sample ranges.
+
+    With ``n_held`` held-out samples appended, those are the scoring part and the rest of the
+    first recording after training is the choosing part.
+    """
     n_train = int(round(train_frac * n))
     n_choose = n_train + int(round(choose_frac * (n - n_train)))
+    if n_held:
+        n_choose, n = n, n + n_held
     if n_train < 100 or min(n_choose - n_train, n - n_choose) < 50:
         raise DtwinValueError(
             f"recording too short to split: {n_train} training, {n_choose - n_train} choosing "
@@ -534,6 +543,7 @@ def diagnose_table(
     calibrate: bool = False,
     train_frac: float = 0.5,
     settings: GapSettings | None = None,
+    heldout: Recording | None = None,
 ) -> TableDiagnosis:
     """Diagnose the sim-to-real gap of a recording against a twin table.
 
@@ -550,6 +560,10 @@ def diagnose_table(
         Share of the samples, from the start, used for fitting; the rest is split into the
         choosing and the scoring part (``settings.choose_frac``).
     settings : GapSettings, optional
+    heldout : Recording, optional
+        A separate validation experiment: the scoring part (the first recording after its
+        training part is then the choosing part). Every window restarts inside its part, so the
+        join is never integrated across.
 
     Returns
     -------
@@ -562,16 +576,35 @@ def diagnose_table(
         recorded outputs, a constant output, or a twin that does not simulate.
     """
     with threadpool_limits(limits=1):
-        return _diagnose_table(recording, table, calibrate, train_frac, settings or GapSettings())
-
-
-def _diagnose_table(recording, table, calibrate, train_frac, settings) -> TableDiagnosis:
-    if table.dt is not None and abs(recording.dt - table.dt) > 0.01 * table.dt:
-        raise DtwinValueError(
-            f"recording dt ({recording.dt:.6g} s, from column 't') disagrees with the twin's dt "
-            f"({table.dt:.6g} s) by more than 1%"
+        return _diagnose_table(
+            recording, table, calibrate, train_frac, settings or GapSettings(), heldout
         )
-    parts = _split(recording.n_samples, train_frac, settings.choose_frac)
+
+
+def _joined(recording: Recording, heldout: Recording) -> Recording:
+    """Return the recording followed by the held-out one (time continuing by one sample)."""
+    missing = sorted(set(recording.signals) - set(heldout.signals))
+    if missing:
+        raise DtwinValueError(
+            f"held-out recording is missing column(s) {', '.join(missing)} (the recording has "
+            f"{', '.join(sorted(recording.signals))})"
+        )
+    t_held = recording.t[-1] + recording.dt + (heldout.t - heldout.t[0])
+    signals = {s: np.concatenate([v, heldout.signals[s]]) for s, v in recording.signals.items()}
+    return Recording(np.concatenate([recording.t, t_held]), recording.dt, signals)
+
+
+def _diagnose_table(recording, table, calibrate, train_frac, settings, heldout) -> TableDiagnosis:
+    for label, rec in (("recording", recording), ("held-out recording", heldout)):
+        if rec is not None and table.dt is not None and abs(rec.dt - table.dt) > 0.01 * table.dt:
+            raise DtwinValueError(
+                f"{label} dt ({rec.dt:.6g} s, from column 't') disagrees with the twin's dt "
+                f"({table.dt:.6g} s) by more than 1%"
+            )
+    n_held = heldout.n_samples if heldout is not None else 0
+    parts = _split(recording.n_samples, train_frac, settings.choose_frac, n_held)
+    if heldout is not None:
+        recording = _joined(recording, heldout)
     specs = units_of(table, list(recording.signals))
     if not specs:
         raise DtwinValueError("no module of the twin has a recorded output")
