@@ -54,6 +54,7 @@ from dtwin.gap.table_fit import (
     state_guess,
 )
 from dtwin.gap.which import _excess, shrink_pct
+from dtwin.twin.fmu import model_for
 from dtwin.twin.simulate import UnitModel, UnitSpec, choose_substeps, units_of
 
 __all__ = ["UnitReport", "TableDiagnosis", "diagnose_table", "SCREENED"]
@@ -216,21 +217,32 @@ def _prepare_unit(spec, recording, table, parts, settings, calibrate) -> UnitDat
     """Arrays, holds, substeps and windows of one unit."""
     train = slice(*parts["train"])
     inputs, outputs, norm = _unit_arrays(spec, recording, train)
-    model = UnitModel.from_spec(spec)
+    model = model_for(spec, table)
     produced = {s for m in table.modules for s in m.outputs}
     hold = getattr(table, "discretisation", None)
     linear = np.array([s in produced or hold != "zoh" for s in spec.inputs], dtype=bool)
     data = UnitData(
         spec, model, inputs, outputs, recording.dt, norm, linear, 8, 200, parts, dict(spec.params)
     )
-    guess = state_guess(data, dict(spec.params), twin_variant(data))
-    data.substeps, data.window, bandwidth = _dynamics(
-        model, dict(spec.params), guess, inputs, recording.dt, train
-    )
-    data.bandwidth = bandwidth
+    if hasattr(model, "derivatives"):
+        guess = state_guess(data, dict(spec.params), twin_variant(data))
+        data.substeps, data.window, bandwidth = _dynamics(
+            model, dict(spec.params), guess, inputs, recording.dt, train
+        )
+        data.bandwidth = bandwidth
+    else:  # a closed model (a Co-Simulation FMU) steps itself: no Jacobian to probe
+        data.substeps, data.window, data.bandwidth = 1, _closed_window(model, data), 0.1 / data.dt
     if hold is None and any(s not in produced for s in spec.inputs):
         data.linear = _chosen_hold(data, spec, produced, settings, calibrate)
     return data
+
+
+def _closed_window(model, data: UnitData) -> int:
+    """Return a closed model's window: the whole part if it cannot restart, else the longest."""
+    if not model.restarts:
+        return data.n_samples
+    train = data.parts["train"][1] - data.parts["train"][0]
+    return int(min(MAX_WINDOW, max(MIN_WINDOW, train // 4)))
 
 
 #: Share of repeated consecutive samples above which an input is read as held (a staircase).
@@ -610,7 +622,7 @@ def _diagnose_table(recording, table, calibrate, train_frac, settings, heldout) 
         raise DtwinValueError("no module of the twin has a recorded output")
     works = {s.name: _analyse_unit(s, recording, table, parts, settings, calibrate) for s in specs}
     flagged = [w for w in works.values() if w.flagged]
-    notes: list[str] = []
+    notes = [note for w in works.values() for note in getattr(w.data.model, "notes", ())]
     units = {name: _unit_report(w) for name, w in works.items()}
     base = dict(units=units, n_samples=recording.n_samples, n_train=parts["train"][1],
                 n_choose=parts["choose"][1], dt=recording.dt)  # fmt: skip

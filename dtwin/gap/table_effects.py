@@ -273,5 +273,6 @@ def candidate_variants(
     )
     out += _input_variants(data)
     out += _output_variants(data)
-    out += _state_variants(data, guess, blocks)
+    if not getattr(data.model, "closed", False):  # an FMU's internals are closed
+        out += _state_variants(data, guess, blocks)
     return out

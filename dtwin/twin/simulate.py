@@ -117,7 +117,12 @@ def _derivative_slot(state: str) -> str:
 
 
 def _module_assignments(module, produced_in_unit: set[str]) -> list[Assignment]:
-    """Return the algebraic and derivative assignments of one module (qualified names)."""
+    """Return the algebraic and derivative assignments of one module (qualified names).
+
+    An FMU module has none: its model is the FMU (:func:`dtwin.twin.fmu.model_for`).
+    """
+    if getattr(module, "fmu", None) is not None:
+        return []
     local = {p: f"{module.name}.{p}" for p in module.params}
     local.update({s: f"{module.name}.{s}" for s in module.states})
     local.update({s: s for s in module.inputs})

@@ -23,6 +23,15 @@ Specification: docs/gap.md §Twin file. A twin file with a ``modules:`` key is a
           level: "h2 + offset"
     noise: {level: 0.02}           # optional std devs: by output signal or by module name
 
+A module may also be an FMU (FMI 2.0, :mod:`dtwin.twin.fmu`)::
+
+      plant:
+        fmu: models/plant.fmu        # relative to the twin file (``base_dir``)
+        inputs: {u_act: F}           # recording signal -> FMU input variable
+        outputs: {x: s}              # recording signal -> FMU output variable
+        params: {m: 1.2, d: 0.4}     # FMU parameters the diagnoser may re-fit
+        interface: co_simulation     # optional: model_exchange (default when present)
+
 :func:`table_from_mapping` turns the file's content into a :class:`TwinTable`. An expression
 (:mod:`dtwin.twin.expressions`) may read the module's params, its states, its input signals and
 ``t`` (s); nothing else, not even the module's own outputs.
@@ -49,6 +58,13 @@ module, the key and the token::
   ``block`` with ``states``, ``derivatives`` or ``equations``; ``initial`` for a name that is
   not a state; a param or an initial state that is not a finite number (a YAML ``true`` is not
   a number); ``candidates`` not a list of names.
+- *An FMU module* (keys ``fmu``, ``interface``, ``inputs``, ``outputs``, ``params``,
+  ``candidates``): ``fmu`` not a text; ``inputs``/``outputs`` not a mapping of signal names to
+  FMU variable names (a list means the same names); no outputs; a file that is missing, not a
+  zip, without ``modelDescription.xml``, not FMI 2.0, without the interface or a binary for
+  this platform; an input, output or param the FMU does not have as such (a param must have
+  causality ``parameter``: a calculated parameter, a constant or a local is not tunable); a
+  model that fails to initialise with the declared params (its log's last line quoted).
 - *A block module*: the block's number of inputs or outputs; an unknown param, a required one
   missing, a rule broken (``tau > 0``, ``m > 0``, ``c, k >= 0``), ``weights`` not one per
   input, matrix shapes of ``state_space`` inconsistent (``A`` n×n, ``B`` n×m, ``C`` p×n, ``D``
@@ -85,6 +101,7 @@ import keyword
 import re
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -92,6 +109,7 @@ import numpy as np
 from dtwin._validation import DtwinValueError
 from dtwin.twin.blocks import BlockError, Lowered, lower_block
 from dtwin.twin.expressions import FUNCTIONS, Expression, ExpressionError, parse_expression
+from dtwin.twin.fmu import FmuError, FmuInfo, read_fmu
 
 __all__ = [
     "NAME_PATTERN",
@@ -114,7 +132,8 @@ START_PROBES = (0.0, 1.0, 10.0)
 _TOP_KEYS = ("dt", "discretisation", "modules", "noise")
 _LEGACY_KEYS = ("actuator", "plant", "sensor_A", "sensor_B", "fusion", "kpi", "twin")
 _MODULE_KEYS = ("block", "inputs", "outputs", "states", "initial", "params", "derivatives",
-                "equations", "candidates")  # fmt: skip
+                "equations", "candidates", "fmu", "interface")  # fmt: skip
+_FMU_KEYS = ("fmu", "interface", "inputs", "outputs", "params", "candidates")
 _EQUATION_KEYS = ("states", "derivatives", "equations")
 _DISCRETISATIONS = ("zoh", "foh")
 
@@ -165,6 +184,9 @@ class ModuleSpec:
         ``"block lag"`` or ``"equations"``, for messages.
     candidates : tuple of str or None
         The effect names the file restricts the diagnosis to, as given; None: not given.
+    fmu : FmuInfo or None
+        An FMU module's file and variables (:mod:`dtwin.twin.fmu`); its ``states`` are the
+        FMU's settable continuous states, ``params`` FMU parameters, no texts.
     """
 
     name: str
@@ -180,6 +202,7 @@ class ModuleSpec:
     linear: bool
     source: str = ""
     candidates: tuple[str, ...] | None = None
+    fmu: FmuInfo | None = None
 
     @property
     def symbols(self) -> frozenset[str]:
@@ -446,7 +469,59 @@ def _check_expressions(module: ModuleSpec) -> None:
         _check_start(module, key, _parse(module, key, text))
 
 
-def _module_spec(name: Any, entry: Any) -> ModuleSpec:
+def _signal_map(module: str, key: str, raw: Any) -> dict[str, str]:
+    """Read an FMU module's ``inputs``/``outputs``: recording signal → FMU variable name."""
+    if isinstance(raw, (list, tuple)):
+        return {n: n for n in _names(module, key, raw)}
+    given = _mapping(raw, module=module, key=key, of="recording signals to FMU variables")
+    out = {}
+    for signal, variable in given.items():
+        signal = _name(signal, module=module, key=key)
+        if not isinstance(variable, str) or not variable:
+            raise TwinTableError(f"must be an FMU variable name (got {_shown(variable)})",
+                                 module=module, key=f"{key}.{signal}",
+                                 token=_token(variable))  # fmt: skip
+        out[signal] = variable
+    return out
+
+
+def _fmu_module(name: str, entry: Mapping, base_dir: Path | None) -> ModuleSpec:
+    """Return an FMU module (``fmu:``), its file read and checked (:func:`read_fmu`)."""
+    unknown = next((k for k in entry if k not in _FMU_KEYS), None)
+    if unknown is not None:
+        raise TwinTableError(f"an FMU module takes no '{unknown}' (allowed: "
+                             f"{', '.join(_FMU_KEYS)})", module=name, key=str(unknown),
+                             token=str(unknown))  # fmt: skip
+    raw = entry["fmu"]
+    if not isinstance(raw, str) or not raw:
+        raise TwinTableError(f"must be the FMU file's path (got {_shown(raw)})", module=name,
+                             key="fmu", token=_token(raw))  # fmt: skip
+    inputs = _signal_map(name, "inputs", entry.get("inputs"))
+    outputs = _signal_map(name, "outputs", entry.get("outputs"))
+    if not outputs:
+        raise TwinTableError("an FMU module needs outputs (recording signal: FMU output)",
+                             module=name, key="outputs")  # fmt: skip
+    both = next((s for s in outputs if s in inputs), None)
+    if both is not None:
+        raise TwinTableError(f"'{both}' is also an input of the module", module=name,
+                             key="outputs", token=both)  # fmt: skip
+    params = _mapping(entry.get("params"), module=name, key="params", of="FMU parameters")
+    params = {str(p): _number(v, module=name, key=f"params.{p}") for p, v in params.items()}
+    path = Path(raw) if base_dir is None else Path(base_dir) / raw
+    try:
+        info = read_fmu(path, inputs=inputs, outputs=outputs, params=params,
+                        interface=entry.get("interface"), shown=raw)  # fmt: skip
+    except FmuError as error:
+        raise TwinTableError(error.rule, module=name, key=error.key, token=error.token) from None
+    return ModuleSpec(
+        name=name, block=None, inputs=tuple(inputs), outputs=tuple(outputs),
+        states=info.states, params=dict(info.params), initial={}, derivatives={},
+        equations={}, output_states=dict(info.output_states), linear=False,
+        source=f"fmu {raw}", candidates=_candidates(name, entry.get("candidates")), fmu=info,
+    )  # fmt: skip
+
+
+def _module_spec(name: Any, entry: Any, base_dir: Path | None = None) -> ModuleSpec:
     """One module of the ``modules`` mapping, validated (module docstring)."""
     name = _name(name, module=None, key="modules")
     if not isinstance(entry, Mapping):
@@ -458,6 +533,11 @@ def _module_spec(name: Any, entry: Any) -> ModuleSpec:
     if unknown is not None:
         raise TwinTableError(f"unknown key (allowed: {', '.join(_MODULE_KEYS)})", module=name,
                              key=str(unknown), token=str(unknown))  # fmt: skip
+    if "fmu" in entry:
+        return _fmu_module(name, entry, base_dir)
+    if "interface" in entry:
+        raise TwinTableError("'interface' is for an FMU module (one with 'fmu')", module=name,
+                             key="interface", token="interface")  # fmt: skip
     inputs = _names(name, "inputs", entry.get("inputs"))
     outputs = _names(name, "outputs", entry.get("outputs"))
     both = next((s for s in outputs if s in inputs), None)
@@ -630,7 +710,9 @@ def _discretisation(value: Any) -> str | None:
     )  # fmt: skip
 
 
-def table_from_mapping(mapping: Mapping, *, dt: float | None = None) -> TwinTable:
+def table_from_mapping(
+    mapping: Mapping, *, dt: float | None = None, base_dir: str | Path | None = None
+) -> TwinTable:
     """Return the :class:`TwinTable` of a twin file's content (module docstring).
 
     Parameters
@@ -640,6 +722,9 @@ def table_from_mapping(mapping: Mapping, *, dt: float | None = None) -> TwinTabl
         level or all under ``twin:``.
     dt : float, optional
         Sample period, s, when the file gives none (the recording's).
+    base_dir : str or Path, optional
+        The twin file's folder: an FMU module's path is relative to it (default: the
+        working directory).
 
     Returns
     -------
@@ -669,7 +754,8 @@ def table_from_mapping(mapping: Mapping, *, dt: float | None = None) -> TwinTabl
     if period is not None:
         period = _number(period, module=None, key="dt", positive=True)
     discretisation = _discretisation(raw.get("discretisation"))
-    modules = [_module_spec(name, entry) for name, entry in raw["modules"].items()]
+    folder = None if base_dir is None else Path(base_dir)
+    modules = [_module_spec(name, entry, folder) for name, entry in raw["modules"].items()]
     _check_wiring(modules)
     _check_algebraic_loops(modules)
     ordered = _order(modules)
