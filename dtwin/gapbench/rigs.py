@@ -34,6 +34,7 @@ from scipy.signal import lfilter
 
 from dtwin._validation import DtwinValueError
 from dtwin.gap.effects import effect_by_name
+from dtwin.gapbench.families import FAMILY_PREFIXES, generate_family_case
 from dtwin.gapbench.generator import GeneratedCase, accepted_effects, generate_case
 
 __all__ = [
@@ -484,12 +485,16 @@ def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
 
 
 def generate_any_case(case_type: str, seed: int, **paper_options) -> GeneratedCase:
-    """Generate a benchmark case: a rig family's (``rig_``, ``hardrig_``), else the paper asset.
+    """Generate a benchmark case: a rig family's, another physics' family's, else the paper's.
 
+    Prefixes ``rig_``, ``hardrig_`` (this module); ``tanks_``, ``motor_``, ``thermal_``
+    (:mod:`dtwin.gapbench.families`); anything else is the paper asset's case type.
     A paper-asset case type may carry an arm (``no_noise__none``, dtwin/gapbench/arms.py).
     ``paper_options`` go to :func:`dtwin.gapbench.generator.generate_case` (``nominal``, the
-    nominal twin, is needed; ``miscalibration``, ``noise_error``); the rig family has none.
+    nominal twin, is needed; ``miscalibration``, ``noise_error``); the other families have none.
     """
+    if case_type.startswith(FAMILY_PREFIXES):
+        return generate_family_case(case_type, seed)
     if case_type.startswith(RIG_PREFIX):
         return generate_rig_case(case_type[len(RIG_PREFIX) :], seed)
     if case_type.startswith(HARD_RIG_PREFIX):
