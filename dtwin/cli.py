@@ -158,7 +158,7 @@ def _diagnose_table(args: argparse.Namespace, twin_content) -> int:
     from dtwin.gap.twin_file import table_file
     from dtwin.twin.table import check_recorded
 
-    table = table_file(twin_content)
+    table = table_file(twin_content, base_dir=os.path.dirname(os.path.abspath(args.twin)))
     columns = (*table.signals, *table.exogenous)
     recording = read_recording(args.recording, columns=columns)
     check_recorded(table, recording.signals)

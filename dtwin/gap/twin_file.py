@@ -203,7 +203,7 @@ def is_table(mapping: Any) -> bool:
     return "modules" in mapping or (isinstance(inner, Mapping) and "modules" in inner)
 
 
-def table_file(mapping: Any, dt: float | None = None) -> TwinTable:
+def table_file(mapping: Any, dt: float | None = None, base_dir: str | None = None) -> TwinTable:
     """Return the :class:`~dtwin.twin.table.TwinTable` of a twin file's content.
 
     Parameters
@@ -212,10 +212,12 @@ def table_file(mapping: Any, dt: float | None = None) -> TwinTable:
         The content (:func:`load_twin_text`); a table (:func:`is_table`).
     dt : float, optional
         Sample period, s, when the file gives none (the recording's).
+    base_dir : str, optional
+        The twin file's folder (an FMU module's path is relative to it).
 
     Raises
     ------
     dtwin.twin.table.TwinTableError
         One line naming the module, the key and the token (:mod:`dtwin.twin.table`).
     """
-    return table_from_mapping(mapping, dt=dt)
+    return table_from_mapping(mapping, dt=dt, base_dir=base_dir)

@@ -279,7 +279,7 @@ def read_fmu(
         n_event_indicators=int(description.numberOfEventIndicators or 0),
         needs_step_calls=not bool(getattr(element, "completedIntegratorStepNotNeeded", False)),
     )  # fmt: skip
-    _instance(info).start(np.array(list(info.params.values())), 0.0)
+    _instance(info).start(info, np.array(list(info.params.values())), 0.0)
     return info
 
 
@@ -333,12 +333,13 @@ class _Instance:
         """The ``fmi2Component`` address."""
         return int(self.fmu.component)
 
-    def start(self, params: np.ndarray, t0: float, states: Sequence[float] | None = None):
+    def start(self, info: FmuInfo, params, t0: float, states: Sequence[float] | None = None):
         """Reset, set ``params`` (and state start values), initialise at ``t0``.
 
+        ``info`` is the module's (two modules may share one file with different params).
         Raises :class:`FmuError` quoting the log's last line when the FMU refuses.
         """
-        fmu, info = self.fmu, self.info
+        fmu = self.fmu
         try:
             if self.initialised:
                 fmu.reset()
@@ -358,7 +359,7 @@ class _Instance:
         except Exception as error:
             last = self.log[-1] if self.log else str(error)
             raise FmuError(f"'{info.name}' failed to initialise: {last}", token=info.name) from None
-        self.current = (tuple(float(v) for v in params), float(t0))
+        self.current = (tuple(info.params), tuple(float(v) for v in params), float(t0))
 
 
 _INSTANCES: dict[tuple, _Instance] = {}
@@ -491,7 +492,8 @@ class FmuModel:
         for w, (a, b) in enumerate(zip(starts, stops, strict=True)):
             first = int(a) if self.restarts else 0
             try:
-                instance.start(params, t0 + first * dt, x0[w] if self.restarts else None)
+                instance.start(self.info, params, t0 + first * dt,
+                               x0[w] if self.restarts else None)  # fmt: skip
             except FmuError:
                 continue
             cs_window(
@@ -525,7 +527,7 @@ class FmuModelExchange(FmuModel):
         params = np.asarray(theta[: len(self.param_names)], dtype=float)
         starts = np.asarray(starts, dtype=np.int64)
         try:
-            instance.start(params, t0 + (int(starts[0]) if len(starts) else 0) * dt)
+            instance.start(self.info, params, t0 + (int(starts[0]) if len(starts) else 0) * dt)
         except FmuError:
             nan = np.full((len(u), len(self.spec.outputs)), np.nan)
             return nan, np.full((len(u), n_states), np.nan)
@@ -544,8 +546,9 @@ class FmuModelExchange(FmuModel):
         """Return the FMU's state derivatives at one point, shape ``(n_states,)``."""
         instance = _instance(self.info)
         params = np.asarray(theta[: len(self.param_names)], dtype=float)
-        if instance.current is None or instance.current[0] != tuple(params):
-            instance.start(params, t)
+        if instance.current is None or instance.current[:2] != (tuple(self.info.params),
+                                                                tuple(params)):  # fmt: skip
+            instance.start(self.info, params, t)
         set_time, set_real, set_states, get_derivatives = instance.fns[:4]
         comp = instance.component
         u = np.ascontiguousarray(inputs, dtype=float).ravel()
