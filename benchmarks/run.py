@@ -32,6 +32,10 @@ load average before and after it), medians where repeated. Sections (`python ben
   and `--calibrate` on a 130,000-sample plant-only rig (issue 10's target: ≤ 30 s);
 - ``table``: `dtwin diagnose --calibrate` on a two-state expression module written as a twin
   table, 10,000 and 100,000 samples (benchmarks/table_cases.py): wall, CPU, peak RSS, answer;
+- ``fmu``: `dtwin diagnose --calibrate` on a two-state FMU module (the test FMU, Model Exchange
+  and Co-Simulation), 10,000 samples (benchmarks/fmu_case.py; target ≤ 60 s): wall, CPU, peak
+  RSS and answer of the command, and in-process where the diagnosis spends its time (the FMU's
+  model against the fitting);
 - ``tests``: `make test-fast` in the repository (its .venv set up): wall seconds, the CPU
   seconds of every process (``RUSAGE_CHILDREN`` around it: lint, both pytest-xdist workers and
   the subprocesses the tests start) and the tests passed.
@@ -378,6 +382,35 @@ def table_benchmarks() -> dict:
     return results
 
 
+def fmu_benchmarks() -> dict:
+    """`dtwin diagnose --calibrate` on a 10,000-sample two-state FMU module (both interfaces).
+
+    The command's wall and CPU seconds, peak RSS (MB) and answer; then the same case diagnosed
+    in one process with the FMU's model timed (benchmarks/fmu_case.py ``--profile``).
+    """
+    results = {}
+    with tempfile.TemporaryDirectory() as folder:
+        for interface in ("model_exchange", "co_simulation"):
+            case = Path(folder) / interface
+            script = [PY, str(REPO / "benchmarks" / "fmu_case.py"), "10000", str(case), interface]
+            done = subprocess.run([*script, "--profile"], cwd=REPO, check=True,
+                                  capture_output=True, text=True)  # fmt: skip
+            cpu_before, start = children_cpu(), time.perf_counter()
+            diagnose = [PY, "-m", "dtwin", "diagnose", str(case / "recording.csv"), "--twin"]
+            run([*diagnose, str(case / "twin.yaml"), "--out", str(case / "out"), "--calibrate"],
+                REPO)  # fmt: skip
+            answer = json.loads((case / "out" / "diagnosis.json").read_text())
+            results[f"diagnose_10000_{interface}"] = {
+                "wall_s": round(time.perf_counter() - start, 2),
+                "cpu_s": round(children_cpu() - cpu_before, 2),
+                "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024),
+                "answer": f"{answer['effect']} at {answer['at']}",
+                "in_process": json.loads(done.stdout.strip().splitlines()[-1]),
+            }
+            print(interface, results[f"diagnose_10000_{interface}"], flush=True)
+    return results
+
+
 def tests_benchmark() -> dict:
     """`make test-fast` once: wall s, CPU s of every process and the count of tests passed."""
     cpu_before, start = children_cpu(), time.perf_counter()
@@ -399,6 +432,7 @@ SECTIONS = {
     "imports": import_benchmarks,
     "gap": gap_benchmarks,
     "table": table_benchmarks,
+    "fmu": fmu_benchmarks,
     "hmm": hmm_benchmarks,
     "tests": tests_benchmark,
 }

@@ -102,14 +102,16 @@ import re
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from dtwin._validation import DtwinValueError
 from dtwin.twin.blocks import BlockError, Lowered, lower_block
 from dtwin.twin.expressions import FUNCTIONS, Expression, ExpressionError, parse_expression
-from dtwin.twin.fmu import FmuError, FmuInfo, read_fmu
+
+if TYPE_CHECKING:  # dtwin.twin.fmu is imported when a table has an FMU module (numba, fmpy)
+    from dtwin.twin.fmu import FmuInfo
 
 __all__ = [
     "NAME_PATTERN",
@@ -507,6 +509,8 @@ def _fmu_module(name: str, entry: Mapping, base_dir: Path | None) -> ModuleSpec:
                              key="outputs", token=both)  # fmt: skip
     params = _mapping(entry.get("params"), module=name, key="params", of="FMU parameters")
     params = {str(p): _number(v, module=name, key=f"params.{p}") for p, v in params.items()}
+    from dtwin.twin.fmu import FmuError, read_fmu
+
     path = Path(raw) if base_dir is None else Path(base_dir) / raw
     try:
         info = read_fmu(path, inputs=inputs, outputs=outputs, params=params,
