@@ -555,7 +555,12 @@ def generate_family_case(
 
 
 def write_family_case(
-    case_type: str, index: int, seed: int, folder: str | os.PathLike
+    case_type: str,
+    index: int,
+    seed: int,
+    folder: str | os.PathLike,
+    *,
+    n_samples: int | None = None,
 ) -> GeneratedCase:
     """Generate a family case and write ``recording.csv``, ``twin.yaml`` and ``key.json``.
 
@@ -570,6 +575,8 @@ def write_family_case(
     folder : path
         Created if missing; each file is written atomically, as
         :func:`dtwin.gapbench.batch.write_case_folder` writes a case.
+    n_samples : int, optional
+        Samples of the recording (drawn when None, as the benchmark draws them).
 
     Returns
     -------
@@ -580,7 +587,7 @@ def write_family_case(
 
     from dtwin.artifacts import atomic_write, write_csv, write_json
 
-    case = generate_family_case(case_type, seed)
+    case = generate_family_case(case_type, seed, n_samples=n_samples)
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     write_csv(case.recording, folder / "recording.csv")

@@ -138,13 +138,21 @@ class Family:
 def _steps(
     rng: np.random.Generator, n: int, low: float, high: float, hold: tuple[float, float]
 ) -> np.ndarray:
-    """Return random steps ``(n,)``: levels uniform in [low, high], each held 'hold' samples."""
-    pieces, total = [], 0
-    while total < n:
-        length = int(rng.integers(max(int(hold[0]), 2), max(int(hold[1]), 3) + 1))
-        pieces.append(np.full(length, rng.uniform(low, high)))
-        total += length
-    return np.concatenate(pieces)[:n]
+    """Return random steps ``(n,)``: levels uniform in [low, high], each held ``hold`` samples.
+
+    The second half plays the first half's steps (level and hold) again in another order, so
+    both halves reach about the same extremes: an effect drawn to be reached in the training
+    half is reached about as much in the rest.
+    """
+    low_hold, high_hold = max(int(hold[0]), 2), max(int(hold[1]), 3)
+    steps, total = [], 0
+    while total < n // 2:
+        steps.append((rng.uniform(low, high), int(rng.integers(low_hold, high_hold + 1))))
+        total += steps[-1][1]
+    first = np.concatenate([np.full(length, level) for level, length in steps])[: n // 2]
+    again = [steps[k] for k in rng.permutation(len(steps))] * 2
+    second = np.concatenate([np.full(length, level) for level, length in again])
+    return np.concatenate([first, second])[:n]
 
 
 def _multisine(rng: np.random.Generator, n: int, dt: float, band: tuple[float, float]):
@@ -288,7 +296,7 @@ def _draw_motor(rng: np.random.Generator, n_samples: int | None) -> Asset:
         "Ke": constant,
         "Kt": constant,
         "J": tau_m * constant**2 / resistance,
-        "b": rng.uniform(0.02, 0.2) * constant**2 / resistance,
+        "b": rng.uniform(0.05, 0.3) * constant**2 / resistance,
     }
     v_max = rng.uniform(6.0, 24.0)
     steps = _steps(rng, n, -v_max, v_max, (0.5 * tau_m / dt, 3.0 * tau_m / dt))
@@ -576,12 +584,12 @@ def _thermal_twin(p: dict[str, float]) -> dict[str, Any]:
 def _convection(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
     """Draw a loss ``θ·|T1 − Ta|^p·sign`` of the first node, ``p`` 1.7–2.3 (convection-like).
 
-    At rms(T1 − Ta) it is 5–60 % of the node's linear loss ``(T1 − Ta)/R1a``.
+    At rms(T1 − Ta) it is 1–60 % of the node's linear loss ``(T1 − Ta)/R1a``.
     """
     power = rng.uniform(1.7, 2.3)
     ta, r1a, c1 = ctx.params["Ta"], ctx.params["R1a"], ctx.params["C1"]
     rise_rms = float(np.sqrt(np.mean((ctx.clean["T1"] - ta) ** 2))) or 1.0
-    theta = log_between(0.05, 0.6, level) * rise_rms / r1a / rise_rms**power
+    theta = log_between(0.01, 0.6, level) * rise_rms / r1a / rise_rms**power
 
     def term(t: float, x: Sequence[float]) -> float:
         rise = x[1] - ta

@@ -197,6 +197,10 @@ class FamilyEffect:
     draw: Draw
 
 
+#: ``x`` with ``tanh(x) = x/2``: a tanh reaching half its linear extension (1.9150...).
+_TANH_HALF = 1.9150080004407
+
+
 def _softplus(z: np.ndarray) -> np.ndarray:
     return np.logaddexp(0.0, z)
 
@@ -206,25 +210,35 @@ def _sign(rng: np.random.Generator) -> float:
 
 
 def input_saturation() -> Draw:
-    """Return the draw of a saturating input: ``U`` 3–50 % below the training half's ``max|u|``.
+    """Return the draw of a saturating input that lowers the largest input by 0.3–40 %.
 
-    Forms: ``clip`` (hard), ``tanh`` (``U·tanh(u/U)``), ``knee`` (a soft minimum of ``|u|``
-    and ``U``, width 2–8 % of ``U``); symmetric about 0 (a unipolar input is clipped above).
+    The largest input ``M`` is the smaller of the two halves' ``max|u|``, so the training
+    half holds the effect. Forms: ``clip`` (hard at ``U = (1 − depth)·M``), ``tanh`` (linear
+    up to ``(1 − 2·depth)·M``, then a tanh towards ``U``, the asymptote, reaching
+    ``(1 − depth)·M`` at ``M``), ``knee`` (a soft minimum of ``|u|`` and ``U = (1 −
+    depth)·M``, width 0.5–1.5 ``depth·M``); symmetric about 0 (a unipolar input is limited
+    above).
     """
 
     def draw(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
         form = str(rng.choice(["clip", "tanh", "knee"]))
-        width = rng.uniform(0.02, 0.08)
-        depth = log_between(0.03, 0.5, level)
-        limit = (1.0 - depth) * float(np.max(np.abs(ctx.u[: ctx.n // 2])))
+        softness = rng.uniform(0.5, 1.5)
+        depth = log_between(0.003, 0.4, level)
+        half = ctx.n // 2
+        top = min(float(np.max(np.abs(ctx.u[:half]))), float(np.max(np.abs(ctx.u[half:]))))
+        start, bend = (1.0 - 2.0 * depth) * top, 2.0 * depth * top / _TANH_HALF
+        limit = start + bend if form == "tanh" else (1.0 - depth) * top
 
         def saturate(u: np.ndarray) -> np.ndarray:
+            a = np.abs(u)
             if form == "clip":
                 return np.clip(u, -limit, limit)
             if form == "tanh":
-                return limit * np.tanh(u / limit)
-            w = width * limit
-            return np.sign(u) * (limit - w * _softplus((limit - np.abs(u)) / w))
+                return np.sign(u) * np.where(
+                    a > start, start + bend * np.tanh((a - start) / bend), a
+                )
+            w = softness * depth * top
+            return np.sign(u) * (limit - w * _softplus((limit - a) / w))
 
         return Placed(form, {"U": limit, "depth": depth}, input_map=saturate)
 
@@ -232,7 +246,7 @@ def input_saturation() -> Draw:
 
 
 def input_deadzone() -> Draw:
-    """Return the draw of a dead zone on the input: width ``D`` 3–30 % of ``max|u|``.
+    """Return the draw of a dead zone on the input: width ``D`` 0.2–30 % of ``max|u|``.
 
     Forms: ``hard`` (``sign(u)·max(|u| − D, 0)``), ``smooth`` (a soft edge of width
     0.1–0.3 ``D``) and, on a bipolar input, ``asymmetric`` (``D`` ± 10–30 % by direction).
@@ -242,7 +256,7 @@ def input_deadzone() -> Draw:
         bipolar = float(np.min(ctx.u)) < 0.0
         form = str(rng.choice(["hard", "smooth", "asymmetric"] if bipolar else ["hard", "smooth"]))
         soft, skew = rng.uniform(0.1, 0.3), rng.uniform(0.1, 0.3) * _sign(rng)
-        width = log_between(0.03, 0.3, level) * float(np.max(np.abs(ctx.u)))
+        width = log_between(0.002, 0.3, level) * float(np.max(np.abs(ctx.u)))
 
         def dead(u: np.ndarray) -> np.ndarray:
             a = np.abs(u)
@@ -263,12 +277,12 @@ def _whole_substeps(delay: float, ctx: Context) -> float:
 
 
 def _delay(level: float, ctx: Context) -> float:
-    """Return a delay of 0.5–10 % of the asset's slowest time constant, at least 0.3 sample (s)."""
-    return max(log_between(0.005, 0.1, level) * ctx.tau_slow, 0.3 * ctx.dt)
+    """Return a delay of 0.2–10 % of the asset's slowest time constant, at least 0.3 sample (s)."""
+    return max(log_between(0.002, 0.1, level) * ctx.tau_slow, 0.3 * ctx.dt)
 
 
 def input_delay() -> Draw:
-    """Return the draw of a transport delay of the input: 0.5–10 % of the slowest time constant.
+    """Return the draw of a transport delay of the input: 0.2–10 % of the slowest time constant.
 
     At least 0.3 sample; rounded to whole integration sub-steps (so fractional in samples).
     """
@@ -283,12 +297,12 @@ def input_delay() -> Draw:
 def rate_limiter() -> Draw:
     """Return the draw of a slew-rate limit on the input (out of the catalogue).
 
-    A full-span step takes 0.1–2 of the asset's slowest time constant.
+    A full-span step takes 0.003–1 of the asset's slowest time constant.
     """
 
     def draw(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
         span = float(np.ptp(ctx.u)) or 1.0
-        ramp = log_between(0.1, 2.0, level) * ctx.tau_slow
+        ramp = log_between(0.003, 1.0, level) * ctx.tau_slow
         return Placed("slew", {"rate": span / ramp, "ramp_s": ramp}, rate=span / ramp)
 
     return draw
@@ -297,18 +311,17 @@ def rate_limiter() -> Draw:
 def output_saturation(signal: str) -> Draw:
     """Return the draw of a sensor that clips ``signal`` above ``high``.
 
-    ``high`` lies 1–30 % of the training half's range (the first half) below its maximum
-    (the clean signal's). Forms: ``clip``
-    (after the noise, as an ADC clips) and ``knee`` (a soft minimum, width 0.5–2 % of the
-    signal's spread).
+    ``high`` leaves 0.5–30 % of the training half's clean samples (the first half) above it.
+    Forms: ``clip`` (after the noise, as an ADC clips) and ``knee`` (a soft minimum, width
+    0.5–2 % of the signal's spread).
     """
 
     def draw(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
         form = str(rng.choice(["clip", "knee"]))
         y = ctx.clean[signal]
         width = rng.uniform(0.005, 0.02) * float(np.ptp(y))
-        depth = log_between(0.01, 0.3, level)
-        high = _below_top(y[: ctx.n // 2], depth)
+        share = log_between(0.005, 0.3, level)
+        high = float(np.quantile(y[: ctx.n // 2], 1.0 - share))
 
         def sense(view: OutputView) -> np.ndarray:
             raw = view.clean + view.noise
@@ -316,14 +329,9 @@ def output_saturation(signal: str) -> Draw:
                 return np.minimum(raw, high)
             return high - width * _softplus((high - raw) / width)
 
-        return Placed(form, {"high": high, "depth": depth}, output=(signal, sense))
+        return Placed(form, {"high": high, "share_train": share}, output=(signal, sense))
 
     return draw
-
-
-def _below_top(x: np.ndarray, depth: float) -> float:
-    """Return the level ``depth`` of ``x``'s range below its maximum."""
-    return float(np.max(x) - depth * np.ptp(x))
 
 
 def _drift_shape(form: str, rng: np.random.Generator, n: int) -> np.ndarray:
@@ -361,10 +369,15 @@ def output_bias_drift(signal: str) -> Draw:
 
 
 def output_scale_error(signal: str) -> Draw:
-    """Return the draw of a sensor gain error: ``gain = 1 ± (3–30 %)`` on the clean signal."""
+    """Return the draw of a sensor gain error on the clean signal: ``gain = 1 ± e``.
+
+    ``e·rms(signal)`` is 1.5–40 noise std (``e`` at most 0.5).
+    """
 
     def draw(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
-        gain = 1.0 + _sign(rng) * log_between(0.03, 0.3, level)
+        rms = float(np.sqrt(np.mean(ctx.clean[signal] ** 2))) or 1.0
+        error = min(log_between(1.5, 40.0, level) * ctx.noise[signal] / rms, 0.5)
+        gain = 1.0 + _sign(rng) * error
 
         def sense(view: OutputView) -> np.ndarray:
             return gain * view.clean + view.noise
@@ -375,7 +388,7 @@ def output_scale_error(signal: str) -> Draw:
 
 
 def output_delay(signal: str) -> Draw:
-    """Return the draw of a delayed reading: 0.5–10 % of the asset's slowest time constant.
+    """Return the draw of a delayed reading: 0.2–10 % of the asset's slowest time constant.
 
     At least 0.3 sample, fractional (interpolated on the integration's sub-steps); the noise
     is not delayed.
@@ -416,18 +429,18 @@ def output_quantization(signal: str) -> Draw:
 def state_limit(state: str) -> Draw:
     """Return the draw of an upper limit of ``state`` reached in the training half.
 
-    The level lies 1–30 % of the training half's range (the first half of the run without
-    the effect) below its maximum. Forms: ``hard`` (the state stops there) and ``steep`` (an
+    The level leaves 0.5–30 % of the training half's samples (the first half of the run
+    without the effect) above it. Forms: ``hard`` (the state stops there) and ``steep`` (an
     outflow of 1–3 per sample time constant above it: a weir, a boiling point).
     """
 
     def draw(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
         form = str(rng.choice(["hard", "steep"]))
         steep = rng.uniform(1.0, 3.0) / ctx.dt
-        depth = log_between(0.01, 0.3, level)
-        upper = _below_top(ctx.clean[state][: ctx.n // 2], depth)
+        share = log_between(0.005, 0.3, level)
+        upper = float(np.quantile(ctx.clean[state][: ctx.n // 2], 1.0 - share))
         steepness = 0.0 if form == "hard" else steep
-        params = {"limit_upper": upper, "depth": depth, "steepness": steepness}
+        params = {"limit_upper": upper, "share_train": share, "steepness": steepness}
         return Placed(form, params, limit=(state, upper, steepness))
 
     return draw
@@ -452,11 +465,11 @@ def parameter_mismatch(owners: Mapping[str, str]) -> Draw:
 def parameter_drift(name: str) -> Draw:
     """Return the draw of a param drifting linearly over the run (out of the catalogue).
 
-    ``name`` falls by 5–35 % of its value from the start to the end (a clogging orifice).
+    ``name`` falls by 1–30 % of its value from the start to the end (a clogging orifice).
     """
 
     def draw(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
-        fall = log_between(0.05, 0.35, level)
+        fall = log_between(0.01, 0.3, level)
         span = ctx.n * ctx.dt
 
         def factor(t: float) -> float:
@@ -470,12 +483,12 @@ def parameter_drift(name: str) -> Draw:
 def parameter_step(name: str) -> Draw:
     """Return the draw of a param that steps mid-run (out of the catalogue).
 
-    ``name`` is divided by ``1 + jump``, ``jump`` 0.1–1, from 35–65 % of the run on (a fan
+    ``name`` is divided by ``1 + jump``, ``jump`` 0.02–1, from 35–65 % of the run on (a fan
     that switches on).
     """
 
     def draw(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
-        jump = log_between(0.1, 1.0, level)
+        jump = log_between(0.02, 1.0, level)
         when = rng.uniform(0.35, 0.65) * ctx.n * ctx.dt
 
         def factor(t: float) -> float:
