@@ -18,7 +18,7 @@ import numpy as np
 
 from dtwin._jit import njit
 
-__all__ = ["me_windows", "cs_window"]
+__all__ = ["me_windows", "cs_window", "warm_up"]
 
 #: Most event iterations (``fmi2NewDiscreteStates`` calls) at one event.
 MAX_EVENT_ITERATIONS = 100
@@ -210,3 +210,39 @@ def cs_window(fns, comp, u, linear, interpolate, in_vr, out_vr, state_vr, first,
         if k < b - 1:
             status = max(status, fns[2](comp, t0 + k * dt, dt, 1))
     return status
+
+
+def _stand_ins() -> tuple[tuple, tuple]:
+    """Model Exchange and Co-Simulation function tuples of Python stand-ins returning fmi2OK.
+
+    They have the C signatures of :mod:`dtwin.twin.fmu`'s pointers, hence numba's types: what
+    is compiled for them serves every FMU.
+    """
+    import ctypes
+
+    p, d, n, i = ctypes.c_void_p, ctypes.c_double, ctypes.c_size_t, ctypes.c_int
+
+    def ok(*_args) -> int:
+        return 0
+
+    def function(*argtypes):
+        return ctypes.CFUNCTYPE(ctypes.c_int, *argtypes)(ok)
+
+    me = (function(p, d), function(p, p, n, p), function(p, p, n), function(p, p, n),
+          function(p, p, n, p), function(p, i, p, p), function(p, p, n), function(p),
+          function(p, p), function(p), function(p, p, n))  # fmt: skip
+    cs = (function(p, p, n, p), function(p, p, n, p), function(p, d, d, i),
+          function(p, p, n, p, p))  # fmt: skip
+    return me, cs
+
+
+def warm_up() -> None:
+    """Compile the loops into numba's on-disk cache (``make venv`` calls this once)."""
+    me, cs = _stand_ins()
+    u, linear, refs = np.zeros((3, 1)), np.ones(1, dtype=np.bool_), np.zeros(1, dtype=np.uint32)
+    bounds = (np.full(2, -np.inf), np.full(2, np.inf))
+    first, last = np.zeros(1, dtype=np.int64), np.full(1, 3, dtype=np.int64)
+    me_windows(me, 0, u, linear, refs, refs, *bounds, first, last, np.zeros((1, 2)), 0.1, 0.0,
+               1, True, 1)  # fmt: skip
+    cs_window(cs, 0, u, linear, True, refs, refs, refs, 0, 0, 3, 0.1, 0.0, np.zeros((3, 1)),
+              np.zeros((3, 1)))  # fmt: skip

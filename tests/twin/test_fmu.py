@@ -120,9 +120,13 @@ def test_the_fmu_simulates_as_the_expression_module(fmu_path, interface, toleran
 @pytest.mark.parametrize(
     ("case", "interface", "effect", "at", "param", "truth"),
     [
-        ("clip", "model_exchange", "output_saturation", "x", "high", None),
+        pytest.param(
+            "clip", "model_exchange", "output_saturation", "x", "high", None, marks=pytest.mark.slow
+        ),
         ("dead", "model_exchange", "input_deadzone", "u", "D", 0.5),
-        ("dead", "co_simulation", "input_deadzone", "u", "D", 0.5),
+        pytest.param(
+            "dead", "co_simulation", "input_deadzone", "u", "D", 0.5, marks=pytest.mark.slow
+        ),
     ],
 )
 def test_the_fmu_and_the_expression_twin_name_the_same_effect(
@@ -226,3 +230,23 @@ def test_the_cli_diagnoses_an_fmu_twin_relative_to_its_file(fmu_path, tmp_path, 
     assert len(error.splitlines()) == 1
     assert "mass m must be > 0" in error
     assert not bad_out.exists()
+
+
+def test_an_fmu_joined_to_a_module_by_an_unrecorded_signal_is_refused(fmu_path):
+    mapping = _fmu_table(fmu_path, inputs={"q": "u"})
+    mapping["modules"] = {"pump": {"block": "lag", "inputs": ["u"], "outputs": ["q"],
+                                   "params": {"tau": 0.5}}, **mapping["modules"]}  # fmt: skip
+    table = table_from_mapping(mapping)
+    spec = units_of(table, ["u", "x"])[0]
+    assert spec.modules == ("pump", "osc")
+    with pytest.raises(ValueError, match=r"module 'osc': an FMU module is diagnosed on its own.*"
+                       r"signal\(s\) q join it to module\(s\) pump: record them"):  # fmt: skip
+        model_for(spec, table)
+    assert isinstance(model_for(units_of(table, ["u", "q", "x"])[1], table), FmuModelExchange)
+
+
+def test_the_fmu_loops_compile_for_stand_ins():
+    """``make venv`` warms the numba cache with stand-in functions of the FMI signatures."""
+    from dtwin.twin import _fmu_kernels
+
+    _fmu_kernels.warm_up()
