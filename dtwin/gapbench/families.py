@@ -430,6 +430,7 @@ def _key(family, effect, placed, choices, asset, twin, names) -> dict[str, Any]:
     none = effect == NONE
     spec = None if none else family.effects[effect]
     expected = NONE if none else spec.expected
+    also = () if none or (spec.equivalent_bare_only and choices.internal) else spec.equivalent
     module = None if none else placed.module or spec.module
     units = _units(twin["modules"], (family.input, *names))
     true_params = {**asset.params, **placed.true_params}
@@ -438,7 +439,7 @@ def _key(family, effect, placed, choices, asset, twin, names) -> dict[str, Any]:
         "arm": RECORDING_ARMS[0] if choices.internal else RECORDING_ARMS[1],
         "effect": effect,
         "expected_effect": expected,
-        "accepted_effects": [expected],
+        "accepted_effects": [expected, *also],
         "module": module,
         "group": units[module] if module else [],
         "at": None if none else placed.at or spec.at,
@@ -537,10 +538,10 @@ def generate_family_case(
         % for thermal) and the recorded outputs (tanks ``[q, h1,] level``; motor ``[i,] w``;
         thermal ``[P, T1,] y``). ``twin``: ``dt``, ``modules`` and, in four cases of five,
         ``noise``. ``key``: ``family``, ``arm`` (``internal`` or ``bare``), ``effect``,
-        ``expected_effect``, ``module``, ``group``, ``at``, ``in_list``, ``magnitude``,
-        ``snr``, ``snr_by_signal``, ``form``, ``params``, ``true_params`` (by module, the
-        twin's names), ``noise``, ``noise_pole``, ``noise_declared``, ``internal``, ``seed``,
-        ``n_samples``, ``dt``, ``excitation``, ``columns``.
+        ``expected_effect``, ``accepted_effects``, ``module``, ``group``, ``at``, ``in_list``,
+        ``magnitude``, ``snr``, ``snr_by_signal``, ``form``, ``params``, ``true_params`` (by
+        module, the twin's names), ``noise``, ``noise_pole``, ``noise_declared``,
+        ``internal``, ``seed``, ``n_samples``, ``dt``, ``excitation``, ``columns``.
 
     Examples
     --------
@@ -624,7 +625,9 @@ def score_family_case(key: Mapping[str, Any], diagnosis: Mapping[str, Any]) -> d
         module or in its ``modules``; None for a ``none`` case), ``at_ok`` (the answer's
         ``at`` without its ``module.`` prefix is the key's) and ``named``: ``none`` answered
         for a ``none`` case; ``unexplained`` and located for an out-of-list one; else located,
-        the effect right and, for a ``state_*`` effect, ``at`` right.
+        the effect one of the key's ``accepted_effects`` (the generated one's catalogue name,
+        or one that explains the recording exactly as well) and, for a ``state_*`` effect,
+        ``at`` right.
     """
     expected = key["expected_effect"]
     effect, module = diagnosis.get("effect"), diagnosis.get("module")
@@ -635,7 +638,7 @@ def score_family_case(key: Mapping[str, Any], diagnosis: Mapping[str, Any]) -> d
         named = effect == NONE
     else:
         located = key["module"] == module or key["module"] in modules
-        named = located and effect == expected
+        named = located and effect in key.get("accepted_effects", [expected])
         if expected.startswith("state_"):
             named = named and at_ok
     return {

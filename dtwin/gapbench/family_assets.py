@@ -188,7 +188,7 @@ def _draw_tanks(rng: np.random.Generator, n_samples: int | None) -> Asset:
         "b0": rng.uniform(0.1, 0.6),
     }
     tau_slow = 2.0 * math.sqrt(0.5 * h_full) / min(a1, a2)
-    u = _steps(rng, n, 1.5, 10.0, (0.3 * tau_slow / dt, 1.5 * tau_slow / dt))
+    u = _steps(rng, n, 0.0, 10.0, (0.3 * tau_slow / dt, 1.5 * tau_slow / dt))
     return Asset(dt, u, params, tau_slow, "steps")
 
 
@@ -260,17 +260,32 @@ TANKS = Family(
         "state_limit": FamilyEffect("state_limit", "tanks", "h1", state_limit("h1")),
         "input_saturation": FamilyEffect("input_saturation", "pump", "u", input_saturation()),
         "input_deadzone": FamilyEffect("input_deadzone", "pump", "u", input_deadzone()),
-        "input_delay": FamilyEffect("input_delay", "pump", "u", input_delay()),
+        "input_delay": FamilyEffect(
+            "input_delay", "pump", "u", input_delay(), equivalent=("output_delay",)
+        ),
         **{
             name: FamilyEffect(name, "sensor", "level", draw("level"))
             for name, draw in (
                 ("output_saturation", output_saturation),
                 ("output_bias_drift", output_bias_drift),
-                ("output_scale_error", output_scale_error),
-                ("output_delay", output_delay),
                 ("output_quantization", output_quantization),
             )
         },
+        "output_scale_error": FamilyEffect(  # the sensor's gain and bias scale alike
+            "output_scale_error",
+            "sensor",
+            "level",
+            output_scale_error("level"),
+            equivalent=("parameter_mismatch",),
+        ),
+        "output_delay": FamilyEffect(
+            "output_delay",
+            "sensor",
+            "level",
+            output_delay("level"),
+            equivalent=("input_delay",),
+            equivalent_bare_only=True,
+        ),
         "parameter_mismatch": FamilyEffect(
             "parameter_mismatch", "tanks", None, parameter_mismatch({"a1": "tanks", "a2": "tanks"})
         ),
@@ -387,7 +402,7 @@ def _drive_torque(ctx: Context) -> float:
 
 
 def _friction(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
-    """Draw a friction torque on the rotor: ``Fc`` 3–30 % of the drive torque's spread.
+    """Draw a friction torque on the rotor: ``Fc`` 1–30 % of the drive torque's spread.
 
     Forms: ``tanh`` (``Fc·tanh(w/ws)``), ``stribeck`` (a breakaway 1.3–2.5 ``Fc`` decaying
     over ``vs`` 2–10 % of std(w)), ``coulomb_viscous`` (plus a viscous part of 20 % of ``Fc``
@@ -397,7 +412,7 @@ def _friction(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
     w_std = float(np.std(ctx.clean["w"])) or 1.0
     smooth = rng.uniform(0.005, 0.02) * w_std
     breakaway, vs = rng.uniform(1.3, 2.5), rng.uniform(0.02, 0.1) * w_std
-    fc = log_between(0.03, 0.3, level) * _drive_torque(ctx)
+    fc = log_between(0.01, 0.3, level) * _drive_torque(ctx)
     inertia, viscous = ctx.params["J"], 0.2 * fc / w_std if form == "coulomb_viscous" else 0.0
     bump = (breakaway - 1.0) * fc if form == "stribeck" else 0.0
 
@@ -411,10 +426,10 @@ def _friction(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
 
 
 def _drag(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
-    """Draw a fan's drag ``θ·|w|^p·sign(w)``, ``p`` 1.8–2.2: 5–50 % of the drive at rms(w)."""
+    """Draw a fan's drag ``θ·|w|^p·sign(w)``, ``p`` 1.8–2.2: 1–50 % of the drive at rms(w)."""
     power = rng.uniform(1.8, 2.2)
     w_rms = float(np.sqrt(np.mean(ctx.clean["w"] ** 2))) or 1.0
-    theta = log_between(0.05, 0.5, level) * _drive_torque(ctx) / w_rms**power
+    theta = log_between(0.01, 0.5, level) * _drive_torque(ctx) / w_rms**power
     inertia = ctx.params["J"]
 
     def term(t: float, x: Sequence[float]) -> float:
@@ -474,16 +489,36 @@ MOTOR = Family(
         "state_abs_square": FamilyEffect("state_abs_square", "mechanical", "w", _drag),
         "input_saturation": FamilyEffect("input_saturation", "electrical", "V", input_saturation()),
         "input_deadzone": FamilyEffect("input_deadzone", "electrical", "V", input_deadzone()),
-        "input_delay": FamilyEffect("input_delay", "electrical", "V", input_delay()),
+        "input_delay": FamilyEffect(
+            "input_delay",
+            "electrical",
+            "V",
+            input_delay(),
+            equivalent=("output_delay",),
+            equivalent_bare_only=True,
+        ),
         **{
             name: FamilyEffect(name, "mechanical", "w", draw("w"))
             for name, draw in (
                 ("output_quantization", output_quantization),
-                ("output_scale_error", output_scale_error),
-                ("output_delay", output_delay),
                 ("output_bias_drift", output_bias_drift),
             )
         },
+        "output_scale_error": FamilyEffect(  # Kt·g and Ke/g: the same recording
+            "output_scale_error",
+            "mechanical",
+            "w",
+            output_scale_error("w"),
+            equivalent=("parameter_mismatch",),
+        ),
+        "output_delay": FamilyEffect(
+            "output_delay",
+            "mechanical",
+            "w",
+            output_delay("w"),
+            equivalent=("input_delay",),
+            equivalent_bare_only=True,
+        ),
         "parameter_mismatch": FamilyEffect(
             "parameter_mismatch",
             "electrical",
@@ -617,10 +652,17 @@ THERMAL = Family(
             name: FamilyEffect(name, "sensor", "y", draw("y"))
             for name, draw in (
                 ("output_bias_drift", output_bias_drift),
-                ("output_scale_error", output_scale_error),
                 ("output_saturation", output_saturation),
-                ("output_delay", output_delay),
                 ("output_quantization", output_quantization),
+            )
+        },
+        **{  # without T1: temperatures scaled (C/g, Ta·g), a delay moved to the input
+            name: FamilyEffect(
+                name, "sensor", "y", draw("y"), equivalent=(other,), equivalent_bare_only=True
+            )
+            for name, draw, other in (
+                ("output_scale_error", output_scale_error, "parameter_mismatch"),
+                ("output_delay", output_delay, "input_delay"),
             )
         },
         "parameter_mismatch": FamilyEffect(

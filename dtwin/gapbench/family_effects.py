@@ -189,12 +189,22 @@ class FamilyEffect:
         The signal, state or param (as written in the twin file), or None.
     draw : callable
         :data:`Draw`.
+    equivalent : tuple of str
+        Catalogue effects that explain the recording exactly as well (the key's
+        ``accepted_effects``): a delay at a unit's input and at its only output commute
+        through a time-invariant unit started from rest; a sensor's gain error equals a
+        re-fit of params when the twin is covariant with the output's scale.
+    equivalent_bare_only : bool
+        The equivalence holds only without the internal signals (a recorded internal
+        signal that the effect leaves alone breaks it).
     """
 
     expected: str
     module: str
     at: str | None
     draw: Draw
+    equivalent: tuple[str, ...] = ()
+    equivalent_bare_only: bool = False
 
 
 #: ``x`` with ``tanh(x) = x/2``: a tanh reaching half its linear extension (1.9150...).

@@ -25,11 +25,11 @@ from dtwin.gapbench.rigs import generate_any_case
 from dtwin.twin.table import table_from_mapping
 
 #: Samples of the quick cases (the benchmark's are 2000–10,000).
-SHORT = 300
+SHORT = 200
 #: Keys every case's key holds.
 KEY_FIELDS = {
-    "family", "arm", "effect", "expected_effect", "module", "group", "at", "in_list",
-    "magnitude", "snr", "snr_by_signal", "form", "params", "true_params", "noise",
+    "family", "arm", "effect", "expected_effect", "accepted_effects", "module", "group",
+    "at", "in_list", "magnitude", "snr", "snr_by_signal", "form", "params", "true_params", "noise",
     "noise_pole", "noise_declared", "internal", "seed", "n_samples", "dt", "columns",
 }  # fmt: skip
 EFFECT_TYPES = [case for case in FAMILY_CASE_TYPES if not case.endswith("_none")]
@@ -138,9 +138,10 @@ def test_case_types_parse_and_dispatch(monkeypatch):
         parse_family_case_type("boiler_none")
     calls = []
     monkeypatch.setattr(rigs, "generate_family_case", lambda *args: calls.append(args))
+    monkeypatch.setattr(rigs, "generate_rig_case", lambda *args: calls.append(("rig", *args)))
     generate_any_case("motor_cogging", 3, nominal={})  # as the benchmark calls it
-    generate_any_case("rig_none", 3)
-    assert calls == [("motor_cogging", 3)]
+    generate_any_case("rig_none", 4)
+    assert calls == [("motor_cogging", 3), ("rig", "none", 4)]
 
 
 def test_scores_locate_by_unit_and_name_states_by_their_name():
@@ -154,12 +155,24 @@ def test_scores_locate_by_unit_and_name_states_by_their_name():
                                         "effect": "state_limit", "at": "h1"})  # fmt: skip
     assert not elsewhere["located"] and not elsewhere["named"]
     none_key = {**key, "expected_effect": "none", "effect": "none", "module": None,
-                "in_list": False, "at": None}  # fmt: skip
+                "in_list": False, "at": None, "accepted_effects": ["none"]}  # fmt: skip
     assert score_family_case(none_key, {"module": None, "modules": [], "effect": "none"})["named"]
     assert score_family_case(none_key, {**group, "effect": "unexplained"})["located"] is None
-    out = {**key, "expected_effect": "unexplained", "effect": "clogging", "in_list": False}
+    out = {**key, "expected_effect": "unexplained", "effect": "clogging", "in_list": False,
+           "accepted_effects": ["unexplained"]}  # fmt: skip
     assert score_family_case(out, {**group, "effect": "unexplained"})["named"]
     assert not score_family_case(out, {**group, "effect": "parameter_mismatch"})["named"]
+
+
+def test_a_delay_is_either_delay_when_the_unit_cannot_tell_them_apart():
+    bare = generate_family_case("motor_bare_output_delay", 3, n_samples=SHORT).key
+    inside = generate_family_case("motor_internal_output_delay", 3, n_samples=SHORT).key
+    assert bare["accepted_effects"] == ["output_delay", "input_delay"]
+    assert inside["accepted_effects"] == ["output_delay"]
+    answer = {"module": "electrical", "modules": ["electrical", "mechanical"],
+              "effect": "input_delay", "at": "V"}  # fmt: skip
+    assert score_family_case(bare, answer)["named"]
+    assert not score_family_case(inside, {**answer, "modules": ["electrical"]})["named"]
 
 
 def test_the_summary_gives_wilson_intervals_per_family_and_arm():
