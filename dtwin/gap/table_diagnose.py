@@ -38,6 +38,7 @@ from dtwin.gap.noise import (
     effective_samples,
     gap_threshold,
     reconcile_noise_floor,
+    residual_noise_floor,
     spectral_noise_floor,
 )
 from dtwin.gap.recording import Recording
@@ -288,11 +289,16 @@ def _floors(data, fit, noise, settings) -> tuple[list[NoiseFloor], list[float]]:
     n_choose = data.parts["choose"][1] - data.parts["choose"][0]
     floors, thresholds = [], []
     for o, signal in enumerate(data.spec.outputs):
-        residual = error[train, o]
-        residual = residual[np.isfinite(residual)]
-        spectral = spectral_noise_floor(residual, data.dt, max(data.bandwidth, 1e-12))
+        gapped = error[train, o]
+        residual = gapped[np.isfinite(gapped)]
+        measured = spectral_noise_floor(residual, data.dt, max(data.bandwidth, 1e-12))
+        # the whole residual as AR(1) noise when its innovations are white: the twin is right
+        # and its error is noise, whatever its colour (a spectral floor misses coloured noise)
+        whole = residual_noise_floor(gapped, settings.significance)
+        if whole is not None and whole.rms > measured.rms:
+            measured = whole
         twin = NoiseFloor(noise[signal], "twin", np.ones(1)) if signal in noise else None
-        floor = reconcile_noise_floor(twin, spectral, settings.noise_tolerance)
+        floor = reconcile_noise_floor(twin, measured, settings.noise_tolerance)
         floors.append(floor)
         thresholds.append(
             gap_threshold(
