@@ -4,6 +4,8 @@ Subcommands::
 
     dtwin diagnose RECORDING.csv --twin TWIN.yaml --out DIR [--calibrate] [--train-frac 0.5]
     dtwin generate EFFECT --seed N --out DIR [--magnitude M] [--n-samples N] [--module M]
+    dtwin regimes RECORDING.csv --twin TWIN.yaml --out DIR [--k K | --k-max K] [--nominal T0:T1]
+    dtwin monitor --twin TWIN.yaml --regimes DIR/regimes.json [--follow FILE] [--every N]
 
 Bad input gets a one-line message on stderr and exit status 2, never a traceback; an unexpected
 failure gets exit status 3 (set ``DTWIN_DEBUG=1`` for the traceback). No Python warning reaches
@@ -317,6 +319,10 @@ def build_parser() -> argparse.ArgumentParser:
         "(default config/config.yaml, the paper's; a rig case has its own)",
     )
     gen.set_defaults(run=_generate)
+
+    from dtwin.monitor.commands import add_commands  # dtwin regimes, dtwin monitor
+
+    add_commands(sub)
     return parser
 
 

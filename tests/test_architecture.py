@@ -18,6 +18,9 @@ Layers of ``dtwin/`` (who may import whom, directly or through any chain of dtwi
   its own figure in the shared style, ``dtwin.figures._style``) and never its benchmark;
 - gapbench (``dtwin/gapbench/``): the diagnoser's benchmark (generated cases, their scores);
   may import the diagnoser, never a stage, figure or reference module. No other layer imports it.
+- monitor (``dtwin/monitor/``): ``dtwin regimes`` and ``dtwin monitor`` on a user's twin; may
+  import concepts, the twin package and the diagnoser (and draw in the shared style), never a
+  stage, figure, reference or gapbench module. Only the command line imports it.
 
 Every forbidden dtwin name is checked against each file's imports and those of every dtwin
 module it reaches (a name a package re-exports lazily, dtwin/_lazy.py, counts as an import of
@@ -127,7 +130,22 @@ FORBIDDEN = {
         "yaml",
         "snakemake",
     ),
+    "monitor": (
+        "dtwin.stages",
+        "dtwin.figures",
+        "dtwin.reference",
+        "dtwin.gapbench",
+        "dtwin.claims",
+        "dtwin.cli",
+        "dtwin._script",
+        "snakemake",
+    ),
 }
+# dtwin regimes and dtwin monitor (dtwin/monitor/): only the command line imports them
+for _layer in FORBIDDEN:
+    if _layer != "monitor":
+        FORBIDDEN[_layer] += ("dtwin.monitor",)
+ALLOWED["monitor"] = ("dtwin.figures._style", "dtwin.figures._print_check")
 
 
 def layer_of(path: Path) -> str | None:

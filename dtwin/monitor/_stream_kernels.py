@@ -1,0 +1,110 @@
+"""The monitor's compiled loop: the regime filter over a chunk of residual rows.
+
+:func:`filter_rows` is the normalised forward recursion of the regime HMM (paper Eq. (4)) over
+a chunk of z-scored residual rows, continuing from the previous row's filtered vector; a row
+with a missing value is a prediction step only. It gives the same bits whether a series is run
+in one call or in chunks (the stream and ``dtwin regimes`` run the same code). Without numba it
+runs in Python (:mod:`dtwin._jit`). Arrays are time-first.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dtwin._jit import njit
+
+__all__ = ["filter_rows", "warm_up"]
+
+
+@njit(cache=True)
+def _predict(alpha, transmat, propagate, predicted):  # pragma: no cover - compiled
+    """``predicted = alpha @ transmat`` (or ``alpha`` itself when not ``propagate``)."""
+    k = alpha.shape[0]
+    for j in range(k):
+        if not propagate:
+            predicted[j] = alpha[j]
+            continue
+        total = 0.0
+        for i in range(k):
+            total += alpha[i] * transmat[i, j]
+        predicted[j] = total
+
+
+@njit(cache=True)
+def _log_emissions(row, means, precision, log_norm, log_b) -> float:  # pragma: no cover
+    """Fill ``log_b`` with each state's Gaussian log density of ``row``; return their maximum."""
+    peak = -np.inf
+    for j in range(means.shape[0]):
+        quadratic = 0.0
+        for c in range(row.shape[0]):
+            gap = row[c] - means[j, c]
+            quadratic += gap * gap * precision[j, c]
+        log_b[j] = log_norm[j] - 0.5 * quadratic
+        peak = max(peak, log_b[j])
+    return peak
+
+
+@njit(cache=True)
+def _update(alpha, predicted, log_b, peak):  # pragma: no cover - compiled
+    """``alpha ∝ predicted · exp(log_b − peak)``; the emissions alone if nothing is reachable."""
+    k = alpha.shape[0]
+    norm = 0.0
+    for j in range(k):
+        alpha[j] = predicted[j] * math.exp(log_b[j] - peak)
+        norm += alpha[j]
+    if not norm > 0.0:
+        norm = 0.0
+        for j in range(k):
+            alpha[j] = math.exp(log_b[j] - peak)
+            norm += alpha[j]
+    for j in range(k):
+        alpha[j] /= norm
+
+
+@njit(cache=True)
+def filter_rows(z, means, precision, log_norm, transmat, alpha, fresh):  # pragma: no cover
+    """Return the filtered posteriors of the rows of ``z``, continuing from ``alpha``.
+
+    Parameters
+    ----------
+    z : ndarray, shape (n, D)
+        z-scored residual rows; a row with a NaN is a prediction step (no emission).
+    means, precision : ndarray, shape (K, D)
+        Emission means and inverse variances (z-units).
+    log_norm : ndarray, shape (K,)
+        ``−½ Σ_d log(2π σ_kd²)``.
+    transmat : ndarray, shape (K, K)
+        ``transmat[i, j] = P(S_t = j | S_t−1 = i)``.
+    alpha : ndarray, shape (K,)
+        The previous row's filtered vector, or the initial distribution when ``fresh``;
+        left at the last row's filtered vector.
+    fresh : bool
+        Row 0 is the first of a sequence (``alpha`` is the initial distribution, not propagated).
+
+    Returns
+    -------
+    ndarray, shape (n, K)
+        ``P(S_t = k | e_1:t)``, rows summing to 1.
+    """
+    n = z.shape[0]
+    k = means.shape[0]
+    out = np.empty((n, k))
+    predicted = np.empty(k)
+    log_b = np.empty(k)
+    for t in range(n):
+        _predict(alpha, transmat, not (fresh and t == 0), predicted)
+        if np.isnan(z[t]).any():
+            alpha[:] = predicted
+        else:
+            peak = _log_emissions(z[t], means, precision, log_norm, log_b)
+            _update(alpha, predicted, log_b, peak)
+        out[t] = alpha
+    return out
+
+
+def warm_up() -> None:
+    """Compile the filter into numba's on-disk cache."""
+    filter_rows(np.zeros((2, 1)), np.zeros((2, 1)), np.ones((2, 1)), np.zeros(2),
+                np.full((2, 2), 0.5), np.full(2, 0.5), True)  # fmt: skip

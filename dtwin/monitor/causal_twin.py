@@ -1,0 +1,450 @@
+"""The twin run causally: residuals a live monitor can reproduce sample by sample.
+
+Specification: docs/monitor.md §Residuals. The diagnoser's residuals
+(:func:`dtwin.gap.table_residuals.table_residuals`) fit every window's states on the window
+itself, which needs the window's future. Here each unit of the twin table
+(:func:`dtwin.twin.simulate.units_of`) is **frozen** (:func:`freeze_units`: its params fitted
+once, on the nominal stretch, as the diagnoser fits them) and then **continued**: from its state
+at the previous sample to the next, a state that is a recorded output reset to its recorded
+value at every window start (every :attr:`FrozenUnit.window` samples), the others carried on.
+At a start (the first sample, or after a jump in time) the states are unknown: the first
+:attr:`CausalTwin.settling` samples are the **settling period**, over which each unit's initial
+states are fitted by least squares (params held, as the diagnoser fits a window's states); no
+residual is given inside it. The residual of a recorded output is ``recorded − twin``.
+
+:class:`CausalTwin` takes samples in chunks of any size and gives the same bits whatever the
+cut, so ``dtwin regimes`` (one chunk: the whole recording) and ``dtwin monitor`` (what the
+stream holds) agree. Arrays are time-first: ``(n_samples, n_columns)``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from dtwin._validation import DtwinValueError
+from dtwin.twin.simulate import UnitModel, UnitSpec, units_of
+
+__all__ = [
+    "FrozenUnit",
+    "CausalRows",
+    "CausalTwin",
+    "freeze_units",
+    "frozen_units_from_mapping",
+    "channel_names",
+]
+
+#: Largest normalised residual of a diverged start fit (keeps least squares finite).
+_DIVERGED = 1e3
+_FIRST = np.zeros(1, dtype=np.int64)
+
+
+def channel_names(units: Sequence[FrozenUnit]) -> list[str]:
+    """Return the residual channels ``<unit>:<signal>`` of ``units``, in order."""
+    return [f"{u.name}:{signal}" for u in units for signal in u.outputs]
+
+
+def _fingerprint(spec: UnitSpec) -> str:
+    """Return a digest of the unit's equations (targets, texts, bound names) and params."""
+    text = repr(
+        [(a.target, a.text, sorted(a.symbols.items())) for a in spec.assignments]
+        + [sorted(spec.params), list(spec.output_states.items())]
+    )
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class FrozenUnit:
+    """One unit of the twin with its params fixed: what the monitor continues.
+
+    Attributes
+    ----------
+    name : str
+        The unit's modules joined by ``+``.
+    inputs, outputs, states : tuple of str
+        Its recorded inputs, recorded outputs and qualified states.
+    theta : dict of str to float
+        Every param (qualified name) as fitted on the nominal stretch.
+    window : int
+        Samples between resets of the states that are recorded outputs.
+    substeps : int
+        Runge-Kutta steps per sample.
+    linear : tuple of bool
+        Each input linear between samples (True) or held.
+    settle : int
+        Samples over which the initial states are fitted at a start (1: none unrecorded).
+    norm : tuple of float
+        Each output's standard deviation on the nominal stretch (the start fit's unit).
+    x_typical, x_scale : tuple of float
+        Each state's median and spread over the nominal stretch (the start fit's first
+        guess and scale).
+    fingerprint : str
+        Digest of the unit's equations: a model file is refused for another twin.
+    """
+
+    name: str
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    states: tuple[str, ...]
+    theta: dict[str, float]
+    window: int
+    substeps: int
+    linear: tuple[bool, ...]
+    settle: int
+    norm: tuple[float, ...]
+    x_typical: tuple[float, ...]
+    x_scale: tuple[float, ...]
+    fingerprint: str
+
+    def to_mapping(self) -> dict:
+        """Return the unit as plain data (``regimes.json``'s ``twin.units``)."""
+        return asdict(self)
+
+
+def _unit_from_mapping(raw: Mapping) -> FrozenUnit:
+    tuples = ("inputs", "outputs", "states", "linear", "norm", "x_typical", "x_scale")
+    values = {key: tuple(raw[key]) for key in tuples}
+    return FrozenUnit(
+        name=str(raw["name"]),
+        theta={str(k): float(v) for k, v in raw["theta"].items()},
+        window=int(raw["window"]),
+        substeps=int(raw["substeps"]),
+        settle=int(raw["settle"]),
+        fingerprint=str(raw["fingerprint"]),
+        **values,
+    )
+
+
+def frozen_units_from_mapping(raw: Sequence[Mapping], table) -> list[FrozenUnit]:
+    """Return the frozen units of ``regimes.json`` after checking that they are ``table``'s.
+
+    Parameters
+    ----------
+    raw : sequence of mapping
+        ``regimes.json``'s ``twin.units``.
+    table : dtwin.twin.table.TwinTable
+
+    Raises
+    ------
+    DtwinValueError
+        One line naming the first unit, signal or equation that differs.
+    """
+    try:
+        units = [_unit_from_mapping(entry) for entry in raw]
+    except (KeyError, TypeError, ValueError, AttributeError) as error:
+        raise DtwinValueError(f"regimes file: twin.units is malformed ({error})") from error
+    recorded = {s for u in units for s in (*u.inputs, *u.outputs)}
+    specs = {spec.name: spec for spec in units_of(table, sorted(recorded))}
+    if sorted(specs) != sorted(u.name for u in units):
+        raise DtwinValueError(
+            "regimes file does not match the twin: its units are "
+            f"{', '.join(u.name for u in units)}, the twin's on those signals "
+            f"{', '.join(specs) or 'none'}"
+        )
+    for unit in units:
+        spec = specs[unit.name]
+        for key in ("inputs", "outputs", "states"):
+            if tuple(getattr(spec, key)) != getattr(unit, key):
+                raise DtwinValueError(
+                    f"regimes file does not match the twin: unit {unit.name} {key} "
+                    f"{', '.join(getattr(unit, key))} (the twin: {', '.join(getattr(spec, key))})"
+                )
+        if _fingerprint(spec) != unit.fingerprint:
+            raise DtwinValueError(
+                f"regimes file does not match the twin: unit {unit.name}'s equations or params "
+                "differ from those it was fitted with (run dtwin regimes again)"
+            )
+    return units
+
+
+def freeze_units(recording, table, rows: tuple[int, int], *, calibrate: bool = False):
+    """Fit every unit's params on ``rows`` of the recording, as the diagnoser does; freeze them.
+
+    Parameters
+    ----------
+    recording : dtwin.gap.recording.Recording
+    table : dtwin.twin.table.TwinTable
+    rows : (int, int)
+        The nominal stretch, samples ``rows[0] … rows[1] − 1``.
+    calibrate : bool
+        Fit every param freely (else within the calibration tolerance of its declared value).
+
+    Returns
+    -------
+    list of FrozenUnit
+        In table order.
+    """
+    from threadpoolctl import threadpool_limits
+
+    from dtwin.gap.results import GapSettings
+    from dtwin.gap.table_diagnose import _nominal_fit
+    from dtwin.gap.table_fit import require_finite_fit, state_guess
+
+    settings = GapSettings()
+    n = recording.n_samples
+    parts = {"train": rows, "choose": (rows[1], n), "score": (rows[1], n)}
+    units = []
+    with threadpool_limits(limits=1):
+        for spec in units_of(table, list(recording.signals)):
+            if spec.states:
+                data = _prepared(spec, recording, table, parts, settings, calibrate)
+            else:
+                data = _algebraic_data(spec, recording, parts)
+            fit = _nominal_fit(data, settings, calibrate)
+            require_finite_fit(fit, spec.name)
+            guess = state_guess(data, fit.theta, fit.variant)[slice(*rows)]
+            units.append(_frozen(spec, data, fit, guess))
+    return units
+
+
+def _prepared(spec, recording, table, parts, settings, calibrate):
+    """Return the diagnoser's layout of a unit with states (holds, substeps, window)."""
+    from dtwin.gap.table_diagnose import _prepare_unit
+
+    try:
+        return _prepare_unit(spec, recording, table, parts, settings, calibrate)
+    except OverflowError as error:  # no decaying mode: no time constant sets a window
+        raise DtwinValueError(
+            f"unit {spec.name}: no state decays (an integrator alone?), so no window can be "
+            "chosen for it; record one of its states or add its feedback"
+        ) from error
+
+
+def _algebraic_data(spec: UnitSpec, recording, parts):
+    """Return the layout of a unit without states (outputs are functions of the inputs)."""
+    from dtwin.gap.table_fit import UnitData
+
+    train = slice(*parts["train"])
+    n = recording.n_samples
+    inputs = np.column_stack([recording.signals[s] for s in spec.inputs] or [np.zeros((n, 0))])
+    outputs = np.column_stack([recording.signals[s] for s in spec.outputs])
+    norm = outputs[train].std(axis=0)
+    if not np.all(norm > 0):
+        raise DtwinValueError(f"unit {spec.name}: an output does not vary on the nominal stretch")
+    linear = np.ones(len(spec.inputs), dtype=bool)  # read at the samples only
+    return UnitData(spec, UnitModel.from_spec(spec), np.ascontiguousarray(inputs), outputs,
+                    recording.dt, norm, linear, 1, parts["train"][1] - parts["train"][0],
+                    parts, dict(spec.params))  # fmt: skip
+
+
+def _frozen(spec: UnitSpec, data, fit, guess: np.ndarray) -> FrozenUnit:
+    recorded = set(spec.output_states.values())
+    unrecorded = any(s not in recorded for s in spec.states)
+    typical = np.nanmedian(fit.x0, axis=0) if len(spec.states) else np.zeros(0)
+    spread = np.nanstd(guess, axis=0) if len(spec.states) else np.zeros(0)
+    scale = np.where(spread > 0, spread, np.maximum(np.abs(typical), 1.0))
+    return FrozenUnit(
+        name=spec.name,
+        inputs=tuple(spec.inputs),
+        outputs=tuple(spec.outputs),
+        states=tuple(spec.states),
+        theta={k: float(v) for k, v in fit.theta.items()},
+        window=int(data.window),
+        substeps=int(data.substeps),
+        linear=tuple(bool(v) for v in data.linear),
+        settle=int(data.window) if unrecorded else 1,
+        norm=tuple(float(v) for v in data.norm),
+        x_typical=tuple(float(v) for v in np.nan_to_num(typical)),
+        x_scale=tuple(float(v) for v in scale),
+        fingerprint=_fingerprint(spec),
+    )
+
+
+@dataclass(frozen=True)
+class CausalRows:
+    """What :meth:`CausalTwin.feed` returns for a chunk of samples.
+
+    Attributes
+    ----------
+    simulated, residuals : ndarray, shape (n, n_channels)
+        The twin's outputs and ``recorded − twin`` per channel (:func:`channel_names`);
+        NaN inside the settling period and at missing samples (residuals only).
+    settling : ndarray of bool, shape (n,)
+        The sample lies in a settling period.
+    """
+
+    simulated: np.ndarray
+    residuals: np.ndarray
+    settling: np.ndarray
+
+
+class _UnitRunner:
+    """One frozen unit compiled, with its place in the stream's columns and its running state."""
+
+    def __init__(self, unit: FrozenUnit, spec: UnitSpec, columns: Sequence[str], dt: float):
+        self.unit, self.dt = unit, dt
+        self.model = UnitModel.from_spec(spec)
+        self.theta = np.array([unit.theta[name] for name in self.model.param_names])
+        self.in_cols = np.array([columns.index(s) for s in unit.inputs], dtype=np.int64)
+        self.out_cols = np.array([columns.index(s) for s in unit.outputs], dtype=np.int64)
+        pairs = [
+            (spec.states.index(st), spec.outputs.index(o)) for o, st in spec.output_states.items()
+        ]
+        self.reset_states = np.array([p[0] for p in pairs], dtype=np.int64)
+        self.reset_outputs = np.array([p[1] for p in pairs], dtype=np.int64)
+        self.state = np.zeros(len(spec.states))
+
+    def start_state(self, rows: np.ndarray) -> None:
+        """Fit the initial states on the first ``settle`` rows (params held)."""
+        u, y = rows[:, self.in_cols], rows[:, self.out_cols]
+        x = np.array(self.unit.x_typical, dtype=float)
+        x[self.reset_states] = y[0, self.reset_outputs]
+        if self.unit.settle > 1 and len(x):
+            x = self._fitted_start(u[: self.unit.settle], y[: self.unit.settle], x)
+        self.state = x
+
+    def _fitted_start(self, u: np.ndarray, y: np.ndarray, guess: np.ndarray) -> np.ndarray:
+        from scipy.optimize import least_squares
+
+        norm = np.asarray(self.unit.norm)
+        starts, stops = np.array([0]), np.array([len(u)])
+
+        def residual(x):
+            with np.errstate(all="ignore"):
+                simulated, _ = self.model.simulate(
+                    u, self.theta, starts, stops, x[None, :], self.dt,
+                    substeps=self.unit.substeps, linear=self.unit.linear,
+                )  # fmt: skip
+            r = (simulated - y) / norm
+            r = np.where(np.isnan(y), 0.0, np.where(np.isfinite(r), r, _DIVERGED))
+            return np.clip(r, -_DIVERGED, _DIVERGED).ravel()
+
+        fit = least_squares(
+            residual, guess, x_scale=np.asarray(self.unit.x_scale), max_nfev=100, xtol=1e-10
+        )
+        return fit.x
+
+    def _simulate(self, u: np.ndarray, t0: float) -> tuple[np.ndarray, np.ndarray]:
+        """Return the outputs and states of rows ``u`` from the state at row 0 (one window)."""
+        with np.errstate(all="ignore"):
+            return self.model.simulate(
+                u, self.theta, _FIRST, np.array([len(u)]), self.state[None, :], self.dt,
+                substeps=self.unit.substeps, linear=self.unit.linear, t0=t0,
+            )  # fmt: skip
+
+    def run(self, rows: np.ndarray, k0: int, t0: float) -> np.ndarray:
+        """Return the outputs at ``rows`` (row 0: the state's sample); move the state on.
+
+        Rows are run in windows cut where the global index ``k0 + r`` is a multiple of the
+        unit's window (never at row 0: its state is given); at a cut the states that are
+        recorded outputs are reset to their recorded values (when finite), and the cut's output
+        is the reset state's. A unit without such states runs in one piece.
+        """
+        u, y = rows[:, self.in_cols], rows[:, self.out_cols]
+        n, window = len(rows), self.unit.window
+        out = np.empty((n, len(self.out_cols)))
+        first = (-k0) % window or window
+        cuts = list(range(first, n, window)) if len(self.reset_states) else []
+        bounds = [0, *cuts] + ([n - 1] if not cuts or cuts[-1] != n - 1 else [])
+        if n == 1:
+            out[:] = self._simulate(u, t0)[0]
+        for a, b in itertools.pairwise(bounds):
+            outputs, states = self._simulate(u[a : b + 1], t0 + a * self.dt)
+            out[a : b + 1] = outputs
+            self.state = states[-1].copy()
+            if b in cuts:
+                self._reset(y[b])
+                if b == n - 1:
+                    out[b] = self._simulate(u[b : b + 1], t0 + b * self.dt)[0][0]
+        return out
+
+    def _reset(self, recorded: np.ndarray) -> None:
+        values = recorded[self.reset_outputs]
+        keep = np.isfinite(values)
+        self.state[self.reset_states[keep]] = values[keep]
+
+
+class CausalTwin:
+    """The frozen twin continued over a stream of samples (module docstring).
+
+    Parameters
+    ----------
+    units : sequence of FrozenUnit
+    table : dtwin.twin.table.TwinTable
+        The twin the units belong to (:func:`frozen_units_from_mapping` checked it).
+    dt : float
+        Sample period, s.
+
+    Attributes
+    ----------
+    columns : tuple of str
+        The signals a sample row carries, in order: every unit's inputs and outputs.
+    channels : list of str
+        The residual channels (:func:`channel_names`).
+    settling : int
+        Samples of the settling period after a start (the longest of the units').
+    """
+
+    def __init__(self, units: Sequence[FrozenUnit], table, dt: float):
+        if not units:
+            raise DtwinValueError("the twin has no unit with a recorded output to monitor")
+        self.columns = tuple(dict.fromkeys(s for u in units for s in (*u.inputs, *u.outputs)))
+        specs = {spec.name: spec for spec in units_of(table, list(self.columns))}
+        self.runners = [_UnitRunner(u, specs[u.name], self.columns, dt) for u in units]
+        self.channels = channel_names(units)
+        self.settling = max(u.settle for u in units)
+        self.dt = float(dt)
+        self.restart(0.0)
+
+    def restart(self, t0: float) -> None:
+        """Forget the states: the next sample starts a settling period at time ``t0`` (s)."""
+        self.t0 = float(t0)
+        self.buffer: list[np.ndarray] = []
+        self.k = -1  # global index of the last sample run
+        self.last: np.ndarray | None = None
+
+    @property
+    def settled(self) -> bool:
+        """Whether the settling period is over."""
+        return self.last is not None
+
+    def feed(self, rows: np.ndarray) -> CausalRows:
+        """Run the twin over the next samples; return their outputs and residuals.
+
+        Parameters
+        ----------
+        rows : ndarray, shape (n, len(columns))
+            Consecutive samples (one every ``dt``); a missing sample is a row whose outputs
+            are NaN and whose inputs are interpolated.
+
+        Returns
+        -------
+        CausalRows
+        """
+        rows = np.asarray(rows, dtype=float).reshape(-1, len(self.columns))
+        n = len(rows)
+        simulated = np.full((n, len(self.channels)), np.nan)
+        settling = np.zeros(n, dtype=bool)
+        first = 0
+        if not self.settled:
+            first = min(n, self.settling - sum(len(b) for b in self.buffer))
+            self.buffer.append(rows[:first])
+            settling[:first] = True
+            if sum(len(b) for b in self.buffer) == self.settling:
+                self._settle(np.concatenate(self.buffer))
+        if first < n and self.settled:
+            simulated[first:] = self._continue(rows[first:])
+        residuals = np.full_like(simulated, np.nan)
+        columns = [i for r in self.runners for i in r.out_cols]
+        residuals[first:] = rows[first:, columns] - simulated[first:]
+        return CausalRows(simulated, residuals, settling)
+
+    def _settle(self, rows: np.ndarray) -> None:
+        for runner in self.runners:
+            runner.start_state(rows)
+            runner.run(rows, 0, self.t0)
+        self.k = len(rows) - 1
+        self.last = rows[-1]
+        self.buffer = []
+
+    def _continue(self, rows: np.ndarray) -> np.ndarray:
+        chunk = np.vstack([self.last[None, :], rows])
+        t0 = self.t0 + self.k * self.dt
+        out = np.hstack([runner.run(chunk, self.k, t0)[1:] for runner in self.runners])
+        self.k += len(rows)
+        self.last = rows[-1]
+        return out

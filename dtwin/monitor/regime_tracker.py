@@ -1,0 +1,162 @@
+"""The regime model run forward over residual rows: posteriors, regime, correction, action.
+
+Specification: docs/monitor.md §Regimes, §Correction. :class:`RegimeTracker` holds the
+filter's last vector and the correction's last values, so a series fed in chunks of any size
+gives the bits it gives in one call (``dtwin regimes`` feeds the whole recording, ``dtwin
+monitor`` what the stream holds). Per row: the filtered posteriors of the K fitted regimes and
+``unknown`` (:func:`dtwin.monitor._stream_kernels.filter_rows`, paper Eq. (4)); the most
+probable regime; whether the nominal regimes hold at least half the probability; the
+posterior-weighted bias ``b̂ = Σ_k γ_t(k) μ_k`` (Eq. (25); ``μ_unknown = 0``: no correction for a
+regime never seen), shaped in residual standard deviations by the DAG's own
+:func:`dtwin.bias_correction.shaped_bias` and added to the twin's outputs; and, with an
+actions table, the action (:mod:`dtwin.monitor.action_table`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dtwin.bias_correction import shaped_bias
+from dtwin.monitor._stream_kernels import filter_rows
+from dtwin.monitor.action_table import ActionTable
+from dtwin.monitor.regime_model import RegimeModel
+
+__all__ = ["TrackedRows", "RegimeTracker", "HoldEvent", "HoldRule"]
+
+
+@dataclass(frozen=True)
+class TrackedRows:
+    """What :meth:`RegimeTracker.feed` returns for a chunk of rows.
+
+    Attributes
+    ----------
+    posteriors : ndarray, shape (n, K + 1)
+        Filtered posteriors of ``S1 … SK, unknown``.
+    regime : ndarray of int, shape (n,)
+        The most probable of them.
+    nominal : ndarray of bool, shape (n,)
+        The nominal regimes hold at least half the probability.
+    applied : ndarray, shape (n, C)
+        The shaped bias added to the twin's outputs, channel units.
+    corrected : ndarray, shape (n, C)
+        The twin's outputs plus ``applied``.
+    action : ndarray of int, shape (n,), or None
+        Index of the chosen alternative (None without an actions table).
+    """
+
+    posteriors: np.ndarray
+    regime: np.ndarray
+    nominal: np.ndarray
+    applied: np.ndarray
+    corrected: np.ndarray
+    action: np.ndarray | None
+
+
+class RegimeTracker:
+    """Filter, correction and action over residual rows, continued across calls.
+
+    Parameters
+    ----------
+    model : RegimeModel
+    actions : ActionTable, optional
+    """
+
+    def __init__(self, model: RegimeModel, actions: ActionTable | None = None):
+        self.model = model
+        self.arrays = model.filter_arrays()
+        self.mask = model.nominal_mask
+        self.bias_z = np.vstack([model.state_means / model.scale, np.zeros(len(model.scale))])
+        self.actions = actions
+        self.stacked = None if actions is None else actions.stacked(model.labels, self.mask)
+        self.restart()
+
+    def restart(self) -> None:
+        """Start a new sequence: the filter from its initial distribution, no correction yet."""
+        self.alpha = self.arrays.start.copy()
+        self.fresh = True
+        self.shaping: tuple[np.ndarray, np.ndarray] | None = None
+
+    def feed(self, residuals: np.ndarray, simulated: np.ndarray) -> TrackedRows:
+        """Track the next rows.
+
+        Parameters
+        ----------
+        residuals : ndarray, shape (n, C)
+            ``recorded − twin`` per channel (NaN at a missing sample: a prediction step).
+        simulated : ndarray, shape (n, C)
+            The twin's outputs.
+
+        Returns
+        -------
+        TrackedRows
+        """
+        model, arrays = self.model, self.arrays
+        z = np.ascontiguousarray((residuals - model.center) / model.scale)
+        posteriors = filter_rows(
+            z, arrays.means, arrays.precision, arrays.log_norm, arrays.transmat, self.alpha,
+            self.fresh,
+        )  # fmt: skip
+        self.fresh = False
+        shaped = shaped_bias(
+            posteriors @ self.bias_z, kappa=model.kappa, ema_alpha=model.ema_alpha,
+            rate_max=model.rate_max, initial=self.shaping,
+        )  # fmt: skip
+        self.shaping = (shaped.smoothed[-1], shaped.applied[-1])
+        applied = shaped.applied * model.scale
+        action = None if self.actions is None else self.actions.decide(posteriors, self.stacked)
+        return TrackedRows(
+            posteriors=posteriors,
+            regime=np.argmax(posteriors, axis=1),
+            nominal=posteriors[:, self.mask].sum(axis=1) >= 0.5,
+            applied=applied,
+            corrected=simulated + applied,
+            action=action,
+        )
+
+
+@dataclass(frozen=True)
+class HoldEvent:
+    """A change of regime that held: ``left`` nominal or came ``back``.
+
+    ``change`` is the index of the run's first sample, ``fired`` that of the sample at which
+    it had held ``hold`` samples (indices as the caller numbers the rows it feeds).
+    """
+
+    kind: str
+    change: int
+    fired: int
+
+
+class HoldRule:
+    """Events when the nominal flag changes and holds for ``hold`` consecutive samples.
+
+    A run of ``hold`` non-nominal samples fires ``left`` (once); after it, a run of ``hold``
+    nominal samples fires ``back`` and re-arms the rule.
+    """
+
+    def __init__(self, hold: int):
+        self.hold = int(hold)
+        self.restart()
+
+    def restart(self) -> None:
+        """Forget the current run (a new sequence starts nominal)."""
+        self.away, self.run, self.start = False, 0, 0
+
+    def feed(self, nominal: np.ndarray, first: int) -> list[HoldEvent]:
+        """Return the events fired by ``nominal`` (bool per row; row 0 has index ``first``)."""
+        events = []
+        for offset, flag in enumerate(nominal.tolist()):
+            index = first + offset
+            if flag == (not self.away):  # the current side: no run towards a change
+                self.run = 0
+                continue
+            if self.run == 0:
+                self.start = index
+            self.run += 1
+            if self.run >= self.hold:
+                self.away = not self.away
+                events.append(HoldEvent("left" if self.away else "back", self.start, index))
+                self.run = 0
+        return events
