@@ -394,47 +394,64 @@ def _screening_states(work: _UnitWork) -> np.ndarray:
     return fit.x0
 
 
+#: Candidates within this BIC of the best are told apart by :data:`PREFERENCE` (a tie).
+TIE_BIC = 2.0
+#: Order among tied candidates: where a user looks first (a port, then a re-fit, then a state).
+PREFERENCE = ("input_", "output_", "parameter_mismatch", "state_limit")
+
+
+def _bic(candidate: _Candidate, n_eff: float) -> float:
+    """``n_eff·ln(gap²) + k·ln(n_eff)`` on the choosing part (``k`` the candidate's params)."""
+    return n_eff * math.log(max(candidate.gap_choose, 1e-300) ** 2) + candidate.n_params * math.log(
+        n_eff
+    )
+
+
 def _weights(candidates: list[_Candidate], n_eff: float) -> None:
-    """BIC weights on the choosing part: ``n_eff·ln(gap²) + k·ln(n_eff)``."""
-    bic = np.array([n_eff * math.log(max(c.gap_choose, 1e-300) ** 2) + c.n_params * math.log(n_eff)
-                    for c in candidates])  # fmt: skip
+    """Set each candidate's BIC weight on the choosing part."""
+    bic = np.array([_bic(c, n_eff) for c in candidates])
     w = np.exp(-0.5 * (bic - bic.min()))
-    for c, value in zip(candidates, w / w.sum(), strict=False):
+    for c, value in zip(candidates, w / w.sum(), strict=True):
         c.weight = float(value)
 
 
-def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, list[str]]:
-    """Return the candidate that explains the choosing part's gap, or None (``unexplained``)."""
-    from scipy.stats import chi2
+def _ranked(candidates: list[_Candidate], n_eff: float) -> list[_Candidate]:
+    """Candidates by BIC; those within :data:`TIE_BIC` of the best first, by :data:`PREFERENCE`.
 
+    Two effects the choosing part cannot tell apart (an input saturation of a lag and a limit
+    on its state) are named where a user would look first.
+    """
+    best = min(_bic(c, n_eff) for c in candidates)
+
+    def rank(c: _Candidate) -> tuple:
+        tied = _bic(c, n_eff) <= best + TIE_BIC
+        name = c.fit.variant.name
+        order = next((i for i, p in enumerate(PREFERENCE) if name.startswith(p)), len(PREFERENCE))
+        return (0, order, _bic(c, n_eff)) if tied else (1, 0, _bic(c, n_eff))
+
+    return sorted(candidates, key=rank)
+
+
+def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, list[str]]:
+    """Return the candidate that explains the choosing part's gap, or None (``unexplained``).
+
+    The best by BIC (:func:`_ranked`; the re-fitted twin, ``parameter_mismatch``, is one of
+    the candidates with all its params counted) must remove ``min_share`` of the excess gap
+    (``min_linear_share`` for a linear form), else the gap is unexplained.
+    """
     notes = []
     gap = combined(work.gaps)
     floor = work.floor
     n_choose = work.data.parts["choose"][1] - work.data.parts["choose"][0]
     n_eff = float(np.mean([effective_samples(f.acf, n_choose) for f in work.floors]))
     _weights(candidates, n_eff)
-    refit = next((c for c in candidates if c.fit.variant.refits_linear), None)
-    reference = refit.gap_choose if refit is not None else gap
-    for candidate in sorted(candidates, key=lambda c: c.gap_choose):
-        variant = candidate.fit.variant
-        removed = 1.0 - _excess(candidate.gap_choose, floor) ** 2 / max(
-            _excess(gap, floor) ** 2, 1e-300
-        )
-        share = settings.min_linear_share if variant.linear_form else settings.min_share
-        if removed < share:
-            notes.append(f"{variant.name} at {variant.at}: removes {removed:.0%} of the excess")
-            break
-        if variant.refits_linear:
-            return candidate, notes
-        statistic = n_eff * math.log(
-            max(reference, 1e-300) ** 2 / max(candidate.gap_choose, 1e-300) ** 2
-        )
-        if statistic >= chi2.isf(settings.significance, max(candidate.n_params, 1)):
-            return candidate, notes
-        notes.append(
-            f"{variant.name} at {variant.at}: no better than the re-fitted twin "
-            f"(T = {statistic:.1f})"
-        )
+    best = _ranked(candidates, n_eff)[0]
+    variant = best.fit.variant
+    removed = 1.0 - _excess(best.gap_choose, floor) ** 2 / max(_excess(gap, floor) ** 2, 1e-300)
+    share = settings.min_linear_share if variant.linear_form else settings.min_share
+    if removed >= share:
+        return best, notes
+    notes.append(f"{variant.name} at {variant.at}: removes {removed:.0%} of the excess")
     return None, notes
 
 

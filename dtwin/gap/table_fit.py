@@ -377,7 +377,10 @@ def fit_variant(
     upper = np.concatenate([high, np.full(len(starts) * n_states, np.inf)])
     scales = np.concatenate([scale, np.tile(state_scale, len(starts))])
     # scipy's sparse trust region fails on one or two columns; dense is as cheap there
-    sparsity = _sparsity(data, starts, stops, len(names), n_states) if n_states else None
+    columns = len(names) + len(starts) * n_states
+    sparsity = (
+        _sparsity(data, starts, stops, len(names), n_states) if n_states and columns > 2 else None
+    )
     if len(z0) == 0:
         r = residual(z0)
         return VariantFit(variant, dict(theta), (), x0, float(r @ r), len(r), None, r)
@@ -451,9 +454,12 @@ def part_error(
             y = _simulate(data, variant, theta, starts, stops, states)
             return _normalised(data, y, rows)
 
+        columns = len(starts) * n_states
+        # scipy's sparse trust region fails on one or two columns; dense is as cheap there
+        sparsity = _sparsity(data, starts, stops, 0, n_states) if columns > 2 else None
         result = least_squares(
             residual, x0.ravel(), x_scale=np.tile(_state_scales(guess, n_states), len(starts)),
-            jac_sparsity=_sparsity(data, starts, stops, 0, n_states), max_nfev=20, xtol=1e-5,
+            jac_sparsity=sparsity, max_nfev=20, xtol=1e-5,
         )  # fmt: skip
         x0 = result.x.reshape(len(starts), n_states)
     simulated = _simulate(data, variant, theta, starts, stops, x0)
