@@ -66,6 +66,23 @@ def write_case_folder(
     write_json({"case": case, **generated.key}, folder / "key.json")
 
 
+def _diagnose_table_folder(case_folder, twin_content, out_folder, calibrate, train_frac, settings):
+    """Diagnose a case whose twin is a table (a family case) into ``out_folder``, no figure."""
+    from dtwin.gap.recording import read_recording
+    from dtwin.gap.table_diagnose import diagnose_table
+    from dtwin.gap.table_report import write_table_report
+    from dtwin.gap.twin_file import table_file
+
+    table = table_file(twin_content, base_dir=Path(case_folder))
+    columns = (*table.signals, *table.exogenous)
+    recording = read_recording(Path(case_folder) / "recording.csv", columns=columns)
+    result = diagnose_table(
+        recording, table, calibrate=calibrate, train_frac=train_frac, settings=settings
+    )
+    Path(out_folder).mkdir(parents=True, exist_ok=True)
+    write_table_report(result, out_folder, figure=False)
+
+
 def diagnose_case_folder(
     case_folder: str | os.PathLike,
     diagnose_settings: Mapping[str, Any],
@@ -90,12 +107,19 @@ def diagnose_case_folder(
     from dtwin.gap import GapSettings, diagnose, twin_discretisation, twin_from_mapping
     from dtwin.gap.recording import read_recording
     from dtwin.gap.report import write_report
+    from dtwin.gap.twin_file import is_table
 
     settings = dict(diagnose_settings)
     train_frac = settings.pop("train_frac")
     calibrate = bool(settings.pop("calibrate"))
-    recording = read_recording(Path(case_folder) / "recording.csv")
     twin_content = yaml.safe_load((Path(case_folder) / "twin.yaml").read_text())
+    if is_table(twin_content):
+        gap_settings = GapSettings.from_mapping(settings)
+        _diagnose_table_folder(
+            case_folder, twin_content, out_folder, calibrate, train_frac, gap_settings
+        )
+        return
+    recording = read_recording(Path(case_folder) / "recording.csv")
     twin = twin_from_mapping(twin_content, dt=recording.dt)
     result = diagnose(
         recording,
