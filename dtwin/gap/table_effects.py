@@ -48,6 +48,8 @@ MSD_NAMES = {
 }
 #: Largest slope of each term's ``f(z)`` over ``|z| ≤ 4``, per unit of ``θ/σ``.
 TERM_SLOPES: dict[str, float] = {"state_cubic": 48.0, "state_abs_square": 8.0, "state_sign": 100.0}
+#: Built-in blocks whose states get no state effect (a lag's state is its filter's).
+NO_STATE_EFFECTS = frozenset({"lag"})
 #: Delays tried before fitting a delay, in samples.
 DELAY_GRID = (0.5, 1, 2, 4, 6, 9, 13, 18, 25)
 
@@ -183,12 +185,19 @@ def _local_name(assignment: Assignment, slot: str) -> str | None:
 
 
 def _state_variants(data: UnitData, guess: np.ndarray, blocks: dict[str, str | None]):
-    """Return the missing-term and limit candidates of every state of the unit."""
+    """Return the missing-term and limit candidates of every state of the unit.
+
+    A block whose state is a modelling device rather than a physical quantity
+    (:data:`NO_STATE_EFFECTS`: a lag's filter state) has none: a limit on it is its input's
+    saturation seen through the lag, which the input candidates already name.
+    """
     spec, model = data.spec, data.model
     train = slice(*data.parts["train"])
     out = []
     derivatives = {a.target[2:]: a for a in model.assignments if a.target.startswith("d/")}
     for j, state in enumerate(spec.states):
+        if blocks.get(spec.module_of(state)) in NO_STATE_EFFECTS:
+            continue
         assignment = derivatives[state]
         path = guess[train, j]
         rate = float(np.nanstd(np.diff(path))) / data.dt or 1.0
