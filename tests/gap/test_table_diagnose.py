@@ -121,3 +121,20 @@ def test_the_cli_writes_the_answer_and_refuses_a_bad_table(tmp_path, capsys):
     error = capsys.readouterr().err.strip().splitlines()
     assert error[-1].endswith("module 'tank': derivatives.h: unknown name 'hh'")
     assert not bad_out.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("case_type", "seed"), [("tanks_bare_state_limit", 1), ("motor_bare_state_sign", 2)]
+)
+def test_a_family_case_is_located_and_named(case_type, seed):
+    from dtwin.gap.table_report import table_diagnosis_to_dict
+    from dtwin.gap.twin_file import table_file
+    from dtwin.gapbench.families import generate_family_case, score_family_case
+
+    case = generate_family_case(case_type, seed, magnitude=0.8)
+    table = table_file(case.twin)
+    recording = recording_with_columns(case.recording, (*table.signals, *table.exogenous))
+    answer = table_diagnosis_to_dict(diagnose_table(recording, table))
+    scored = score_family_case(case.key, answer)
+    assert scored["located"] and scored["named"], (case.key["at"], answer["effect"], answer["at"])
