@@ -282,9 +282,51 @@ def _nominal_fit(data, settings, calibrate, cap=None) -> VariantFit:
     )  # fmt: skip
 
 
-def _floors(data, fit, noise, settings) -> tuple[list[NoiseFloor], list[float]]:
-    """Each output's noise floor and its normalised threshold on the choosing part."""
+#: Seed of the noise drawn on a unit's recorded inputs (:func:`_input_noise_floor`).
+INPUT_NOISE_SEED = 0
+
+
+def _input_noise_floor(data: UnitData, fit: VariantFit, input_noise: Mapping[str, float]):
+    """Return the RMS error (output units) that noise on the recorded inputs alone causes.
+
+    A unit driven by a signal another module produces is driven by its *recorded* values, noise
+    included; through an integrating or slow unit that noise grows into an error the twin
+    cannot remove. It is measured by running the twin on the choosing part's windows with
+    white noise of each input's level added (seed :data:`INPUT_NOISE_SEED`) and without, from
+    the same states. Shape ``(n_outputs,)``; zeros for a unit whose inputs are noise-free.
+    """
+    levels = np.array([input_noise.get(s, 0.0) for s in data.spec.inputs])
+    if not np.any(levels > 0):
+        return np.zeros(len(data.spec.outputs))
+    starts, stops = data.windows("choose")
+    x0 = np.ascontiguousarray(data.guess[starts])
+    values = [fit.theta[name] for name in data.model.param_names]
+    rng = np.random.default_rng(INPUT_NOISE_SEED)
+    noisy = data.inputs + rng.standard_normal(data.inputs.shape) * levels
+
+    def run(inputs):
+        with np.errstate(all="ignore"):
+            y, _ = data.model.simulate(
+                inputs, values, starts, stops, x0, data.dt, substeps=data.substeps,
+                linear=data.linear,
+            )  # fmt: skip
+        return y
+
+    difference = run(noisy) - run(data.inputs)
+    with np.errstate(invalid="ignore"):
+        rms = np.sqrt(np.nanmean(difference**2, axis=0))
+    return np.where(np.isfinite(rms), rms, 0.0)
+
+
+def _floors(data, fit, noise, settings, n_tests=1, input_noise=None):
+    """Return each output's noise floor and its normalised threshold on the choosing part.
+
+    The floor is the measurement noise's (declared, reconciled with the one read from the
+    training residual), with the error that the recorded inputs' noise causes through the
+    unit (:func:`_input_noise_floor`) added in quadrature.
+    """
     error, _ = part_error(data, fit, "train")
+    propagated = _input_noise_floor(data, fit, input_noise or {})
     train = slice(*data.parts["train"])
     n_choose = data.parts["choose"][1] - data.parts["choose"][0]
     floors, thresholds = [], []
@@ -299,11 +341,15 @@ def _floors(data, fit, noise, settings) -> tuple[list[NoiseFloor], list[float]]:
             measured = whole
         twin = NoiseFloor(noise[signal], "twin", np.ones(1)) if signal in noise else None
         floor = reconcile_noise_floor(twin, measured, settings.noise_tolerance)
+        if propagated[o] > 0:
+            total = math.hypot(floor.rms, propagated[o])
+            floor = NoiseFloor(total, f"{floor.source}+inputs", floor.acf, floor.measurement)
         floors.append(floor)
         thresholds.append(
             gap_threshold(
                 floor.rms / data.norm[o], effective_samples(floor.acf, n_choose),
-                noise_tolerance=settings.noise_tolerance, significance=settings.significance,
+                noise_tolerance=settings.noise_tolerance,
+                significance=settings.significance / n_tests,
                 min_gap=settings.min_gap,
             )
         )  # fmt: skip
@@ -328,13 +374,22 @@ class _UnitWork:
         return combined([f.rms / n for f, n in zip(self.floors, self.data.norm, strict=False)])
 
 
-def _analyse_unit(spec, recording, table, parts, settings, calibrate) -> _UnitWork:
+def _analyse_unit(
+    spec, recording, table, parts, settings, calibrate, n_tests=1, input_noise=None
+) -> _UnitWork:
+    """Fit a unit's twin, read its noise floors and test its gap on the choosing part.
+
+    ``n_tests`` is the number of outputs tested over every unit: each is tested at
+    ``significance / n_tests`` (Bonferroni), so the chance that noise alone flags a recording
+    stays ``significance`` however many outputs the twin has. ``input_noise`` gives the noise
+    level of each recorded signal another module produces (:func:`_input_noise_floor`).
+    """
     progress.info("%s: twin, windows and noise floor", "+".join(spec.modules))
     data = _prepare_unit(spec, recording, table, parts, settings, calibrate)
     nominal = _nominal_fit(data, settings, calibrate)
     require_finite_fit(nominal, "+".join(spec.modules))
     data.guess = state_guess(data, nominal.theta, nominal.variant)
-    floors, thresholds = _floors(data, nominal, table.noise, settings)
+    floors, thresholds = _floors(data, nominal, table.noise, settings, n_tests, input_noise)
     error, _ = part_error(data, nominal, "choose")
     gaps = rms_by_output(error, slice(*parts["choose"]), data.norm)
     flagged = bool(np.any(gaps > np.asarray(thresholds)))
@@ -643,7 +698,13 @@ def _diagnose_table(recording, table, calibrate, train_frac, settings, heldout) 
     specs = units_of(table, list(recording.signals))
     if not specs:
         raise DtwinValueError("no module of the twin has a recorded output")
-    works = {s.name: _analyse_unit(s, recording, table, parts, settings, calibrate) for s in specs}
+    n_tests = sum(len(s.outputs) for s in specs)
+    works, levels = {}, {}
+    for spec in specs:  # in table order: a producer's floors are read before its readers'
+        work = _analyse_unit(spec, recording, table, parts, settings, calibrate, n_tests, levels)
+        works[spec.name] = work
+        for signal, floor in zip(spec.outputs, work.floors, strict=True):
+            levels[signal] = table.noise.get(signal, floor.rms)
     flagged = [w for w in works.values() if w.flagged]
     notes = [note for w in works.values() for note in getattr(w.data.model, "notes", ())]
     units = {name: _unit_report(w) for name, w in works.items()}
