@@ -36,6 +36,10 @@ load average before and after it), medians where repeated. Sections (`python ben
   and Co-Simulation), 10,000 samples (benchmarks/fmu_case.py; target ≤ 60 s): wall, CPU, peak
   RSS and answer of the command, and in-process where the diagnosis spends its time (the FMU's
   model against the fitting);
+- ``monitor``: `dtwin regimes` on a 100,000-sample recording of the paper's six modules (with
+  the BIC sweep, and with ``--k 8``), then the monitor on it (K = 8, 5 channels): samples per
+  CPU second with one JSON line per sample and with ``--every 100``, milliseconds per line fed
+  one at a time, the CLI's wall and start-up (benchmarks/monitor.py);
 - ``tests``: `make test-fast` in the repository (its .venv set up): wall seconds, the CPU
   seconds of every process (``RUSAGE_CHILDREN`` around it: lint, both pytest-xdist workers and
   the subprocesses the tests start) and the tests passed.
@@ -411,6 +415,15 @@ def fmu_benchmarks() -> dict:
     return results
 
 
+def monitor_benchmark() -> dict:
+    """benchmarks/monitor.py in a fresh process (its JSON line)."""
+    done = subprocess.run(
+        [PY, str(REPO / "benchmarks" / "monitor.py"), "100000"],
+        cwd=REPO, check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
 def tests_benchmark() -> dict:
     """`make test-fast` once: wall s, CPU s of every process and the count of tests passed."""
     cpu_before, start = children_cpu(), time.perf_counter()
@@ -434,6 +447,7 @@ SECTIONS = {
     "table": table_benchmarks,
     "fmu": fmu_benchmarks,
     "hmm": hmm_benchmarks,
+    "monitor": monitor_benchmark,
     "tests": tests_benchmark,
 }
 

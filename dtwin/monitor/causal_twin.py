@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import hashlib
 import itertools
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 
@@ -36,11 +37,32 @@ __all__ = [
     "freeze_units",
     "frozen_units_from_mapping",
     "channel_names",
+    "settling_samples",
+    "SETTLE_SHARE",
+    "MIN_SETTLE",
 ]
 
 #: Largest normalised residual of a diverged start fit (keeps least squares finite).
 _DIVERGED = 1e3
 _FIRST = np.zeros(1, dtype=np.int64)
+#: Share of a unit's window (ten time constants of its slowest mode) its settling period lasts.
+SETTLE_SHARE = 0.3
+#: Fewest samples of a settling period (of a unit with states that are not recorded).
+MIN_SETTLE = 20
+
+
+def settling_samples(window: int) -> int:
+    """Return the samples over which a unit's unrecorded states are fitted at a start.
+
+    :data:`SETTLE_SHARE` of the unit's window (the diagnoser's: ten time constants of its
+    slowest mode), so three time constants, at least :data:`MIN_SETTLE` samples.
+
+    Examples
+    --------
+    >>> settling_samples(346), settling_samples(40)
+    (104, 20)
+    """
+    return max(MIN_SETTLE, math.ceil(SETTLE_SHARE * window))
 
 
 def channel_names(units: Sequence[FrozenUnit]) -> list[str]:
@@ -76,7 +98,8 @@ class FrozenUnit:
     linear : tuple of bool
         Each input linear between samples (True) or held.
     settle : int
-        Samples over which the initial states are fitted at a start (1: none unrecorded).
+        Samples over which the initial states are fitted at a start (:func:`settling_samples`;
+        1 when every state is a recorded output).
     norm : tuple of float
         Each output's standard deviation on the nominal stretch (the start fit's unit).
     x_typical, x_scale : tuple of float
@@ -246,7 +269,7 @@ def _frozen(spec: UnitSpec, data, fit, guess: np.ndarray) -> FrozenUnit:
         window=int(data.window),
         substeps=int(data.substeps),
         linear=tuple(bool(v) for v in data.linear),
-        settle=int(data.window) if unrecorded else 1,
+        settle=settling_samples(int(data.window)) if unrecorded else 1,
         norm=tuple(float(v) for v in data.norm),
         x_typical=tuple(float(v) for v in np.nan_to_num(typical)),
         x_scale=tuple(float(v) for v in scale),
@@ -368,25 +391,29 @@ class CausalTwin:
         The twin the units belong to (:func:`frozen_units_from_mapping` checked it).
     dt : float
         Sample period, s.
+    channels : collection of str, optional
+        Run only the units holding one of these channels (default: every unit).
 
     Attributes
     ----------
     columns : tuple of str
         The signals a sample row carries, in order: every unit's inputs and outputs.
     channels : list of str
-        The residual channels (:func:`channel_names`).
+        The residual channels of the units run (:func:`channel_names`).
     settling : int
         Samples of the settling period after a start (the longest of the units').
     """
 
-    def __init__(self, units: Sequence[FrozenUnit], table, dt: float):
+    def __init__(self, units: Sequence[FrozenUnit], table, dt: float, channels=None):
         if not units:
             raise DtwinValueError("the twin has no unit with a recorded output to monitor")
         self.columns = tuple(dict.fromkeys(s for u in units for s in (*u.inputs, *u.outputs)))
         specs = {spec.name: spec for spec in units_of(table, list(self.columns))}
+        self.settling = max(u.settle for u in units)  # every unit's, as dtwin regimes had it
+        if channels is not None:  # run only the units holding one of these channels
+            units = [u for u in units if set(channel_names([u])) & set(channels)]
         self.runners = [_UnitRunner(u, specs[u.name], self.columns, dt) for u in units]
         self.channels = channel_names(units)
-        self.settling = max(u.settle for u in units)
         self.dt = float(dt)
         self.restart(0.0)
 

@@ -98,7 +98,7 @@ class Monitor:
     def __init__(self, model: MonitorModel, table, settings: MonitorSettings, out: IO[str],
                  err: IO[str], jobs: DiagnosisJobs | None = None, header=None):  # fmt: skip
         self.model, self.settings, self.out, self.err, self.jobs = model, settings, out, err, jobs
-        self.twin = CausalTwin(model.units, table, model.dt)
+        self.twin = CausalTwin(model.units, table, model.dt, model.model.channels)
         self.tracker = RegimeTracker(model.model, model.actions)
         self.hold = HoldRule(settings.hold or model.hold)
         self.parser = RowParser(self.twin.columns, model.dt, settings.max_gap, header)

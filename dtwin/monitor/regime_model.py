@@ -57,11 +57,11 @@ UNKNOWN = "unknown"
 #: Standard deviation of the unknown regime's emission, z-units of each channel.
 UNKNOWN_SD = 4.0
 #: Probability per sample of entering the unknown regime from any fitted regime.
-UNKNOWN_HAZARD = 1e-4
+UNKNOWN_HAZARD = 1e-9
 #: Probability per sample of staying in the unknown regime.
 UNKNOWN_STAY = 0.99
 #: Smallest share of the nominal stretch (smoothed occupancy) a nominal regime holds.
-NOMINAL_SHARE = 0.1
+NOMINAL_SHARE = 0.02
 #: Most samples the BIC sweep over K fits (evenly spaced contiguous blocks beyond it).
 MAX_SWEEP_SAMPLES = 20_000
 #: Contiguous blocks of the sweep's sample when it is capped.

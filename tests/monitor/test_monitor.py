@@ -260,3 +260,104 @@ def test_a_followed_file_is_read_across_a_rotation(tmp_path):
         read += next(pieces)
     assert read == ["t,u,level", "0,1,2", "0.1,1,2", "t,u,level", "0.2,1,2"]
     assert source.rotations == 1
+
+
+def test_on_the_paper_asset_with_its_faults_the_monitor_scores_as_the_batch(config):
+    """The paper's six modules as a table, its asset with the fault schedule in the recording:
+    the monitor's regime accuracy (Hungarian) equals dtwin regimes' (K = 4)."""
+    from dtwin.fault_injection import FaultMagnitudes, fault_schedule, inject_faults, regime_labels
+    from dtwin.params import twin_params_from_mapping
+    from dtwin.regime_matching import hungarian_map
+    from dtwin.stages.twin import simulate_asset
+    from dtwin.twin.paper_chain import paper_table
+
+    twin = twin_params_from_mapping(config["twin"])
+    schedule = fault_schedule(config["faults"]["schedule"])
+    physics = simulate_asset(config["simulation"], config["command"], config["twin"])
+    faulted = inject_faults(
+        physics, np.random.default_rng(config["faults"]["seed"]), alpha=twin.fusion.alpha,
+        w1=twin.kpi.w1, w2=twin.kpi.w2, dt=twin.dt, schedule=schedule,
+        magnitudes=FaultMagnitudes.from_mapping(config["faults"]),
+    ).drop(columns="regime")  # fmt: skip
+    table = paper_table(twin)
+    recording = recording_with_columns(faulted, (*table.signals, *table.exogenous))
+    result = regimes_of(recording, table, nominal=(0.0, 4.98), settings=RegimeSettings(4))
+    labels = regime_labels(recording.t[result.settling :], schedule)
+    output, _, _ = _monitor(result, table, _lines(faulted), chunks=[7, 300, 41])
+    live = np.argmax([row["p"] for row in output if "p" in row], axis=1)
+    batch = hungarian_map(result.tracked.regime, labels)
+    replay = hungarian_map(live, labels)
+    assert np.mean(replay.predicted == labels) == np.mean(batch.predicted == labels) > 0.5
+
+
+@pytest.mark.slow
+def test_the_cli_diagnoses_a_change_in_the_background_and_waits_for_it(tmp_path, clean):
+    """A stream whose level leaks from halfway: the change is an event, a background dtwin
+    diagnose runs on the samples since it, and its answer comes before the summary at EOF."""
+    import subprocess
+    import sys
+
+    _, _, result = clean
+    from dtwin.artifacts import write_json
+
+    write_json(regimes_file_mapping(result), tmp_path / "regimes.json")
+    (tmp_path / "twin.yaml").write_text(yaml.safe_dump(TWIN))
+    stream = "\n".join(_lines(_asset(15, "leak"))) + "\n"
+    done = subprocess.run(
+        [sys.executable, "-m", "dtwin", "monitor", "--twin", str(tmp_path / "twin.yaml"),
+         "--regimes", str(tmp_path / "regimes.json"), "--every", "100",
+         "--diagnose-samples", "600", "--diagnoses", str(tmp_path / "kept")],
+        input=stream, capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    events = [json.loads(x) for x in done.stdout.splitlines() if '"event"' in x]
+    kinds = [e["event"] for e in events]
+    assert kinds[0] == "start" and kinds[-1] == "summary"
+    assert kinds.index("left_nominal") < kinds.index("diagnosis") < kinds.index("summary")
+    diagnosis = events[kinds.index("diagnosis")]
+    assert diagnosis["samples"] == 600 and "effect" in diagnosis
+    assert events[-1]["diagnoses"] == {"started": 1, "written": 1, "failed": 0, "cancelled": 0}
+    assert (tmp_path / "kept" / "diagnosis_1" / "window.csv").exists()
+
+
+@pytest.mark.slow
+def test_an_interrupted_follow_writes_its_summary(tmp_path, clean):
+    """dtwin monitor --follow on a file that is appended and rotated, ended by SIGINT."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    _, _, result = clean
+    from dtwin.artifacts import write_json
+
+    write_json(regimes_file_mapping(result), tmp_path / "regimes.json")
+    (tmp_path / "twin.yaml").write_text(yaml.safe_dump(TWIN))
+    lines = _lines(_asset(16))
+    live = tmp_path / "live.csv"
+    live.write_text("\n".join(lines[:1000]) + "\n")
+    out = tmp_path / "out.jsonl"
+
+    def wait_for(n_lines: int) -> None:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if out.exists() and out.read_text().count("\n") >= n_lines:
+                return
+            time.sleep(0.1)
+        raise AssertionError(f"the monitor did not write {n_lines} lines in 60 s")
+
+    with open(out, "w") as handle:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "dtwin", "monitor", "--twin", str(tmp_path / "twin.yaml"),
+             "--regimes", str(tmp_path / "regimes.json"), "--follow", str(live),
+             "--no-diagnose"], stdout=handle, stderr=subprocess.DEVNULL, text=True,
+        )  # fmt: skip
+        wait_for(1000)  # the start line and 999 samples
+        live.rename(tmp_path / "live.csv.1")
+        live.write_text("\n".join([lines[0], *lines[1000:1500]]) + "\n")
+        wait_for(1500)
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=30)
+    summary = json.loads(out.read_text().splitlines()[-1])
+    assert summary["event"] == "summary" and summary["ended"] == "interrupted"
+    assert summary["rows_used"] == 1499 and summary["rotations"] == 1
+    assert summary["headers"] == 2 and summary["rows_refused"] == 0
