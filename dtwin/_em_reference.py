@@ -24,9 +24,8 @@ from hmmlearn.base import BaseHMM, ConvergenceMonitor
 from hmmlearn.hmm import GaussianHMM
 from hmmlearn.utils import normalize
 
-from dtwin._multistart import GAUSSIAN, EmData, EmError, EmRun
-from dtwin.hmm import _log_emission
-from dtwin.hmm_ar import _ar_log_emission, _ar_mstep, _moments
+from dtwin._em_data import GAUSSIAN, EmData, EmError, EmRun
+from dtwin._emissions import _ar_log_emission, _ar_mstep, _log_emission, _moments
 
 #: Letter of the AR emission parameters (c, φ, σ²) in hmmlearn's ``params`` string.
 _EMISSION = "e"

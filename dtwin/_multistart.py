@@ -15,13 +15,14 @@ import math
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 import pandas as pd
 from threadpoolctl import threadpool_limits
 
+from dtwin._em_data import AR1, GAUSSIAN, EmData, EmError, EmRun
 from dtwin._jit import HAVE_NUMBA
 
 __all__ = [
@@ -89,9 +90,6 @@ def one_blas_thread() -> Iterator[None]:
             _ONE_BLAS_THREAD.active = False
 
 
-#: Emission families of :class:`EmData` (``kind`` of :mod:`dtwin._em_kernels`, equal there).
-GAUSSIAN, AR1 = 0, 1
-
 #: A state whose expected occupancy ``Σ_t γ_t(k)`` falls below this many samples is "empty"
 #: (half a sample, so that a state holding one outlier sample is not flagged by round-off).
 MIN_OCCUPANCY = 0.5
@@ -119,65 +117,6 @@ _KERNEL_FAILURES = {
     "NON_FINITE": "non-finite log-likelihood or parameters ({})",
     "NOT_DISTRIBUTION": "startprob_ or transmat_ rows do not sum to 1 ({})",
 }
-
-
-class EmError(Exception):
-    """EM produced non-finite values, or a forward pass underflowed, for one start."""
-
-
-@dataclass(frozen=True)
-class EmData:
-    """The training sequence as each engine reads it.
-
-    Attributes
-    ----------
-    kind : int
-        :data:`dtwin._em_kernels.GAUSSIAN` or :data:`dtwin._em_kernels.AR1`.
-    kernel : ndarray, shape (T', C)
-        Rows of the compiled kernels: ``(x, x²)`` (Gaussian) or ``(y, x, y², yx, x²)`` (AR(1)).
-    reference : ndarray
-        Rows of the hmmlearn models: ``X`` (Gaussian) or the AR design rows.
-    """
-
-    kind: int
-    kernel: np.ndarray
-    reference: np.ndarray
-
-
-@dataclass(frozen=True)
-class EmRun:
-    """One finished EM start.
-
-    Attributes
-    ----------
-    startprob, transmat : ndarray, shapes (K,), (K, K)
-        π and A.
-    emission : ndarray, shape (P, K, D)
-        Emission parameters: (means, variances) or (intercepts, coefs, variances).
-    history : ndarray, shape (n_iter + 1,)
-        log p(X) of the parameters entering each iteration, then of the returned ones.
-    stopped : bool
-        The tolerance stopped EM (not the iteration cap).
-    posteriors : ndarray, shape (T', K), or None
-        Smoothed posteriors γ_t(k) under the returned parameters; :func:`fit_starts` keeps them
-        only for its best start (a T′×K array per start: 32 MB at T′ = 1e6, K = 4).
-    implementation : str
-        ``scaling`` (scaled recursions) or ``log`` (log-space recursions, run when the scaled
-        ones underflowed); compiled or hmmlearn's, by the engine.
-    """
-
-    startprob: np.ndarray
-    transmat: np.ndarray
-    emission: np.ndarray
-    history: np.ndarray
-    stopped: bool
-    posteriors: np.ndarray | None
-    implementation: str
-
-    @property
-    def occupancy(self) -> np.ndarray:
-        """Expected occupancy ``Σ_t γ_t(k)`` per state, samples."""
-        return self.posteriors.sum(axis=0)
 
 
 def restart_seeds(seed: int | Sequence[int], n_restarts: int, first: int = 0) -> list[int]:

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 import pandas as pd
 
+from dtwin._emissions import _log_emission
 from dtwin._multistart import (
     ENGINES,
     GAUSSIAN,
@@ -600,25 +601,6 @@ def _assemble_fit(
 
 
 # --- filtering ------------------------------------------------------------------------------
-
-
-def _log_emission(X: np.ndarray, means: np.ndarray, variances: np.ndarray) -> np.ndarray:
-    """``log N(x_t | μ_k, diag σ_k²)``, shape (T, K), as two matrix products.
-
-    ``−½[Σ_d x²/σ² − 2 x·(μ/σ²) + Σ_d μ²/σ² + Σ_d log(2πσ²)]``, evaluated in place on two
-    T×K arrays; the one T×D temporary (``X²``) is freed before the second product.
-    ``2·(X·M)`` is bit-identical to ``(2X)·M`` (doubling is exact in floating point outside
-    the subnormal range), so the values are those of the plain expression.
-    """
-    precision = 1.0 / variances
-    quadratic = (X**2) @ precision.T
-    cross = X @ (means * precision).T
-    cross *= 2.0
-    quadratic -= cross
-    del cross
-    quadratic += (means**2 * precision).sum(axis=1) + np.log(2.0 * np.pi * variances).sum(axis=1)
-    quadratic *= -0.5
-    return quadratic
 
 
 def _forward_filter(

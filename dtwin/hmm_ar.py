@@ -34,13 +34,14 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from dtwin._emissions import _ar_mstep, _moments
 from dtwin._multistart import (
     AR1,
     EmData,
@@ -100,51 +101,6 @@ def _design(X: np.ndarray) -> np.ndarray:
     """
     y, x = X[1:], X[:-1]
     return np.hstack([y, x, y * y, y * x, x * x])
-
-
-def _ar_log_emission(
-    design: np.ndarray, intercepts: np.ndarray, coefs: np.ndarray, variances: np.ndarray
-) -> np.ndarray:
-    """``log N(y_t | c_k + φ_k x_t, diag σ_k²)``, shape (T, K), from :func:`_design` rows.
-
-    ``Σ_d (y − c − φx)²/σ²`` expanded: the weights of ``(y, x, y², yx, x²)`` are
-    ``(−2c, 2cφ, 1, −2φ, φ²)/σ²``, plus the constant ``Σ_d c²/σ²``.
-    """
-    w = 1.0 / variances  # (K, D)
-    weights = np.hstack(
-        [-2.0 * intercepts * w, 2.0 * intercepts * coefs * w, w, -2.0 * coefs * w, coefs**2 * w]
-    )
-    constant = (intercepts**2 * w).sum(axis=1) + np.log(2.0 * np.pi * variances).sum(axis=1)
-    return -0.5 * (design @ weights.T + constant)
-
-
-def _moments(weights: np.ndarray, design: np.ndarray) -> dict[str, np.ndarray]:
-    """Weighted sums per state and feature: ``n`` (K, 1) and ``y, x, yy, xy, xx`` (K, D)."""
-    sums = np.split(weights.T @ design, 5, axis=1)
-    return {
-        "n": weights.sum(axis=0)[:, None],
-        **dict(zip(("y", "x", "yy", "xy", "xx"), sums, strict=True)),
-    }
-
-
-def _ar_mstep(
-    moments: Mapping[str, np.ndarray], var_floor: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Weighted least squares of y on (1, x) per state and feature; returns (c, φ, σ²).
-
-    ``φ = cov_w(x, y)/var_w(x)``, ``c = ȳ − φ x̄``, ``σ² = max(var_w(y) − φ·cov_w(x, y),
-    var_floor)``. A state whose lagged values do not vary (var_w(x) ≈ 0) gets ``φ = 0``.
-    """
-    n = np.maximum(moments["n"], np.finfo(float).tiny)
-    mean_x, mean_y = moments["x"] / n, moments["y"] / n
-    var_x = moments["xx"] / n - mean_x**2
-    var_y = moments["yy"] / n - mean_y**2
-    cov = moments["xy"] / n - mean_x * mean_y
-    varies = var_x > 1e-12 * np.maximum(1.0, moments["xx"] / n)
-    coefs = np.where(varies, cov / np.where(varies, var_x, 1.0), 0.0)
-    intercepts = mean_y - coefs * mean_x
-    variances = np.maximum(var_y - coefs * cov, var_floor)
-    return intercepts, coefs, variances
 
 
 # --- the fitted model -----------------------------------------------------------------------
