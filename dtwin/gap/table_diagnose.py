@@ -408,7 +408,8 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
     """Screen every candidate with the twin's params held; re-fit the best with them."""
     data = work.data
     blocks = {m.name: m.block for m in table.modules}
-    variants = candidate_variants(data, data.guess, blocks, calibrate=calibrate)
+    produced = frozenset(signal for m in table.modules for signal in m.outputs)
+    variants = candidate_variants(data, data.guess, blocks, calibrate=calibrate, produced=produced)
     screened = []
     mode = "free" if calibrate else "band"
     screen_x0 = _screening_states(work)
@@ -487,7 +488,7 @@ def _ranked(candidates: list[_Candidate], n_eff: float) -> list[_Candidate]:
     return sorted(candidates, key=rank)
 
 
-def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, list[str]]:
+def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, list[str], float]:
     """Return the candidate that explains the choosing part's gap, or None (``unexplained``).
 
     The best by BIC (:func:`_ranked`; the re-fitted twin, ``parameter_mismatch``, is one of
@@ -505,9 +506,9 @@ def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, l
     removed = 1.0 - _excess(best.gap_choose, floor) ** 2 / max(_excess(gap, floor) ** 2, 1e-300)
     share = settings.min_linear_share if variant.linear_form else settings.min_share
     if removed >= share:
-        return best, notes
+        return best, notes, removed
     notes.append(f"{variant.name} at {variant.at}: removes {removed:.0%} of the excess")
-    return None, notes
+    return None, notes, removed
 
 
 def _score_gap(data: UnitData, fit: VariantFit) -> float:
@@ -573,7 +574,8 @@ def _label(name: str) -> str:
         return name
     stem = name[3:]
     head, _, tail = stem.rpartition("_")
-    return head if tail.isdigit() and head else stem
+    index = tail[2:] if tail.startswith("in") else tail
+    return head if index.isdigit() and head else stem
 
 
 def _reported_intervals(fit: VariantFit, intervals: Mapping[str, tuple[float, float]]) -> dict:
@@ -712,12 +714,34 @@ def _diagnose_table(recording, table, calibrate, train_frac, settings, heldout) 
                 n_choose=parts["choose"][1], dt=recording.dt)  # fmt: skip
     if not flagged:
         return _none_answer(works, base, notes)
-    source = flagged[0]
-    also = tuple(w.data.spec.name for w in flagged[1:])
-    candidates = _fit_candidates(source, table, calibrate, settings)
-    chosen, choose_notes = _choose(source, candidates, settings)
+    source, candidates, chosen, choose_notes = _source(flagged, table, calibrate, settings)
+    also = tuple(w.data.spec.name for w in flagged if w is not source)
     notes.extend(choose_notes)
     return _answer(source, candidates, chosen, base, notes, also, table)
+
+
+#: Most flagged units whose candidates are fitted (the first in the table's order).
+MAX_SOURCES = 3
+
+
+def _source(flagged: list[_UnitWork], table, calibrate, settings) -> tuple:
+    """Return ``(unit, candidates, chosen, notes)`` of the source among the flagged units.
+
+    Each flagged unit's candidates are fitted (at most :data:`MAX_SOURCES`, in the table's
+    order); the source is the unit whose answer explains the largest share of its excess gap,
+    the first in the table's order among equals. A sensor error on a signal that feeds another
+    module shows in both units, but only its producer's candidates remove it (a bias on a
+    motor's recorded speed, read back through the back-EMF in a loop); with no unit explained,
+    the first flagged one is the source (``unexplained``).
+    """
+    answers = []
+    for work in flagged[:MAX_SOURCES]:
+        candidates = _fit_candidates(work, table, calibrate, settings)
+        chosen, notes, removed = _choose(work, candidates, settings)
+        answers.append((work, candidates, chosen, notes, removed))
+    explained = [a for a in answers if a[2] is not None]
+    best = max(explained, key=lambda a: a[4]) if explained else answers[0]
+    return best[:4]
 
 
 def _unit_report(work: _UnitWork) -> UnitReport:
@@ -765,6 +789,9 @@ def _module_of(data: UnitData, fit: VariantFit | None, table) -> str:
         return data.spec.modules[0]
     if "." in at:
         return at.split(".", 1)[0]
+    producer = table.producer(at)
+    if producer is not None and at not in data.spec.outputs and at in data.spec.inputs:
+        return producer.name  # a recorded input read wrong: its producer's sensor
     for module in table.modules:
         if module.name in data.spec.modules and (at in module.outputs or at in module.inputs):
             return module.name

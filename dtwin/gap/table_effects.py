@@ -108,6 +108,44 @@ def _input_variants(data: UnitData) -> list[Variant]:
     return out
 
 
+def _sensor_variants(data: UnitData, produced: frozenset[str]) -> list[Variant]:
+    """Return the candidates of a recorded input another module produces being read wrong.
+
+    The unit is driven by ``recorded − drift`` (``output_bias_drift``) or ``recorded / gain``
+    (``output_scale_error``) instead of the recorded values; the answer names the signal, so
+    its module is the producer's (docs/gap.md §Your own twin: a sensor error on a signal that
+    feeds another module is blamed on the module that produces it).
+    """
+    out = []
+    duration = data.n_samples * data.dt
+    for i, signal in enumerate(data.spec.inputs):
+        if signal not in produced:
+            continue
+        spread = float(np.std(data.inputs[slice(*data.parts["train"]), i])) or 1.0
+        drifts = tuple(f"_e_{p}_in{i}" for p in ("b0", "b1", "b2"))
+        gain = f"_e_gain_in{i}"
+
+        def drift(values, theta, data, i=i, b=drifts):
+            tau = np.arange(len(values)) * data.dt / duration
+            out = values.copy()
+            out[:, i] -= theta[b[0]] + theta[b[1]] * tau + theta[b[2]] * tau**2
+            return out
+
+        def scale(values, theta, _data, i=i, gain=gain):
+            out = values.copy()
+            out[:, i] /= theta[gain]
+            return out
+
+        out += [
+            Variant("output_bias_drift", signal, data.model, drifts, dict.fromkeys(drifts, 0.0),
+                    dict.fromkeys(drifts, (-np.inf, np.inf)), dict.fromkeys(drifts, spread),
+                    input_map=drift),
+            Variant("output_scale_error", signal, data.model, (gain,), {gain: 1.0},
+                    {gain: (0.1, 10.0)}, {gain: 0.1}, input_map=scale, linear_form=True),
+        ]  # fmt: skip
+    return out
+
+
 def _output_variants(data: UnitData) -> list[Variant]:
     out = []
     train = slice(*data.parts["train"])
@@ -260,7 +298,12 @@ def _limit_variants(data, state, j, path) -> list[Variant]:
 
 
 def candidate_variants(
-    data: UnitData, guess: np.ndarray, blocks: dict[str, str | None], *, calibrate: bool
+    data: UnitData,
+    guess: np.ndarray,
+    blocks: dict[str, str | None],
+    *,
+    calibrate: bool,
+    produced: frozenset[str] = frozenset(),
 ) -> list[Variant]:
     """Every candidate effect of a unit (input, output and state effects; a re-fit).
 
@@ -274,6 +317,9 @@ def candidate_variants(
         Each module's built-in block (None for an equations module).
     calibrate : bool
         The twin is calibrated (no ``parameter_mismatch`` candidate).
+    produced : frozenset of str
+        Signals a module of the table produces: a unit's recorded input among them may be read
+        wrong (:func:`_sensor_variants`).
     """
     out = (
         []
@@ -281,6 +327,7 @@ def candidate_variants(
         else [Variant("parameter_mismatch", None, data.model, refits_linear=True, linear_form=True)]
     )
     out += _input_variants(data)
+    out += _sensor_variants(data, produced)
     out += _output_variants(data)
     if not getattr(data.model, "closed", False):  # an FMU's internals are closed
         out += _state_variants(data, guess, blocks)
