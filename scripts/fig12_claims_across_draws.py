@@ -1,4 +1,4 @@
-"""Rule fig12_claims_across_draws: the paper's claims across random draws (issue 12).
+"""Rule fig12_claims_across_draws: the paper's claims across random draws.
 
 Input   results/draws/chunk<c>.json (every chunk), results/draws/bic/chunk<c>.json (every
         chunk of BIC sweeps), results/bic_sweep.csv (the main run's), R's seed-11 fault

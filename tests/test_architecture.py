@@ -330,8 +330,19 @@ def test_no_citation_outside_the_repository():
     assert cited == []
 
 
-#: An issue number ("issue 12", "issue #5") or a date (2026-11-24): history, not specification.
-HISTORY = re.compile(r"\bissue #?\d+|\b20\d\d-\d\d-\d\d\b", re.IGNORECASE)
+#: An issue number (the word issue, then a number) or a date: history, not specification.
+ISSUE_NUMBER = r"\bissues? #?\d+"
+HISTORY = re.compile(ISSUE_NUMBER + r"|\b20\d\d-\d\d-\d\d\b", re.IGNORECASE)
+#: Every file of code: the library, the scripts, the workflow, the tests and the configuration.
+CODE_FILES = [
+    REPO / "Snakefile",
+    *sorted(
+        path
+        for folder in ("dtwin", "scripts", "workflow", "tests", "config")
+        for path in (REPO / folder).rglob("*")
+        if path.suffix in (".py", ".smk", ".yaml", ".json") and path.is_file()
+    ),
+]
 
 
 def test_the_library_carries_no_issue_numbers_or_dated_measurements():
@@ -340,6 +351,19 @@ def test_the_library_carries_no_issue_numbers_or_dated_measurements():
         for path in LIBRARY_FILES
         for number, line in enumerate(path.read_text().splitlines(), 1)
         for match in [HISTORY.search(line)]
+        if match
+    ]
+    assert found == []
+
+
+def test_no_code_cites_an_issue_number():
+    """Scripts, rules, tests and configuration say what they do, not which issue asked."""
+    pattern = re.compile(ISSUE_NUMBER, re.IGNORECASE)
+    found = [
+        f"{path.relative_to(REPO).as_posix()}:{number}: {match.group(0)}"
+        for path in CODE_FILES
+        for number, line in enumerate(path.read_text().splitlines(), 1)
+        for match in [pattern.search(line)]
         if match
     ]
     assert found == []

@@ -1,6 +1,6 @@
 """The compiled EM engine against hmmlearn (the reference): same iterations, same numbers.
 
-Acceptance fixture of issue 24: on R's seed-11 fault features (T = 2000, D = 10), random and
+Acceptance fixture: on R's seed-11 fault features (T = 2000, D = 10), random and
 split starts at K = 2 … 12 give the same iteration counts and statuses in both engines, the
 log-likelihood within 1e-9 (relative) at every iteration and the parameters within 1e-8.
 """

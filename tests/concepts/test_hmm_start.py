@@ -1,4 +1,4 @@
-"""The EM random starts of fit_hmm (issue 12 item 4): k-means++ beside depmixS4's Dirichlet."""
+"""The EM random starts of fit_hmm: k-means++ beside depmixS4's Dirichlet."""
 
 from __future__ import annotations
 

@@ -336,7 +336,7 @@ def test_gap_benchmark_draws_the_paper_family_only():
 
 
 def test_gap_benchmark_draws_each_arm_and_the_rig_family_in_panel_f():
-    """Issues 10 and 16: the arms and the rig family are rows of the figure, not only JSON."""
+    """The arms and the rig family are rows of the figure, not only JSON."""
     from dtwin.gapbench.scores import benchmark_metrics
 
     paper = benchmark_table().assign(family="paper", arm="default")

@@ -172,7 +172,7 @@ def test_clean_rig_is_calibrated_to_its_physics_and_names_no_effect():
 
 
 def test_free_run_rms_is_in_the_recordings_units_and_falls_with_the_effect(rig_coulomb):
-    """Issue 25 item 7: the scoring part simulated freely from its first sample."""
+    """The scoring part simulated freely from its first sample."""
     volts = rig_coulomb
     frame = _rig(0.3)
     frame["x"] *= 1000.0  # millivolts
@@ -226,7 +226,7 @@ def test_cli_writes_a_valid_report(tmp_path, capsys):
 
 
 def test_a_long_run_shows_its_steps_on_stderr(tmp_path, capsys, monkeypatch, cli_without_figure):
-    """Issue 25 item 8: on a terminal, a line per step once a run has taken PROGRESS_AFTER s."""
+    """On a terminal, a line per step once a run has taken PROGRESS_AFTER s."""
     import dtwin.cli
 
     case = generate_case("coulomb_friction", 1, magnitude=0.8, n_samples=1500, nominal=paper_twin())
@@ -287,7 +287,7 @@ def test_quantizer_on_a_sensor_with_coloured_noise_is_named(seed):
     assert step == pytest.approx(case.key["params"]["q"], rel=0.01)
 
 
-# --- the project's own twin against the project's own asset (issue 25 item 1) ---------------
+# --- the project's own twin against the project's own asset ---------------------------------
 
 CONFIG = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
 #: config/config.yaml's twin section as a twin file says it (declares euler) and without its
@@ -406,7 +406,7 @@ def test_own_asset_with_each_effect_for_20_seeds_reads_as_well_silent_as_declare
     assert silent >= 0.9 * len(rights) and silent >= declared - 3, (declared, silent)
 
 
-# --- 95 % intervals of the answer's parameters (issue 25 item 6) ------------------------------
+# --- 95 % intervals of the answer's parameters -------------------------------------------------
 
 
 def test_rig_friction_interval_holds_the_true_level_and_is_in_the_json(rig_coulomb):

@@ -193,7 +193,7 @@ def _law_force(name: str, params: tuple[float, ...]):
     ],
 )
 def test_compiled_force_loop_equals_the_python_loop(name, params, windows_count):
-    """Issue 25 item 8: the numba loop of a known law gives the Python loop's positions."""
+    """The numba loop of a known law gives the Python loop's positions."""
     rng = np.random.default_rng(8)
     length = 300
     n = windows_count * length
@@ -313,7 +313,7 @@ def _ramped_duffing(n: int, seed: int) -> pd.DataFrame:
 
 
 def test_calibrated_twin_matches_an_oe_fit_on_a_stiffening_rig_with_a_ramped_input():
-    """Issue 10 item 2 on a rig like a measured resonant circuit (10 samples per period, input
+    """On a rig like a measured resonant circuit (10 samples per period, input
     ramped up over the first 30 %): the calibrated linear twin's scoring-part gap is within 5 %
     of a plain OE(3, 2) fit's on the same split and windows (measured 0.1017 vs 0.1020), and
     the stiffening spring is named.

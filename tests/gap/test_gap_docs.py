@@ -40,10 +40,3 @@ def test_every_cited_section_of_docs_gap_exists():
     assert len(citations) > 10, "docs/gap.md §Section citations not found"
     missing = [(path, text) for path, text in citations if not _names_a_heading(text, headings)]
     assert not missing, f"docs/gap.md has no heading for: {missing}"
-
-
-def test_no_citation_of_issue_5_remains():
-    for folder in ("dtwin", "scripts", "config"):
-        for path in (ROOT / folder).rglob("*"):
-            if path.is_file() and path.suffix in (".py", ".smk", ".yaml", ".md"):
-                assert "issue #5" not in path.read_text().lower(), path

@@ -1,4 +1,4 @@
-"""The harder rig family, Stribeck friction and the closed-loop calibration start (issue 25)."""
+"""The harder rig family, Stribeck friction and the closed-loop calibration start."""
 
 from __future__ import annotations
 

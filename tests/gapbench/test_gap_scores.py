@@ -156,7 +156,7 @@ def test_metrics_are_grouped_by_arm():
 
 
 def test_out_of_list_cases_given_a_catalogue_label_are_counted():
-    """Issue 16, arm (f): at most 20 % of near-catalogue cases may get an in-list label."""
+    """Arm (f): at most 20 % of near-catalogue cases may get an in-list label."""
     answers = ["unexplained", "coulomb_friction", "none", "unexplained", "sensor_scale_error"]
     table = pd.DataFrame(
         {
@@ -183,7 +183,7 @@ def test_out_of_list_cases_given_a_catalogue_label_are_counted():
 
 
 def test_a_second_effect_is_scored_on_two_effect_cases_and_counted_as_false_elsewhere():
-    """Issue 16, arm (g): 'say when two are needed' -- named on a two-effect case, a false
+    """Arm (g): 'say when two are needed' -- named on a two-effect case, a false
     alarm on a one-effect case."""
     drift = {"module": "M2a", "effect": "sensor_bias_drift", "choosing_share_pct": 73.0}
     scale = {"module": "M2b", "effect": "sensor_scale_error", "choosing_share_pct": 80.0}
@@ -214,7 +214,7 @@ def test_a_second_effect_is_scored_on_two_effect_cases_and_counted_as_false_else
 
 
 def test_interval_coverage_counts_right_answers_whose_interval_holds_the_truth():
-    """Issue 25 item 6: coverage per effect, Wilson interval, missing intervals counted."""
+    """Coverage per effect, Wilson interval, missing intervals counted."""
     key = {
         "effect": "coulomb_friction",
         "expected_effect": "coulomb_friction",
@@ -249,7 +249,7 @@ def test_report_gives_each_parameter_with_its_interval():
 
 
 def test_step_map_is_the_isotonic_fit_and_pools_equal_weights():
-    """Issue 25 item 5: the share right per step, rising with the weight; ties pooled."""
+    """The share right per step, rising with the weight; ties pooled."""
     from dtwin.gap.confidence import calibrated_confidence, fit_steps
 
     rng = np.random.default_rng(5)

@@ -1,4 +1,4 @@
-"""The AR-HMM stage and Fig. 13's checks (issue 12 item 6): parameter count, notes, errors."""
+"""The AR-HMM stage and Fig. 13's checks: parameter count, notes, errors."""
 
 from __future__ import annotations
 

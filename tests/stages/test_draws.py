@@ -1,4 +1,4 @@
-"""Claims across random draws (issue 12): seeds, the aggregate and its Wilson intervals."""
+"""Claims across random draws: seeds, the aggregate and its Wilson intervals."""
 
 from __future__ import annotations
 

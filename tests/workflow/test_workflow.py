@@ -327,7 +327,7 @@ def test_a_config_change_reruns_only_what_depends_on_it(workflow_copy):
         *DRAWS - {"bic_draws"},  # K* across draws reads no correction
     }
     edit_config(workflow_copy, lambda c: c["correction"].update(kappa=0.8))
-    # an MCDA weight reruns the decisions and the draws' claims, no BIC sweep (issue 24)
+    # an MCDA weight reruns the decisions and the draws' claims, no BIC sweep
     edit_config(workflow_copy, lambda c: c["mcda"]["weights"].update(Cost=0.2))
     assert planned_rules(workflow_copy) == {
         "mcda_actions",

@@ -270,7 +270,7 @@ def gap_case_files(kind, name):
     return [f"results/gap/{kind}/{chunk[case]}/{case}/{name}" for case in GAP_CASES]
 
 
-# --- claims across random draws (issue 12, Fig. 12): one job per chunk of draws ----------------
+# --- claims across random draws (Fig. 12): one job per chunk of draws ----------------
 
 
 wildcard_constraints:

@@ -1,4 +1,4 @@
-"""Stage "draws" (issue 12): the paper's single-draw claims on N random draws → Fig. 12.
+"""Stage "draws": the paper's single-draw claims on N random draws → Fig. 12.
 
 claims_draws runs one chunk of draws (config["draws"]["chunk_size"] per job; the chunk list
 is draw_chunk_files() in common.smk); fig12_claims_across_draws gathers them. Draw 0 is the
