@@ -6,6 +6,7 @@ Every loader checks that the columns it needs are present and names the missing 
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
@@ -170,15 +171,27 @@ def load_r_classification(path: str | os.PathLike) -> dict[str, float]:
 
 
 def load_r_bic(
-    nominal_path: str | os.PathLike, features_path: str | os.PathLike
+    nominal_path: str | os.PathLike,
+    features_path: str | os.PathLike,
+    nominal_log_likelihood: Mapping[int | str, float] | None = None,
 ) -> dict[str, pd.DataFrame]:
     """Return R's BIC by K per data set (r_notes.md §6 (a) and (b)).
+
+    Parameters
+    ----------
+    nominal_path, features_path : path
+        ``bic_vs_K_6ch_nofault_singlefit_rerun.csv`` and
+        ``bic_vs_K_10feat_faulted_multistart5.csv``.
+    nominal_log_likelihood : mapping of K to float, optional
+        R's nominal log-likelihood by K, which its CSV lacks (``r_numbers.yaml``,
+        ``bic_nominal_log_likelihood``); added as a column where given.
 
     Returns
     -------
     dict of str to DataFrame
-        ``nominal_residuals``: columns ``K``, ``bic``; ``fault_features``: ``K``, ``bic``,
-        ``log_likelihood`` (the published diagonal-covariance runs).
+        ``nominal_residuals``: columns ``K``, ``bic`` (and ``log_likelihood`` where given;
+        NaN at a K it lacks); ``fault_features``: ``K``, ``bic``, ``log_likelihood`` (the
+        published diagonal-covariance runs).
     """
     tables = {}
     for name, path, columns in (
@@ -187,6 +200,10 @@ def load_r_bic(
     ):
         raw = _read_csv(path, list(columns.values()))
         tables[name] = pd.DataFrame({ours: raw[theirs] for ours, theirs in columns.items()})
+    if nominal_log_likelihood is not None:
+        by_k = {int(k): float(v) for k, v in nominal_log_likelihood.items()}
+        nominal = tables["nominal_residuals"]
+        nominal["log_likelihood"] = [by_k.get(int(k), np.nan) for k in nominal["K"]]
     return tables
 
 

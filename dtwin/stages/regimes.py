@@ -27,7 +27,11 @@ from dtwin._validation import DtwinValueError
 from dtwin.config_sections import BicSettings, EmSettings, HmmSettings
 from dtwin.fault_injection import regime_features
 from dtwin.hmm import HmmFit, ZScored, bic_by_k, bic_row, fit_zscored_hmm, hmm_summary, zscore
+from dtwin.params import twin_params_from_mapping
+from dtwin.physics import backward_velocity, fuse, kpi
+from dtwin.reference.columns import R_PHYSICS_COLUMNS, R_SURROGATE_COLUMNS
 from dtwin.state_tables import posterior_matrix, state_labels
+from dtwin.surrogate import compute_residuals
 from dtwin.wiring import RESIDUALS
 
 __all__ = [
@@ -44,6 +48,7 @@ __all__ = [
     "bic_dataset",
     "sweep_bic",
     "bic_sweep_dataset",
+    "r_nominal_residuals",
     "bic_r_signals",
 ]
 
@@ -273,19 +278,80 @@ def bic_sweep_dataset(
     return sweep_bic({name: features}, bic, hmm, {name: model})
 
 
-def bic_r_signals(
-    r_pipeline: pd.DataFrame, bic: BicSettings | Mapping[str, Any], hmm: Mapping[str, Any]
-) -> pd.DataFrame:
-    """Fig. 9's sweep of the fault features on R's own seed-11 signals (paper §5).
+def r_nominal_residuals(r_pipeline: pd.DataFrame, twin: Mapping[str, Any]) -> pd.DataFrame:
+    """Return R's nominal residuals ``e0 … e4``, rebuilt from R's own seed-11 signals.
 
-    The same :func:`sweep_bic` (settings, seed stream, EM) as on our draw, run on the ten
-    features of ``config/reference/faulted_pipeline_seed11_rerun.csv``, the signals R's
-    K = 8 came from (R: 5 EM starts per K ≤ 9). Where our minimum is not at 8 on R's own
-    signals either, the draw cannot explain it: Fig. 9 then names the optimiser.
+    R's physics columns of ``config/reference/faulted_pipeline_seed11_rerun.csv`` and its
+    unfaulted surrogate rollouts (the ``*_nofault`` columns, seeded from physics as
+    ``BIC_vs_K.R`` seeds them); the surrogate's fusion and KPI follow from them with the twin's
+    ``fusion.alpha``, ``kpi.w1``, ``kpi.w2`` and ``dt`` (velocity by backward difference,
+    R's ``c(0, diff(x)/dt)``). These are the six channels ``BIC_vs_K.R`` sweeps
+    (r_notes.md §6 (a)); over the fault scenario's Nominal window they equal R's ``e0 … e4``.
+
+    Parameters
+    ----------
+    r_pipeline : DataFrame
+        ``faulted_pipeline_seed11_rerun.csv`` as read, R's column names.
+    twin : mapping
+        The ``twin`` section, at least ``dt``, ``fusion`` and ``kpi``.
 
     Returns
     -------
     DataFrame
-        :func:`sweep_bic`'s table for the one data set ``fault_features``.
+        Columns ``t`` and :data:`dtwin.wiring.RESIDUALS`, one row per sample (T = 1000).
     """
-    return sweep_bic({"fault_features": regime_features(r_pipeline)}, bic, hmm)
+    params = twin_params_from_mapping(twin, require_all=False, required=("fusion", "kpi"))
+    physics = pd.DataFrame({ours: r_pipeline[theirs] for ours, theirs in R_PHYSICS_COLUMNS.items()})
+    surrogate = pd.DataFrame(
+        {
+            ours: r_pipeline[theirs].to_numpy(dtype=float)
+            for ours, theirs in R_SURROGATE_COLUMNS.items()
+        }
+    )
+    x = surrogate["x"].to_numpy()
+    velocity = backward_velocity(x, params.dt)
+    surrogate["y_fused"] = fuse(surrogate["y_A"], surrogate["y_B"], params.fusion.alpha)
+    surrogate["z"] = kpi(x, velocity, params.kpi.w1, params.kpi.w2)
+    return compute_residuals(surrogate, physics)
+
+
+def bic_r_signals(
+    name: str,
+    r_pipeline: pd.DataFrame,
+    bic: BicSettings | Mapping[str, Any],
+    hmm: Mapping[str, Any],
+    twin: Mapping[str, Any],
+) -> pd.DataFrame:
+    """Fig. 9's sweep of one data set on R's own seed-11 signals (paper §5).
+
+    The same :func:`sweep_bic` (settings, seed stream, EM) as on our draw, run on the data
+    set as R built it from the signals of ``config/reference/faulted_pipeline_seed11_rerun.csv``:
+    ``fault_features``, the ten features of R's faulted residuals (R's K = 8 came from them with
+    5 EM starts per K ≤ 9); ``nominal_residuals``, R's nominal residuals
+    (:func:`r_nominal_residuals`; R: one EM start per K). Where our minimum is not at 8 on
+    R's own signals either, the draw cannot explain it: Fig. 9 then names the optimiser.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`BIC_DATASETS`.
+    r_pipeline : DataFrame
+        ``faulted_pipeline_seed11_rerun.csv`` as read.
+    bic, hmm : mapping
+        As :func:`sweep_bic`.
+    twin : mapping
+        The ``twin`` section (``dt``, ``fusion``, ``kpi``): the surrogate's fusion and KPI of
+        the nominal residuals.
+
+    Returns
+    -------
+    DataFrame
+        :func:`sweep_bic`'s table for the one data set ``name``.
+    """
+    if name not in BIC_DATASETS:
+        raise DtwinValueError(f"name must be one of {BIC_DATASETS} (got {name!r})")
+    if name == "nominal_residuals":
+        features = r_nominal_residuals(r_pipeline, twin)[list(RESIDUALS)]
+    else:
+        features = regime_features(r_pipeline)
+    return sweep_bic({name: features}, bic, hmm)

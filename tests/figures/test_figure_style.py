@@ -437,6 +437,7 @@ def test_a_moved_minimum_that_moves_on_r_signals_too_blames_the_optimiser():
         "k_star": 16,
         "log_likelihood_k8": 80.0,
         "r_log_likelihood_k8": 91.7,
+        "r_starts": "5 EM starts per K <= 9",
     }
     noted = _with_interior_note(claim, {"fault_features": 8}, {}, on_r)
     assert "Cause: optimiser (this sweep on R's own seed-11 signals gives K* = 16, not 8" in (

@@ -45,10 +45,11 @@ REFERENCE_DIR = "config/reference"
 # to the BIC sweeps (simulate -> ... -> bic_sweep_dataset -> fig09) is the paper DAG's critical
 # path, so it never waits behind a figure or a sweep chunk; in `make figures` the draws' jobs
 # (the longest, ready at once: they read only the config) start first, the longest first rule.
-# Within the chain, the longer remaining path goes first: bic_r_signals (ready at once) takes
-# one core while the other runs simulate -> fit_surrogates -> residuals -> nominal_regimes (short)
-# -> fault_regimes -> the fault features' BIC sweep (the longest sweep); the nominal residuals'
-# sweep then runs on the core bic_r_signals frees, instead of holding up the fault chain.
+# Within the chain, the longer remaining path goes first: bic_r_signals of the fault features
+# (ready at once) takes one core while the other runs simulate -> fit_surrogates -> residuals ->
+# nominal_regimes (short) -> fault_regimes -> the fault features' BIC sweep (the longest sweep);
+# the nominal residuals' sweeps (on R's signals and on ours) then run on the core the first frees,
+# instead of holding up the fault chain.
 PRIORITY_CRITICAL_PATH = 10
 PRIORITY_TWIN = PRIORITY_CRITICAL_PATH + 3  # simulate, fit_surrogates, residuals, nominal_regimes
 PRIORITY_FAULT_FIT = PRIORITY_CRITICAL_PATH + 2  # fault_regimes
@@ -60,7 +61,7 @@ PRIORITY_SWEEP = 1
 
 
 def bic_sweep_priority(wildcards):
-    """Priority of a data set's BIC sweep: the fault features' (longer, on fig09's path) first."""
+    """Priority of a data set's BIC sweep (ours or on R's signals): the fault features' first."""
     return PRIORITY_CRITICAL_PATH + (wildcards.dataset == "fault_features")
 
 FIGURE_FORMATS = ("png", "pdf")

@@ -136,21 +136,24 @@ rule bic_sweep:
 
 rule bic_r_signals:
     message:
-        "Sweeping K on R's own seed-11 fault features, as Fig. 9 on ours: is K* = 8 the draw "
-        "or the optimiser?"
+        "Sweeping K on R's own seed-11 {wildcards.dataset}, as Fig. 9 on ours: is K* = 8 the "
+        "draw or the optimiser?"
     input:
         lib=dtwin_sources("scripts/bic_r_signals.py"),
         r_pipeline=f"{REFERENCE_DIR}/faulted_pipeline_seed11_rerun.csv",
     output:
-        table="results/bic/r_signals.csv",
+        table="results/bic/r_signals/{dataset}.csv",
+    wildcard_constraints:
+        dataset="|".join(BIC_INPUTS),
     params:
         bic=config["bic"],
         hmm={k: config["hmm"][k] for k in ("seed", "max_iter", "tol", "var_floor", "engine")},
+        twin={k: config["twin"][k] for k in ("dt", "fusion", "kpi")},
     log:
-        "logs/bic_r_signals.log",
+        "logs/bic_r_signals/{dataset}.log",
     benchmark:
-        "benchmarks/rules/bic_r_signals.tsv"
-    priority: PRIORITY_CRITICAL_PATH
+        "benchmarks/rules/bic_r_signals/{dataset}.tsv"
+    priority: bic_sweep_priority
     threads: 1
     resources:
         mem_mb=500,
@@ -167,7 +170,7 @@ rule fig09_bic:
     input:
         lib=dtwin_sources("scripts/fig09_bic.py"),
         table=rules.bic_sweep.output.table,
-        r_signals=rules.bic_r_signals.output.table,
+        r_signals=expand("results/bic/r_signals/{dataset}.csv", dataset=BIC_INPUTS),
         r_nominal=f"{REFERENCE_DIR}/bic_vs_K_6ch_nofault_singlefit_rerun.csv",
         r_features=f"{REFERENCE_DIR}/bic_vs_K_10feat_faulted_multistart5.csv",
         r_numbers=f"{REFERENCE_DIR}/r_numbers.yaml",
