@@ -238,6 +238,7 @@ _GROUP_LABELS = {
     "unseen": "(e) unseen forms",
     "near": "(f) near-catalogue",
     "two": "(g) two effects",
+    "harder": "(h) continuous, coloured x",
     "rig": "rig family",
 }
 

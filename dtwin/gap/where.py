@@ -286,15 +286,22 @@ def _exact_plant_floor(
     residual = (data.output - simulated)[:n_train]
     # the scored samples only: the windows' unscored warm-ups (a fifth of every window) read
     # as zeros had taken a fifth off the noise's spectrum (a white floor 11 % low)
-    floor = spectral_noise_floor(residual[np.isfinite(residual)], data.dt, plant_bandwidth_hz(lin))
+    above = spectral_noise_floor(residual[np.isfinite(residual)], data.dt, plant_bandwidth_hz(lin))
     if data.horizon is None:
-        return floor
-    pole = window_gain_pole(floor)
+        return above
+    pole = window_gain_pole(above)
     gain = window_noise_gain(lin, data.dt, data.discretisation, data.horizon, pole)
-    floor = replace(floor, rms=floor.rms * math.sqrt(gain))
+    floor = replace(above, rms=above.rms * math.sqrt(gain))
     # the realised error of the windows carries their warm-ups' noise already: no gain
     whole = residual_noise_floor(residual, significance)
-    return whole if whole is not None and whole.rms > floor.rms else floor
+    if whole is not None and whole.rms > floor.rms:
+        return whole
+    # the noise read above the plant is measurement noise on the position, which a twin file
+    # never states: it adds to the twin's floor (reconcile_noise_floor) as the Euler plant's
+    # data measurement does, unless its pole sits at the top of the grid (no estimate: the
+    # steep spectrum of a force's sign changes, window_gain_pole)
+    estimated = len(above.acf) < 2 or pole > 0.0
+    return replace(floor, measurement=floor.rms) if estimated else floor
 
 
 def _exact_plant_window(data, nominal, n_train, n_held) -> tuple[int, dict | None, int | None]:

@@ -26,6 +26,11 @@ arm                   condition (expected answer)
                       periodic in the position; the answer is ``unexplained``)
 ``two``               (g) two effects in two modules (``<effect>+<effect>``; the answer is the
                       one with the larger signal-to-noise ratio)
+``harder``            (h) (c) and (d) at once, with (a) or (b): the continuous asset, ``x``
+                      recorded through a position sensor with AR(1) noise (pole uniform in
+                      :data:`HARDER_X_POLES`, standard deviation 1 % of std(x)), no ``v`` or
+                      ``z`` columns and no ``discretisation``; the twin file's noise levels
+                      absent or every one off by 25 % (one of the two per case, even odds)
 ====================  =============================================================================
 
 This module holds the arms' effect forms, their draws and the continuous asset; the generator
@@ -55,6 +60,7 @@ __all__ = [
     "TWO_EFFECT_PAIRS",
     "WRONG_NOISE_ERROR",
     "NOISY_X_FRACTION",
+    "HARDER_X_POLES",
     "CONTINUOUS_SUBSTEPS",
     "split_case_type",
     "unseen_expected",
@@ -77,11 +83,16 @@ ARMS: dict[str, str] = {
     "unseen": "(e) effect forms outside the catalogue's families",
     "near": "(f) near-catalogue out-of-list effects",
     "two": "(g) two effects at once",
+    "harder": "(h) continuous asset, AR(1)-coloured noise on x, noise levels absent or ±25 %",
 }
 #: Relative error of every noise level in a ``wrong_noise`` twin file (sign drawn per level).
 WRONG_NOISE_ERROR = 0.25
-#: Standard deviation of the ``noisy_x`` position sensor's white noise, over std(x).
+#: Standard deviation of the ``noisy_x`` position sensor's white noise, over std(x) (also the
+#: ``harder`` arm's coloured noise).
 NOISY_X_FRACTION = 0.01
+#: Range of the AR(1) pole of the ``harder`` arm's noise on ``x`` (a sensor's anti-aliasing
+#: filter or slow drift).
+HARDER_X_POLES = (0.5, 0.8)
 #: Runge-Kutta sub-steps per sample of the ``continuous`` asset.
 CONTINUOUS_SUBSTEPS = 20
 

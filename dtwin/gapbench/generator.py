@@ -45,6 +45,7 @@ from dtwin.gapbench.arms import (
     CONTINUOUS_SUBSTEPS,
     DEFAULT_ARM,
     FRICTION_FAMILY,
+    HARDER_X_POLES,
     NEAR_CATALOGUE,
     NOISY_X_FRACTION,
     TWO_EFFECT_PAIRS,
@@ -106,6 +107,7 @@ ARM_EFFECTS: dict[str, tuple[str, ...]] = {
     DEFAULT_ARM: ALL_CASE_EFFECTS,
     **{arm: (*IN_LIST_EFFECTS, NONE) for arm in ("no_noise", "wrong_noise", "noisy_x")},
     "continuous": (*IN_LIST_EFFECTS, NONE),
+    "harder": (*IN_LIST_EFFECTS, NONE),
     "unseen": tuple(UNSEEN_FORMS),
     "near": tuple(NEAR_CATALOGUE),
     "two": tuple(f"{a}+{b}" for a, b in TWO_EFFECT_PAIRS),
@@ -471,14 +473,15 @@ def generate_case(
     )
     n = int(rng.integers(1000, 5001)) if n_samples is None else int(n_samples)
     # a noisy-position recording has no z: a KPI (M4) effect could not be seen at all
-    module = module or _draw_module(effects[0], rng, only_module(KPI) if arm == "noisy_x" else None)
+    no_z = only_module(KPI) if arm in _NOISY_X_ARMS else None
+    module = module or _draw_module(effects[0], rng, no_z)
     dt = float(nominal["dt"])
     t = time_axis(n, dt)
     command, u_cmd = _excitation(rng, n, dt)
     asset = _miscalibrated_asset(nominal, rng, miscalibration)
     noise_true = dict(nominal["noise"])
     phis, noises = _draw_noises(rng, n, noise_true)
-    run = _run_continuous_asset if arm == "continuous" else _run_asset
+    run = _run_continuous_asset if arm in _CONTINUOUS_ARMS else _run_asset
     baseline = run(asset, u_cmd, noises, {m: {} for m in _MODULE_OUTPUT}, t)
     scale = _signal_scale(u_cmd, baseline, module, noise_true)
     specs = {m: {} for m in _MODULE_OUTPUT}
@@ -498,7 +501,7 @@ def generate_case(
     signals = run(asset, u_cmd, noises, specs, t)
     snrs = [
         _effect_snr(asset, nominal, u_cmd, noises, specs, signals, where, t, noise_true)
-        if arm != "continuous"
+        if arm not in _CONTINUOUS_ARMS
         else _snr_against(signals, baseline, asset, where, noise_true)
         for _, where, _, _ in placed
     ]
@@ -521,8 +524,8 @@ def generate_case(
             for (e, m, lv, p), r in zip(placed, snrs, strict=True)
         ]
     frame = pd.DataFrame({"t": t, **signals})
-    frame, twin_file = _apply_arm(arm, frame, twin_file, noise_true, arm_rng)
-    return GeneratedCase(recording=frame, twin=twin_file, key=key)
+    frame, twin_file, conditions = _apply_arm(arm, frame, twin_file, noise_true, arm_rng)
+    return GeneratedCase(recording=frame, twin=twin_file, key={**key, **conditions})
 
 
 def _check_case(effect: str, arm: str) -> tuple[str, list[str]]:
@@ -621,23 +624,38 @@ def _expected(arm, case_effect, effects, placed, snrs) -> dict[str, Any]:
     return key
 
 
-def _apply_arm(arm, frame, twin_file, noise_true, rng) -> tuple[pd.DataFrame, dict]:
-    """Return the recording and twin file under the arm's condition (dtwin/gapbench/arms.py)."""
+#: Arms whose asset is the continuous one (Runge-Kutta), and arms whose ``x`` is noisy.
+_CONTINUOUS_ARMS = ("continuous", "harder")
+_NOISY_X_ARMS = ("noisy_x", "harder")
+
+
+def _apply_arm(arm, frame, twin_file, noise_true, rng) -> tuple[pd.DataFrame, dict, dict]:
+    """Return the recording, twin file and key entries under the arm's condition (arms.py).
+
+    The key entries: the ``harder`` arm's ``x_noise_pole`` and ``noise_levels``
+    (``"absent"`` or ``"off_25"``); none for the other arms.
+    """
     twin = dict(twin_file["twin"])
-    if arm == "no_noise":
+    conditions: dict[str, Any] = {}
+    if arm == "harder":
+        conditions["noise_levels"] = "absent" if rng.uniform() < 0.5 else "off_25"
+        conditions["x_noise_pole"] = float(rng.uniform(*HARDER_X_POLES))
+    if arm == "no_noise" or conditions.get("noise_levels") == "absent":
         del twin["noise"]
-    elif arm == "wrong_noise":
+    elif arm == "wrong_noise" or conditions.get("noise_levels") == "off_25":
         twin["noise"] = {
             name: float(value * (1 + WRONG_NOISE_ERROR * (1 if rng.uniform() < 0.5 else -1)))
             for name, value in noise_true.items()
         }
-    elif arm == "noisy_x":
+    if arm in _NOISY_X_ARMS:
         x = frame["x"].to_numpy()
-        noisy = x + NOISY_X_FRACTION * float(np.std(x)) * rng.standard_normal(len(x))
-        frame = frame.drop(columns=["v", "z"]).assign(x=noisy)
-    elif arm == "continuous":
+        sigma = NOISY_X_FRACTION * float(np.std(x))
+        pole = conditions.get("x_noise_pole", 0.0)
+        noise = _ar1(rng, len(x), sigma, pole) if pole else sigma * rng.standard_normal(len(x))
+        frame = frame.drop(columns=["v", "z"]).assign(x=x + noise)
+    if arm in _CONTINUOUS_ARMS:
         del twin["discretisation"]
-    return frame, {"twin": twin}
+    return frame, {"twin": twin}, conditions
 
 
 def _excitation(rng: np.random.Generator, n: int, dt: float):
