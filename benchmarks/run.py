@@ -29,7 +29,7 @@ load average before and after it), medians where repeated. Sections (`python ben
   iteration's tracemalloc peak and the process's peak RSS; benchmarks/hmm_fit.py), and the
   same at T = 1000 for K = 4, 12, 20 (median of 7; the BIC sweeps' size);
 - ``gap``: `dtwin diagnose` on a 2,000-sample six-module recording and a 100,000-sample one,
-  and `--calibrate` on a 130,000-sample plant-only rig (issue 10's target: ≤ 30 s);
+  and `--calibrate` on a 130,000-sample plant-only rig (target: ≤ 30 s);
 - ``table``: `dtwin diagnose --calibrate` on a two-state expression module written as a twin
   table, 10,000 and 100,000 samples (benchmarks/table_cases.py): wall, CPU, peak RSS, answer;
 - ``fmu``: `dtwin diagnose --calibrate` on a two-state FMU module (the test FMU, Model Exchange
@@ -91,7 +91,7 @@ PAPER_TARGETS = [
     for name in yaml.safe_load((REPO / "workflow" / "artifacts.yaml").read_text())["paper"]
 ]
 #: The authors' R scripts on all paper figures, cold, single-threaded, same machine kind, load
-#: 0.4-0.7: median of fresh runs, seconds (110-128 s; docs/performance.md, issue 24).
+#: 0.4-0.7: median of fresh runs, seconds (110-128 s; docs/performance.md).
 R_REFERENCE_S = 112.7
 #: The folder whose sitecustomize.py measures every job's CPU time (see its docstring).
 CPU_PROBE = REPO / "benchmarks" / "cpu_probe"
@@ -295,9 +295,9 @@ def hmm_benchmarks() -> list[dict]:
         max_iter = "500" if n_steps < 100_000 else "3"
         for engine in ("dtwin", "hmmlearn"):
             measure(engine, str(n_steps), "10", max_iter)
-    for engine in ("em-dtwin", "em-hmmlearn"):  # one EM iteration alone at T = 1e6 (issue 11)
+    for engine in ("em-dtwin", "em-hmmlearn"):  # one EM iteration alone at T = 1e6
         measure(engine, "1000000", "3")
-    for n_states in ("4", "12", "20"):  # and at the sweeps' size (issue 24: <= 0.5 ms at K = 20)
+    for n_states in ("4", "12", "20"):  # and at the sweeps' size (target <= 0.5 ms at K = 20)
         for engine in ("em-dtwin", "em-hmmlearn"):
             measure(engine, "1000", "7", n_states)
     return rows
@@ -347,7 +347,7 @@ def gap_benchmarks() -> dict:
 def _plant_only_rig(folder: Path) -> float:
     """Seconds of `dtwin diagnose --calibrate` on a 130,000-sample plant-only rig recording.
 
-    Issue 10's speed target (≤ 30 s): the rig family's cubic-stiffness seed 2 (13.7 samples per
+    The speed target (≤ 30 s): the rig family's cubic-stiffness seed 2 (13.7 samples per
     period, open loop, ``t, u_act, x`` only, no nominal parameters).
     """
     case = folder / "rig130k"

@@ -333,12 +333,12 @@ def test_no_citation_outside_the_repository():
 #: An issue number (the word issue, then a number) or a date: history, not specification.
 ISSUE_NUMBER = r"\bissues? #?\d+"
 HISTORY = re.compile(ISSUE_NUMBER + r"|\b20\d\d-\d\d-\d\d\b", re.IGNORECASE)
-#: Every file of code: the library, the scripts, the workflow, the tests and the configuration.
+#: Every file of code: the library, scripts, workflow, tests, benchmarks and configuration.
 CODE_FILES = [
     REPO / "Snakefile",
     *sorted(
         path
-        for folder in ("dtwin", "scripts", "workflow", "tests", "config")
+        for folder in ("dtwin", "scripts", "workflow", "tests", "benchmarks", "config")
         for path in (REPO / folder).rglob("*")
         if path.suffix in (".py", ".smk", ".yaml", ".json") and path.is_file()
     ),
