@@ -9,8 +9,9 @@ asset with one effect), :mod:`~dtwin.gapbench.arms` (the arms' harder cases),
 other physics whose twin is a ``modules:`` table: tanks, a DC motor, a thermal network; their
 assets in :mod:`~dtwin.gapbench.family_assets`, their effects' real forms in
 :mod:`~dtwin.gapbench.family_effects`), :mod:`~dtwin.gapbench.batch` (a chunk of cases
-written to and diagnosed from folders) and :mod:`~dtwin.gapbench.scores` (diagnoses scored
-against their keys, the benchmark's metrics and checks).
+written to and diagnosed from folders), :mod:`~dtwin.gapbench.scores` (diagnoses scored
+against their keys, the benchmark's metrics and checks) and :mod:`~dtwin.gapbench.power` (the
+share named against the effect's signal-to-noise ratio, docs/gap.md §Detection power).
 
 The package re-exports :func:`generate_case` and :class:`GeneratedCase` lazily (PEP 562), so
 importing one module loads only what it needs.

@@ -80,6 +80,7 @@ from dtwin.wiring import (
 
 __all__ = [
     "accepted_effects",
+    "MIN_MAGNITUDE",
     "IN_LIST_EFFECTS",
     "OUT_OF_LIST_EFFECTS",
     "ALL_CASE_EFFECTS",
@@ -90,6 +91,10 @@ __all__ = [
     "case_spec",
 ]
 
+#: Smallest magnitude a case may be asked for: each strength's log-uniform map extrapolated
+#: three of its ranges below the faintest random case (a friction of 2.6e-6 of the largest
+#: command, a drift of 0.012 of the noise: invisible).
+MIN_MAGNITUDE = -3.0
 #: Effects of the catalogue the generator can inject, with the module(s) they may sit in: every
 #: catalogue effect in its modules, in the catalogue's order, but one that only widens another
 #: (``nests``: Stribeck friction is drawn as Coulomb friction, whose real form has the bump).
@@ -430,8 +435,10 @@ def generate_case(
         optionally prefixed ``<arm>__``.
     seed : int
         Seed of every random draw of the case.
-    magnitude : float in [0, 1], optional
-        Effect strength, from barely above the noise (0) to strong (1); default random.
+    magnitude : float in [:data:`MIN_MAGNITUDE`, 1], optional
+        Effect strength, from barely above the noise (0) to strong (1); default random in
+        [0, 1]. Below 0 the same log-uniform map is extrapolated to fainter effects, down to
+        invisible ones (a detection-power curve, :mod:`dtwin.gapbench.power`).
     module : str, optional
         Module for effects that may sit in several (sensors, ``parameter_mismatch``).
     n_samples : int, optional
@@ -469,7 +476,7 @@ def generate_case(
     level = (
         float(rng.uniform())
         if magnitude is None
-        else require_in_range("magnitude", magnitude, 0, 1)
+        else require_in_range("magnitude", magnitude, MIN_MAGNITUDE, 1)
     )
     n = int(rng.integers(1000, 5001)) if n_samples is None else int(n_samples)
     # a noisy-position recording has no z: a KPI (M4) effect could not be seen at all
