@@ -36,7 +36,9 @@ def _log_emission(X: np.ndarray, means: np.ndarray, variances: np.ndarray) -> np
 def _ar_log_emission(
     design: np.ndarray, intercepts: np.ndarray, coefs: np.ndarray, variances: np.ndarray
 ) -> np.ndarray:
-    """``log N(y_t | c_k + φ_k x_t, diag σ_k²)``, shape (T, K), from the rows ``(y, x, y², y·x, x²)`` of :func:`dtwin.hmm_ar._design`.
+    """``log N(y_t | c_k + φ_k x_t, diag σ_k²)``, shape (T, K), from design rows.
+
+    The rows are ``(y, x, y², y·x, x²)`` (:func:`dtwin.hmm_ar._design`).
 
     ``Σ_d (y − c − φx)²/σ²`` expanded: the weights of ``(y, x, y², yx, x²)`` are
     ``(−2c, 2cφ, 1, −2φ, φ²)/σ²``, plus the constant ``Σ_d c²/σ²``.

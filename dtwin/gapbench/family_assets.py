@@ -3,10 +3,11 @@
 Specification: docs/gap.md §Benchmark. Each :class:`Family` holds one real asset's physics (its
 states, derivative, state at rest and what its sensors read), the draw of its parameters and
 excitation, the nominal twin it is modelled by (a ``modules:`` table,
-docs/gap.md §Your own twin) and its withheld effects (:mod:`dtwin.gapbench.family_effects`). The engine that
-integrates, records and keys a case is :mod:`dtwin.gapbench.families`. A run starts from
-rest (empty tanks, a motor at standstill, a body at ambient) when the input's first level is
-applied, as an experiment does.
+docs/gap.md §Your own twin) and its withheld effects
+(:mod:`dtwin.gapbench.family_effects`). The engine that integrates, records and keys a case
+is :mod:`dtwin.gapbench.families`. A run starts from rest (empty tanks, a motor at
+standstill, a body at ambient) when the input's first level is applied, as an experiment
+does.
 
 - ``tanks``: pump voltage ``u`` (V, 0–10) → pump lag → flow ``q`` (cm/s, as the upper tank's
   level rate) → upper tank ``h1`` (cm) → Torricelli orifice → lower tank ``h2`` (cm) →
