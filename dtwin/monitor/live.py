@@ -14,8 +14,9 @@ writes to standard output:
 - ``left_nominal`` / ``back_to_nominal`` events when the nominal regimes lose / regain half the
   probability for ``hold`` samples (never inside a settling period); a ``left_nominal`` starts
   a background ``dtwin diagnose`` (:class:`~dtwin.monitor.background.DiagnosisJobs`) on the
-  samples since the change once ``diagnose_samples`` of them are in, its answer a
-  ``diagnosis`` event when ready;
+  samples since the change once ``diagnose_samples`` of them are in (a change within
+  ``diagnose_samples`` of the last one diagnosed is the same episode: not diagnosed again), its
+  answer a ``diagnosis`` event when ready;
 - at the end of input (or an interrupt) the diagnoses it started (waited for at the end of
   input, ended on an interrupt), then ``{"event": "summary", ...}``: rows read, used, refused by
   reason, gaps, restarts, events.
@@ -116,6 +117,7 @@ class Monitor:
             np.zeros((0, len(self.twin.columns))),
         )
         self.windows: list[_Window] = []
+        self.diagnosed = -(10**18)  # the change of the last diagnosis window opened
         self.used = 0
         self.tally = {"restarts": 0, "gaps": 0, "missing_samples": 0, "left_nominal": 0,
                       "back_to_nominal": 0, "diagnoses_skipped": 0}  # fmt: skip
@@ -255,6 +257,7 @@ class Monitor:
         settling_rows = np.flatnonzero(causal.settling & present)
         text += self._settling_lines(times, settling_rows)
         events: list[HoldEvent] = []
+        tracked = None
         if valid.any():
             rows = np.flatnonzero(valid)
             tracked = self.tracker.feed(
@@ -341,6 +344,9 @@ class Monitor:
             for old, new in zip(self.recent, (ks, times, values), strict=True)
         )
         for change in changes:
+            if change - self.diagnosed < self.settings.diagnose_samples:
+                continue  # the same episode: a change back and forth within one window
+            self.diagnosed = change
             window = _Window(change, next_k=change)
             self.windows.append(window)
             self._extend(window, *joined)

@@ -20,6 +20,7 @@ input or follows a file being appended, reopening it when it is replaced or trun
 
 from __future__ import annotations
 
+import codecs
 import io
 import math
 import os
@@ -138,12 +139,12 @@ class RowParser:
                 events.append(StreamEvent("header", row, ", ".join(names)))
 
     def _is_header(self, fields: list[str]) -> bool:
-        first = fields[0].strip().lower()
-        try:
-            float(first)
-        except ValueError:
-            return first == "t" or (self.index is None and first not in _MISSING)
-        return False
+        """Return whether a line is a header: names with ``t``, or a first line of text."""
+        names = [f.strip() for f in fields]
+        if "t" in names and not any(_is_number(name) for name in names):
+            return True
+        first = names[0].lower()
+        return self.index is None and first not in _MISSING and not _is_number(first)
 
     def parse(self, lines: Sequence[str]) -> ParsedRows:
         """Parse the next lines (without their line ends); return the usable rows."""
@@ -253,6 +254,14 @@ class RowParser:
         )
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _numbers(lines: Sequence[str], width: int) -> np.ndarray | None:
     """Return the lines as a float table (n, width), or None if one is not plain numbers.
 
@@ -302,6 +311,7 @@ class LineSource:
         self.stream, self.path = stream, None if follow is None else Path(follow)
         self.poll, self.max_lines = poll, max_lines
         self.partial = ""
+        self.decoder = codecs.getincrementaldecoder("utf-8")(errors="replace")
         self.handle = None
         self.inode = None
         self.rotations = 0
@@ -339,7 +349,9 @@ class LineSource:
         if not ready:
             return ""
         data = os.read(fd, 1 << 16)
-        return data.decode("utf-8", errors="replace") if data else None
+        if not data:
+            return self.decoder.decode(b"", final=True) or None
+        return self.decoder.decode(data)  # a character cut between reads waits for its rest
 
     def _read_followed(self) -> str:
         if self.handle is None:
