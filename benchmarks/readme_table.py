@@ -169,6 +169,8 @@ def monitor_rows(monitor: dict) -> list[tuple[str, str, str]]:
     latency = (
         f"{r['latency_ms_median']:.2f} ms median, {r['latency_ms_p99']:.2f} ms 99th percentile"
     )
+    if "latency_cpu_ms_mean" in r:
+        latency += f" ({r['latency_cpu_ms_mean']:.2f} CPU ms a line)"
     return [
         ("`dtwin regimes`, 100,000 samples, paper-size twin, K by BIC (CLI)", regimes, "≤ 60 s"),
         ("`dtwin monitor`, K = 8, 5 channels, one core", lines, "≥ 50,000 samples/s"),

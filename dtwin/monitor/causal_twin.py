@@ -164,9 +164,9 @@ def frozen_units_from_mapping(raw: Sequence[Mapping], table) -> list[FrozenUnit]
     specs = {spec.name: spec for spec in units_of(table, sorted(recorded))}
     if sorted(specs) != sorted(u.name for u in units):
         raise DtwinValueError(
-            "regimes file does not match the twin: its units are "
-            f"{', '.join(u.name for u in units)}, the twin's on those signals "
-            f"{', '.join(specs) or 'none'}"
+            "regimes file does not match the twin: it was fitted for unit(s) "
+            f"{', '.join(u.name for u in units)}; on those signals the twin has "
+            f"{', '.join(specs) or 'none'} (modules {', '.join(m.name for m in table.modules)})"
         )
     for unit in units:
         spec = specs[unit.name]
