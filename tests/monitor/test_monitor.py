@@ -361,3 +361,21 @@ def test_an_interrupted_follow_writes_its_summary(tmp_path, clean):
     assert summary["event"] == "summary" and summary["ended"] == "interrupted"
     assert summary["rows_used"] == 1499 and summary["rotations"] == 1
     assert summary["headers"] == 2 and summary["rows_refused"] == 0
+
+
+def test_the_compiled_filter_is_the_forward_recursion_of_the_dag():
+    """Without the unknown state, filter_rows gives dtwin.hmm.filtered_posteriors' numbers."""
+    from dtwin.hmm import filtered_posteriors, fit_hmm
+    from dtwin.monitor._stream_kernels import filter_rows
+
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.normal(-1, 1, (300, 2)), rng.normal(1.5, 0.7, (300, 2))])
+    fit = fit_hmm(x, 2, n_restarts=2, seed=0)
+    variances = fit.sds**2
+    arrays = (fit.means, 1 / variances, -0.5 * np.log(2 * np.pi * variances).sum(axis=1))
+    ours = filter_rows(x, *arrays, fit.transmat, fit.startprob.copy(), True)
+    np.testing.assert_allclose(ours, filtered_posteriors(fit, x), rtol=0, atol=1e-10)
+    alpha = fit.startprob.copy()
+    first = filter_rows(x[:250], *arrays, fit.transmat, alpha, True)
+    rest = filter_rows(x[250:], *arrays, fit.transmat, alpha, False)
+    np.testing.assert_array_equal(np.vstack([first, rest]), ours)
