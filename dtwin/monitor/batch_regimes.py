@@ -43,6 +43,7 @@ __all__ = [
     "ZERO_RESIDUAL",
     "nominal_rows",
     "informative_channels",
+    "column_ranges",
     "regimes_of",
     "false_alarms",
 ]
@@ -110,6 +111,7 @@ class RegimesResult:
     hold: int
     columns: tuple[str, ...] = field(default=())
     kept: list[int] = field(default_factory=list)
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     @property
     def dropped(self) -> list[str]:
@@ -137,6 +139,28 @@ def nominal_rows(t: np.ndarray, stretch: tuple[float, float] | None) -> tuple[in
             f"(needs {MIN_NOMINAL_SAMPLES}; --nominal T0:T1 in the recording's seconds)"
         )
     return rows
+
+
+def column_ranges(columns, samples: np.ndarray) -> dict[str, tuple[float, float]]:
+    """Return each column's admitted range: its bulk widened by the diagnoser's outlier gap.
+
+    The bulk is the central ``1 − 2·OUTLIER_QUANTILE`` of the recording's values, widened by
+    ``OUTLIER_GAP`` times its spread on each side (docs/gap.md §Bad input): the monitor refuses
+    a value beyond it (``out_of_range``), which would throw the twin's states out.
+
+    Examples
+    --------
+    >>> column_ranges(["u"], np.linspace(0.0, 1.0, 101)[:, None])
+    {'u': (-9.79, 10.79)}
+    """
+    from dtwin.gap.recording import OUTLIER_GAP, OUTLIER_QUANTILE
+
+    low, high = np.quantile(samples, [OUTLIER_QUANTILE, 1.0 - OUTLIER_QUANTILE], axis=0)
+    margin = OUTLIER_GAP * np.maximum(high - low, 1e-12 * np.maximum(np.abs(high), 1.0))
+    return {
+        name: (round(float(lo - m), 12), round(float(hi + m), 12))
+        for name, lo, hi, m in zip(columns, low, high, margin, strict=True)
+    }
 
 
 def informative_channels(recorded: np.ndarray, residuals: np.ndarray) -> list[int]:
@@ -265,4 +289,5 @@ def regimes_of(
         false_alarms=false_alarms(model_fit, tracked, in_stretch, recording.dt, hold,
                                   settings.seed),
         hold=hold, columns=twin.columns, kept=kept,
+        ranges=column_ranges(twin.columns, samples),
     )  # fmt: skip

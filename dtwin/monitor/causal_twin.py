@@ -429,6 +429,11 @@ class CausalTwin:
         """Whether the settling period is over."""
         return self.last is not None
 
+    @property
+    def diverged(self) -> bool:
+        """Whether a unit's state is no longer finite (the twin must restart)."""
+        return self.settled and not all(np.all(np.isfinite(r.state)) for r in self.runners)
+
     def feed(self, rows: np.ndarray) -> CausalRows:
         """Run the twin over the next samples; return their outputs and residuals.
 

@@ -102,7 +102,7 @@ class Monitor:
         self.twin = CausalTwin(model.units, table, model.dt, model.model.channels)
         self.tracker = RegimeTracker(model.model, model.actions)
         self.hold = HoldRule(settings.hold or model.hold)
-        self.parser = RowParser(self.twin.columns, model.dt, settings.max_gap, header)
+        self.parser = RowParser(self.twin.columns, model.dt, settings.max_gap, header, model.ranges)
         self.modelled = [self.twin.channels.index(c) for c in model.model.channels]
         produced = {s for u in model.units for s in u.outputs}
         self.output_columns = np.array([c in produced for c in self.twin.columns])
@@ -207,13 +207,16 @@ class Monitor:
             if a == b:
                 continue
             if parsed.restart[a]:
-                self._restart(float(parsed.t[a]))
+                self._restart(float(parsed.t[a]), "time_jump")
             self._process(*self._block(parsed, a, b))
+            if self.twin.diverged:  # a state is no longer finite: start again from the stream
+                self._restart(float(parsed.t[b - 1]) + self.model.dt, "twin_diverged")
 
-    def _restart(self, t0: float) -> None:
+    def _restart(self, t0: float, reason: str) -> None:
         if self.k >= 0:
             self.tally["restarts"] += 1
-            self._emit({"event": "restart", "t": t0, "settling": self.twin.settling})
+            self._emit({"event": "restart", "t": t0, "reason": reason,
+                        "settling": self.twin.settling})  # fmt: skip
             self._finish_windows()
         self.twin.restart(t0)
         self.tracker.restart()

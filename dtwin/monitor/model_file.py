@@ -11,7 +11,7 @@ frozen_units_from_mapping`) with one line.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from dtwin._validation import DtwinValueError
@@ -43,6 +43,8 @@ class MonitorModel:
         Samples of the settling period.
     false_alarms : dict
         As ``dtwin regimes`` measured them (docs/monitor.md §False alarms).
+    ranges : dict of str to (float, float)
+        Each column's admitted range (:func:`dtwin.monitor.batch_regimes.column_ranges`).
     """
 
     dt: float
@@ -52,6 +54,7 @@ class MonitorModel:
     hold: int
     settling: int
     false_alarms: dict[str, Any]
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def regimes_file_mapping(result) -> dict[str, Any]:
@@ -65,6 +68,7 @@ def regimes_file_mapping(result) -> dict[str, Any]:
         "schema": REGIMES_SCHEMA,
         "dt": result.dt,
         "columns": list(result.columns),
+        "column_ranges": {name: list(r) for name, r in result.ranges.items()},
         "channels": list(result.channels),
         "dropped_channels": result.dropped,
         "settling": {"samples": result.settling, "seconds": result.settling * result.dt},
@@ -133,6 +137,13 @@ def monitor_model_from_mapping(raw: Any, table, actions: ActionTable | None = No
         raise DtwinValueError(f"regimes file: dt or hold is malformed ({error})") from error
     if not dt > 0 or hold < 1:
         raise DtwinValueError(f"regimes file: dt must be > 0 and hold >= 1 (got {dt}, {hold})")
-    return MonitorModel(
-        dt, units, model, actions, hold, settling, dict(raw.get("false_alarms") or {})
-    )
+    alarms = dict(raw.get("false_alarms") or {})
+    return MonitorModel(dt, units, model, actions, hold, settling, alarms, _ranges(raw))
+
+
+def _ranges(raw: Mapping) -> dict[str, tuple[float, float]]:
+    entries = raw.get("column_ranges") or {}
+    try:
+        return {str(k): (float(v[0]), float(v[1])) for k, v in entries.items()}
+    except (TypeError, ValueError, IndexError, AttributeError) as error:
+        raise DtwinValueError(f"regimes file: column_ranges is malformed ({error})") from error

@@ -84,7 +84,8 @@ class RegimeTracker:
         Parameters
         ----------
         residuals : ndarray, shape (n, C)
-            ``recorded − twin`` per channel (NaN at a missing sample: a prediction step).
+            ``recorded − twin`` per channel (NaN at a missing sample, or not finite: a
+            prediction step).
         simulated : ndarray, shape (n, C)
             The twin's outputs.
 
@@ -93,7 +94,9 @@ class RegimeTracker:
         TrackedRows
         """
         model, arrays = self.model, self.arrays
-        z = np.ascontiguousarray((residuals - model.center) / model.scale)
+        with np.errstate(invalid="ignore", over="ignore"):
+            z = np.ascontiguousarray((residuals - model.center) / model.scale)
+        z[~np.isfinite(z)] = np.nan  # a diverged twin's row: a prediction step
         posteriors = filter_rows(
             z, arrays.means, arrays.precision, arrays.log_norm, arrays.transmat, self.alpha,
             self.fresh,

@@ -8,8 +8,9 @@ counted, never dropped silently:
 
 ``no_header`` (a row before any header), ``missing_column`` (the current header lacks a signal
 the twin reads), ``malformed`` (another number of fields than the header's), ``missing_value``
-(an empty field or ``nan``), ``non_numeric``, ``non_finite`` (``inf``), ``duplicate_time`` (the
-time of the previous row), ``backward_time`` (earlier than it), ``empty`` (a blank line).
+(an empty field or ``nan``), ``non_numeric``, ``non_finite`` (``inf``), ``out_of_range`` (beyond
+the signal's admitted range), ``duplicate_time`` (the time of the previous row),
+``backward_time`` (earlier than it), ``empty`` (a blank line).
 
 A row later than one period after the previous one is used: up to ``max_gap`` missing samples
 are bridged (``time_gap``: the twin runs through them, the filter predicts), a longer jump
@@ -45,7 +46,7 @@ __all__ = [
 #: Reasons a row is refused.
 REASONS: tuple[str, ...] = (
     "no_header", "missing_column", "malformed", "missing_value", "non_numeric", "non_finite",
-    "duplicate_time", "backward_time", "empty",
+    "out_of_range", "duplicate_time", "backward_time", "empty",
 )  # fmt: skip
 #: Largest deviation of a row's time from the sample grid that is still on it, in periods.
 GRID_TOLERANCE = 0.25
@@ -113,10 +114,15 @@ class RowParser:
         Most missing samples bridged; a longer jump restarts.
     header : sequence of str, optional
         The columns of a stream without a header line.
+    ranges : mapping of str to (float, float), optional
+        Each signal's admitted range; a value beyond it is refused (``out_of_range``).
     """
 
-    def __init__(self, columns: Sequence[str], dt: float, max_gap: int, header=None):
+    def __init__(self, columns: Sequence[str], dt: float, max_gap: int, header=None, ranges=None):
         self.columns, self.dt, self.max_gap = tuple(columns), float(dt), int(max_gap)
+        bounds = [(ranges or {}).get(c, (-np.inf, np.inf)) for c in self.columns]
+        self.low = np.array([b[0] for b in bounds], dtype=float)
+        self.high = np.array([b[1] for b in bounds], dtype=float)
         self.counts: Counter[str] = Counter()
         self.rows_read = self.headers = self.line_number = 0
         self.last_t: float | None = None
@@ -210,6 +216,12 @@ class RowParser:
                 self._refuse("non_finite", line, events, name)
                 return None
             values.append(value)
+        signals = np.array(values[1:])
+        outside = np.flatnonzero((signals < self.low) | (signals > self.high))
+        if outside.size:
+            name = self.columns[outside[0]]
+            self._refuse("out_of_range", line, events, f"{name} = {float(signals[outside[0]])!r}")
+            return None
         return values
 
     def _place(self, t: float, line: str, events) -> tuple[int, bool] | None:
@@ -244,6 +256,8 @@ class RowParser:
         table = table[:, self.index]
         steps = np.diff(table[:, 0], prepend=self.last_t) / self.dt
         if not np.all(np.isfinite(table)) or np.any(np.abs(steps - 1.0) > GRID_TOLERANCE):
+            return None
+        if np.any(table[:, 1:] < self.low) or np.any(table[:, 1:] > self.high):
             return None
         self.line_number += len(lines)
         self.rows_read += len(lines)

@@ -183,6 +183,7 @@ def test_hostile_rows_are_events_and_counted(clean):
     hostile[402] = hostile[390]  # backward time (an old row again)
     hostile[403] = hostile[403].split(",")[0] + ",abc," + hostile[403].split(",")[2]
     hostile[404] = ""
+    hostile[405] = hostile[405].split(",")[0] + ",1e6," + hostile[405].split(",")[2]  # far out
     hostile.insert(500, hostile[499])  # duplicate time
     hostile.insert(600, "t,level")  # a header without u: its rows are refused
     hostile.insert(603, "t,u,level")  # u is back
@@ -191,11 +192,11 @@ def test_hostile_rows_are_events_and_counted(clean):
     output, err, summary = _monitor(result, table, hostile, chunks=[450, 1, 200])
     events = [json.loads(x) for x in err.splitlines()]
     kinds = {e["event"] for e in events}
-    assert {"malformed", "missing_value", "backward_time", "non_numeric", "empty",
+    assert {"malformed", "missing_value", "backward_time", "non_numeric", "empty", "out_of_range",
             "duplicate_time", "missing_column", "header", "time_jump"} <= kinds  # fmt: skip
     assert summary["refused"] == {"malformed": 1, "missing_value": 1, "non_numeric": 1,
                                   "backward_time": 1, "empty": 1, "duplicate_time": 1,
-                                  "missing_column": 2}  # fmt: skip
+                                  "missing_column": 2, "out_of_range": 1}  # fmt: skip
     assert summary["rows_read"] == summary["rows_used"] + summary["rows_refused"]
     assert summary["restarts"] == 1 and summary["left_nominal"] == 0
     assert output[-1]["t"] == pytest.approx(float(jump[-1].split(",")[0]))
