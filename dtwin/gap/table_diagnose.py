@@ -184,7 +184,11 @@ def _dynamics(model: UnitModel, theta, guess, inputs, dt, train) -> tuple[int, i
     values = [theta[name] for name in model.param_names]
     substeps = choose_substeps(model, values, states, probe_inputs, dt) if len(states) else 8
     slowest, fastest = _time_scales(model, values, states, probe_inputs)
-    window = int(np.clip(round(WINDOW_TIME_CONSTANTS * slowest / dt), MIN_WINDOW, MAX_WINDOW))
+    # no state, or only integrating modes (no decay): the longest window
+    span = WINDOW_TIME_CONSTANTS * slowest / dt
+    window = (
+        MAX_WINDOW if not math.isfinite(span) else int(np.clip(round(span), MIN_WINDOW, MAX_WINDOW))
+    )
     window = min(window, max(MIN_WINDOW, (train.stop - train.start) // 4))
     return substeps, window, fastest / (2 * math.pi)
 
