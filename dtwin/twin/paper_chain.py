@@ -34,13 +34,11 @@ from dtwin.twin.table import TwinTable, TwinTableError, table_from_mapping
 
 __all__ = ["PAPER_NOISE_SIGNALS", "paper_table"]
 
-#: The ``noise`` section's channels → the signal each applies to.
-PAPER_NOISE_SIGNALS: dict[str, str] = {
-    "actuator": "u_act",
-    "plant": "x",
-    "sensor_A": "y_A",
-    "sensor_B": "y_B",
-}
+#: The ``noise`` section's channels → the signal each applies to (a map of names, not a twin:
+#: the values are signals, never parameters).
+PAPER_NOISE_SIGNALS: dict[str, str] = dict(
+    zip(("actuator", "plant", "sensor_A", "sensor_B"), ("u_act", "x", "y_A", "y_B"), strict=True)
+)
 
 
 def _get(owner: Any, name: str) -> Any:
