@@ -140,11 +140,14 @@ def _monitor(args: argparse.Namespace) -> int:
     header = None if args.columns is None else args.columns.split(",")
     source = LineSource(follow=args.follow) if args.follow else LineSource(stream=sys.stdin)
     monitor = Monitor(model, table, settings, sys.stdout, sys.stderr, jobs, header)
-    previous = signal.signal(signal.SIGTERM, _interrupt)
+    # SIGINT too: a process started with SIGINT ignored (a test runner's worker, a shell's
+    # background job) inherits the ignore, and Python then raises no KeyboardInterrupt
+    previous = {sig: signal.signal(sig, _interrupt) for sig in (signal.SIGTERM, signal.SIGINT)}
     try:
         summary = monitor.run(source)
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         if jobs is not None:
             jobs.close()
     return 0 if summary["ended"] == "end_of_input" else 130
