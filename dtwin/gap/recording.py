@@ -253,6 +253,23 @@ def _check_used_signals(signals: Mapping[str, np.ndarray], modules: list[str]) -
             )
 
 
+def _checked_frame(frame: pd.DataFrame) -> pd.DataFrame:
+    """Return ``frame`` with stripped column names, refusing duplicates, no ``t``, too few rows."""
+    frame = frame.rename(columns=lambda name: str(name).strip())
+    duplicated = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
+    if duplicated:
+        raise DtwinValueError(f"recording has duplicate column(s): {', '.join(duplicated)}")
+    if "t" not in frame.columns:
+        raise DtwinValueError(
+            f"recording is missing column 't' (got columns: {', '.join(frame.columns) or 'none'})"
+        )
+    if len(frame) < MIN_SAMPLES:
+        raise DtwinValueError(
+            f"recording must have at least {MIN_SAMPLES} samples (got {len(frame)})"
+        )
+    return frame
+
+
 def recording_from_frame(frame: pd.DataFrame) -> Recording:
     """Return a validated :class:`Recording` from a table with column ``t`` and module signals.
 
@@ -275,19 +292,8 @@ def recording_from_frame(frame: pd.DataFrame) -> Recording:
     >>> rec.n_samples, round(rec.dt, 6), sorted(rec.signals)
     (300, 0.02, ['u_act', 'x'])
     """
-    frame = frame.rename(columns=lambda name: str(name).strip())
-    duplicated = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
-    if duplicated:
-        raise DtwinValueError(f"recording has duplicate column(s): {', '.join(duplicated)}")
-    if "t" not in frame.columns:
-        raise DtwinValueError(
-            f"recording is missing column 't' (got columns: {', '.join(frame.columns) or 'none'})"
-        )
+    frame = _checked_frame(frame)
     present = [name for name in SIGNALS if name in frame.columns]
-    if len(frame) < MIN_SAMPLES:
-        raise DtwinValueError(
-            f"recording must have at least {MIN_SAMPLES} samples (got {len(frame)})"
-        )
     ignored = tuple(c for c in frame.columns if c != "t" and c not in SIGNALS)
     signals = {name: _numeric_column(name, frame[name]) for name in present}
     modules = diagnosable_modules(signals)
@@ -313,18 +319,7 @@ def recording_with_columns(frame: pd.DataFrame, wanted: Collection[str]) -> Reco
     every column of ``wanted`` present becomes a signal (checked for non-numeric, non-finite
     and outlying values), the others are ignored.
     """
-    frame = frame.rename(columns=lambda name: str(name).strip())
-    duplicated = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
-    if duplicated:
-        raise DtwinValueError(f"recording has duplicate column(s): {', '.join(duplicated)}")
-    if "t" not in frame.columns:
-        raise DtwinValueError(
-            f"recording is missing column 't' (got columns: {', '.join(frame.columns) or 'none'})"
-        )
-    if len(frame) < MIN_SAMPLES:
-        raise DtwinValueError(
-            f"recording must have at least {MIN_SAMPLES} samples (got {len(frame)})"
-        )
+    frame = _checked_frame(frame)
     present = [name for name in frame.columns if name in set(wanted)]
     ignored = tuple(c for c in frame.columns if c != "t" and c not in set(wanted))
     signals = {name: _numeric_column(name, frame[name]) for name in present}
