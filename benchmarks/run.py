@@ -180,11 +180,11 @@ def noop(args: list[str], workdir: Path, repeats: int = 3) -> dict:
 
 def set_up(workdir: Path) -> None:
     """What `make` does in a fresh clone before any timing: compile the EM kernels and the gap
-    diagnoser's force loop into the copy's numba cache (dtwin/__pycache__, left out of the
+    diagnoser's force loop into the copy's numba cache (the __pycache__ folders, left out of the
     copy), so no job pays a cold compile."""
     env = {**os.environ, "PYTHONPATH": str(workdir)}
     warm = (
-        "from dtwin import _em_kernels, _force_kernels; "
+        "from dtwin import _em_kernels; from dtwin.twin import _force_kernels; "
         "_em_kernels.warm_up(); _force_kernels.warm_up()"
     )
     run([PY, "-c", warm], workdir, env)

@@ -36,7 +36,7 @@ def lazy_exports(
 
     Examples
     --------
-    >>> getattr_, dir_ = lazy_exports("dtwin", {"SIGNALS": "dtwin.wiring"})
+    >>> getattr_, dir_ = lazy_exports("dtwin", {"SIGNALS": "dtwin.twin.wiring"})
     >>> getattr_("SIGNALS")[:2]
     ('u_cmd', 'u_act')
     """

@@ -18,7 +18,7 @@ from dtwin._validation import (
     require_finite_array,
     require_min_length,
 )
-from dtwin.wiring import MODULES
+from dtwin.twin.wiring import MODULES
 
 __all__ = [
     "ARX_MODULES",

@@ -34,7 +34,7 @@ from dtwin._validation import (
     require_positive,
 )
 from dtwin.physics import backward_velocity, fuse, kpi
-from dtwin.wiring import MODULES, RESIDUALS
+from dtwin.twin.wiring import MODULES, RESIDUALS
 
 __all__ = [
     "CORRECTED_SIGNALS",

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 
 __all__ = [
     "RMSE_RATIO",

@@ -790,7 +790,7 @@ class ArxSettings:
     ----------
     orders : mapping of module name to ArxOrders
         The lag orders of every module the twin replaces by an ARX model (``M0, M1, M2a,
-        M2b``: :attr:`dtwin.wiring.Module.surrogate` ``"arx"``), in the section's order.
+        M2b``: :attr:`dtwin.twin.wiring.Module.surrogate` ``"arx"``), in the section's order.
     train_frac : float, default 0.5
         Fraction of the samples, from the start, the models are fitted on, in (0, 1] (the
         paper: the first half).

@@ -37,7 +37,7 @@ from dtwin._validation import (
 )
 from dtwin.config_sections import require_keys
 from dtwin.physics import backward_velocity, fuse, kpi
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 
 __all__ = [
     "REGIMES",
@@ -317,7 +317,7 @@ def regime_features(residuals: pd.DataFrame) -> pd.DataFrame:
     Parameters
     ----------
     residuals : DataFrame
-        Columns :data:`dtwin.wiring.RESIDUALS` (``e0 … e4``), one row per sample.
+        Columns :data:`dtwin.twin.wiring.RESIDUALS` (``e0 … e4``), one row per sample.
 
     Returns
     -------

@@ -15,8 +15,8 @@ diagnoser) has exactly this shape::
 
 Units: seconds for ``dt`` and every ``tau``; kg, N·s/m, N/m for the plant; signal units for
 biases and noise standard deviations (the plant noise is an acceleration, m/s²).
-``discretisation`` is one of :data:`dtwin.modules.DISCRETISATIONS`: ``euler`` (the paper's
-explicit Euler, the only one :func:`dtwin.physics.simulate_physics` runs) or an exact hold
+``discretisation`` is one of :data:`dtwin.twin.paper_modules.DISCRETISATIONS`: ``euler`` (the
+paper's explicit Euler, the only one :func:`dtwin.physics.simulate_physics` runs) or an exact hold
 (``zoh``, ``foh``, ``bandlimited``: the gap diagnoser's plant, docs/gap.md §Modules); absent
 (None), the gap diagnoser chooses on the training part.
 """
@@ -36,8 +36,8 @@ from dtwin._validation import (
     require_number,
     require_positive,
 )
-from dtwin.modules import CONTRACTS, DISCRETISATIONS
-from dtwin.wiring import MODULES
+from dtwin.twin.paper_modules import CONTRACTS, DISCRETISATIONS
+from dtwin.twin.wiring import MODULES
 
 __all__ = [
     "ActuatorParams",
@@ -144,8 +144,8 @@ class CommandParams:
 def _section_fields() -> dict[str, tuple[type, tuple[str, ...]]]:
     """Each section of :class:`TwinParams`: its dataclass and its keys, in module order.
 
-    Derived from the module contract (:data:`dtwin.modules.CONTRACTS`: a module's section and
-    linear parameters, the noise channels) and the field types of :class:`TwinParams`, so the
+    Derived from the module contract (:data:`dtwin.twin.paper_modules.CONTRACTS`: a module's section
+    and linear parameters, the noise channels) and the field types of :class:`TwinParams`, so the
     modules are listed once (``tests/concepts/test_params.py`` checks each dataclass has those
     fields).
     """
@@ -265,7 +265,7 @@ def discretisation_from_mapping(mapping: Mapping[str, Any], *, prefix: str = "tw
     Raises
     ------
     DtwinValueError, DtwinTypeError
-        If it is not one of :data:`dtwin.modules.DISCRETISATIONS`.
+        If it is not one of :data:`dtwin.twin.paper_modules.DISCRETISATIONS`.
 
     Examples
     --------

@@ -1,9 +1,9 @@
 """The physical asset: six discrete modules and the simulator (paper §3.1; r_notes.md §1).
 
-The modules' laws are the contract of :mod:`dtwin.modules` (recursions, parameters, signals),
-run with the paper's explicit-Euler discretisation; this module adds the noise and the start at
-rest, and :func:`simulate_physics` runs them with the contract's chain runner
-(:func:`dtwin.modules.run_modules`, the order of the wiring table).
+The modules' laws are the contract of :mod:`dtwin.twin.paper_modules` (recursions, parameters,
+signals), run with the paper's explicit-Euler discretisation; this module adds the noise and the
+start at rest, and :func:`simulate_physics` runs them with the contract's chain runner
+(:func:`dtwin.twin.paper_modules.run_modules`, the order of the wiring table).
 
 Every module applies its input with a one-sample delay (``u[k-1]`` drives step ``k``), as the
 paper's equations and the authors' R code do. Arrays are time-first, shape ``(n_steps,)``.
@@ -25,7 +25,8 @@ import pandas as pd
 from dtwin._lfilter import lfilter
 from dtwin._validation import DtwinValueError, require_finite_array, require_min_length
 from dtwin.command import time_axis
-from dtwin.modules import (
+from dtwin.params import TwinParams
+from dtwin.twin.paper_modules import (
     EULER,
     PlantTrajectory,
     fuse,
@@ -35,8 +36,7 @@ from dtwin.modules import (
     plant_response,
     run_modules,
 )
-from dtwin.params import TwinParams
-from dtwin.wiring import MODULES, SIGNALS
+from dtwin.twin.wiring import MODULES, SIGNALS
 
 __all__ = [
     "actuator_lpf",
@@ -217,7 +217,7 @@ def simulate_physics(twin: TwinParams, u_cmd: np.ndarray, rng: np.random.Generat
     Returns
     -------
     pandas.DataFrame
-        One row per sample; columns ``t`` (s) and :data:`dtwin.wiring.SIGNALS`
+        One row per sample; columns ``t`` (s) and :data:`dtwin.twin.wiring.SIGNALS`
         (``u_cmd, u_act, x, v, y_A, y_B, y_fused, z``).
     """
     u_cmd = require_finite_array("u_cmd", u_cmd)

@@ -1,7 +1,7 @@
 """The digital twin: ARX surrogates wired as the physical chain, and module residuals.
 
 Paper §3.2 and §2 Eq. (1); r_notes.md §2–3. The wiring comes from
-:data:`dtwin.wiring.MODULES`: each ARX module is fitted on the *physics* input/output pair of
+:data:`dtwin.twin.wiring.MODULES`: each ARX module is fitted on the *physics* input/output pair of
 the training window and rolled out from its *surrogate* input (M0 from the true command, M1
 from the M0 surrogate, both sensors from the M1 surrogate); M3 and M4 are recomputed
 algebraically from surrogate signals, the KPI with the backward-difference velocity.
@@ -18,7 +18,7 @@ from dtwin._validation import DtwinValueError, require_in_range
 from dtwin.arx import ARX_MODULES, ROLLOUT_INITS, ArxFit, ArxOrders, fit_arx, simulate_arx
 from dtwin.params import TwinParams
 from dtwin.physics import PHYSICS_STEPS, backward_velocity
-from dtwin.wiring import MODULES, RESIDUALS, SIGNALS
+from dtwin.twin.wiring import MODULES, RESIDUALS, SIGNALS
 
 __all__ = [
     "n_train_samples",

@@ -1,4 +1,4 @@
-"""Rule fig01_pipeline: paper Fig. 1, the six-module twin drawn from dtwin.wiring.MODULES.
+"""Rule fig01_pipeline: paper Fig. 1, the six-module twin drawn from dtwin.twin.wiring.MODULES.
 
 Output  paper_figures/fig01_pipeline.{png,pdf,json}
 Params  arx (orders, for the box labels)

@@ -18,6 +18,11 @@ Layers of ``dtwin/`` (who may import whom, directly or through any chain of dtwi
   its own figure in the shared style, ``dtwin.figures._style``) and never its benchmark;
 - gapbench (``dtwin/gapbench/``): the diagnoser's benchmark (generated cases, their scores);
   may import the diagnoser, never a stage, figure or reference module. No other layer imports it.
+- twin (``dtwin/twin/``): a twin as data (the module table, blocks, expressions, simulation)
+  and the paper's six modules (wiring, contract, exact plant, force loops); the bottom layer
+  that concepts, gap, gapbench and monitor read. It imports only itself and the root helpers
+  (``_validation``, ``_jit``, ``_lfilter``), and of third-party packages numpy, scipy, numba
+  and fmpy (an FMU module's reader);
 - monitor (``dtwin/monitor/``): ``dtwin regimes`` and ``dtwin monitor`` on a user's twin; may
   import concepts, the twin package and the diagnoser (and draw in the shared style), never a
   stage, figure, reference or gapbench module. Only the command line imports it.
@@ -36,6 +41,7 @@ from __future__ import annotations
 
 import ast
 import re
+import sys
 from collections import Counter
 from functools import cache
 from pathlib import Path
@@ -256,6 +262,38 @@ def test_each_layer_imports_only_what_it_may(path):
     assert not bad, f"{layer} module reaches {bad}"
 
 
+#: What the twin package may import besides the standard library: itself and the root helpers
+#: (``dtwin._lazy`` runs with ``dtwin/__init__.py``), numpy, scipy, numba and fmpy.
+TWIN_DTWIN_IMPORTS = (
+    "dtwin.twin",
+    "dtwin._validation",
+    "dtwin._jit",
+    "dtwin._lfilter",
+    "dtwin._lazy",
+)
+TWIN_PACKAGES = {"numpy", "scipy", "numba", "fmpy"}
+
+
+@pytest.mark.parametrize(
+    "path", sorted((LIBRARY / "twin").rglob("*.py")), ids=lambda p: p.relative_to(REPO).as_posix()
+)
+def test_the_twin_package_imports_only_itself_the_helpers_and_numerics(path):
+    """The bottom layer: no paper concept (params, command, physics), no pandas, no yaml."""
+    outside = sorted(
+        f"{name} (in {found.relative_to(REPO).as_posix()})"
+        for found in {path, *reached(path)}
+        for name in imported_modules(found)
+        if name.partition(".")[0] == "dtwin"
+        and not any(name == ok or name.startswith(ok + ".") for ok in TWIN_DTWIN_IMPORTS)
+    )
+    third_party = sorted(
+        name
+        for name in imported_modules(path)
+        if name.partition(".")[0] not in {"dtwin", *TWIN_PACKAGES, *sys.stdlib_module_names}
+    )
+    assert outside == [] and third_party == []
+
+
 def _names_something(dotted: str) -> bool:
     """Whether a dotted dtwin name is a module of the library or a top-level name defined in one."""
     *parents, last = dotted.split(".")
@@ -369,7 +407,7 @@ def test_no_code_cites_an_issue_number():
     assert found == []
 
 
-#: Packages whose code treats modules by their role (dtwin.wiring.ROLES), never by their name.
+#: Packages whose code treats modules by their role (dtwin.twin.wiring.ROLES), never by their name.
 ROLE_DISPATCHED = ("gap", "gapbench")
 MODULE_NAME = re.compile(r"^M\d[a-z]?$")
 

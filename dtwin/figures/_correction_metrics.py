@@ -6,7 +6,7 @@ from typing import Any
 
 import pandas as pd
 
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 
 __all__ = ["metrics_beside_r"]
 

@@ -14,7 +14,7 @@ from matplotlib.patches import FancyBboxPatch
 from dtwin.artifacts import Check, FigureArtifact
 from dtwin.config_sections import ArxSettings
 from dtwin.figures._style import BAND_COLOR, SURROGATE_FILL, new_figure, tex
-from dtwin.wiring import MODULES, Module
+from dtwin.twin.wiring import MODULES, Module
 
 __all__ = ["fig01_pipeline", "PipelineLayout", "layout_pipeline", "plot_pipeline"]
 
@@ -143,7 +143,7 @@ def plot_pipeline(modules: Sequence[Module], surrogate_labels: Mapping[str, str]
     Parameters
     ----------
     modules : sequence of Module
-        The wiring table (:data:`dtwin.wiring.MODULES`).
+        The wiring table (:data:`dtwin.twin.wiring.MODULES`).
     surrogate_labels : mapping of module name to str
         How the twin replaces each module (``"ARX(2,2)"``, ``"algebraic"``).
     """
@@ -195,7 +195,7 @@ def plot_pipeline(modules: Sequence[Module], surrogate_labels: Mapping[str, str]
 
 
 def fig01_pipeline(arx: ArxSettings) -> FigureArtifact:
-    """Paper Fig. 1 drawn from :data:`dtwin.wiring.MODULES`."""
+    """Paper Fig. 1 drawn from :data:`dtwin.twin.wiring.MODULES`."""
     orders = arx.orders
     labels = {
         m.name: (
@@ -251,6 +251,6 @@ def fig01_pipeline(arx: ArxSettings) -> FigureArtifact:
             "The six-module twin; red: each module's residual e = twin − physics (Eq. 1). "
             "Same structure as the paper's diagram, which holds no data: nothing differs."
         ),
-        provenance="drawn from dtwin.wiring.MODULES (the table the simulator runs on) and "
+        provenance="drawn from dtwin.twin.wiring.MODULES (the table the simulator runs on) and "
         "the ARX orders of the arx config",
     )

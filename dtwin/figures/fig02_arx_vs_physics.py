@@ -25,7 +25,7 @@ from dtwin.figures._style import (
     tex,
 )
 from dtwin.reference.crosscheck_result import CrosscheckResult
-from dtwin.wiring import MODULES, RESIDUALS, Module
+from dtwin.twin.wiring import MODULES, RESIDUALS, Module
 
 __all__ = ["fig02_arx_vs_physics", "plot_arx_vs_physics"]
 

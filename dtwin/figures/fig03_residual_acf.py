@@ -23,7 +23,7 @@ from dtwin.figures._style import (
     unitless,
 )
 from dtwin.residual_stats import acf_table, ljung_box_table, white_noise_band
-from dtwin.wiring import MODULES, RESIDUALS
+from dtwin.twin.wiring import MODULES, RESIDUALS
 
 __all__ = ["fig03_residual_acf", "plot_residual_acf"]
 

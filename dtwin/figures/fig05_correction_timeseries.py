@@ -32,7 +32,7 @@ from dtwin.figures._style import (
     tex,
 )
 from dtwin.reference.crosscheck_result import CrosscheckResult
-from dtwin.wiring import MODULES, RESIDUALS
+from dtwin.twin.wiring import MODULES, RESIDUALS
 
 __all__ = [
     "fig05_correction_timeseries",

@@ -21,7 +21,7 @@ from dtwin.figures._style import (
     new_figure,
     panel_title,
 )
-from dtwin.wiring import MODULES, RESIDUALS
+from dtwin.twin.wiring import MODULES, RESIDUALS
 
 __all__ = [
     "fig06_correction_distributions",

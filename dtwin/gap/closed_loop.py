@@ -32,10 +32,10 @@ from scipy.optimize import least_squares
 from scipy.signal import lfilter
 from scipy.stats import chi2
 
-from dtwin.exact_plant import exact_plant_response, free_response_basis, hold_matrices
 from dtwin.gap.effects import MAX_DELAY_SAMPLES, fractional_delay
-from dtwin.modules import EULER, ZOH
-from dtwin.wiring import PLANT, only_module
+from dtwin.twin.exact import exact_plant_response, free_response_basis, hold_matrices
+from dtwin.twin.paper_modules import EULER, ZOH
+from dtwin.twin.wiring import PLANT, only_module
 
 __all__ = [
     "CAUSAL_HOLDS",

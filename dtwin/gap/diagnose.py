@@ -25,7 +25,6 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from dtwin._validation import DtwinTypeError, DtwinValueError, require_in_range
-from dtwin.exact_plant import EXACT_HOLDS
 from dtwin.gap.closed_loop import causal_holds
 from dtwin.gap.effects import effects_for_module
 from dtwin.gap.how_far import (
@@ -48,9 +47,10 @@ from dtwin.gap.where import (
     module_notes,
 )
 from dtwin.gap.which import choose, fit_candidates, nested_test, other_gaps, score_candidates
-from dtwin.modules import EULER
 from dtwin.params import TwinParams
-from dtwin.wiring import MODULES
+from dtwin.twin.exact import EXACT_HOLDS
+from dtwin.twin.paper_modules import EULER
+from dtwin.twin.wiring import MODULES
 
 __all__ = ["DT_TOLERANCE", "MIN_TRAIN_SAMPLES", "MIN_PART_SAMPLES", "join_heldout", "diagnose"]
 

@@ -33,7 +33,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import least_squares
 
-from dtwin.exact_plant import hold_matrices
 from dtwin.gap.closed_loop import CAUSAL_HOLDS, in_loop, loop_prediction_error_fit
 from dtwin.gap.effects import (
     MAX_DELAY_SAMPLES,
@@ -50,8 +49,9 @@ from dtwin.gap.models import (
     plant_windows,
     simulate_module,
 )
-from dtwin.modules import EULER, ZOH
-from dtwin.wiring import ACTUATOR, FUSION, KPI, PLANT, SENSOR, role_of
+from dtwin.twin.exact import hold_matrices
+from dtwin.twin.paper_modules import EULER, ZOH
+from dtwin.twin.wiring import ACTUATOR, FUSION, KPI, PLANT, SENSOR, role_of
 
 __all__ = [
     "CandidateFit",

@@ -28,7 +28,7 @@ from dtwin.gap.recording import DERIVED_INPUTS, Recording
 from dtwin.gap.results import ModuleReport
 from dtwin.gap.where import ModuleWork, Split, nominal_lin
 from dtwin.gap.which import linear_refit_gap, shrink_pct
-from dtwin.wiring import MODULES, PLANT, only_module
+from dtwin.twin.wiring import MODULES, PLANT, only_module
 
 __all__ = [
     "chain_before_after",

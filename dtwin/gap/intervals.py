@@ -43,7 +43,7 @@ from dtwin.gap.fit import (
     training_view,
 )
 from dtwin.gap.models import LINEAR_PARAMS, ModuleData, module_part, simulate_module
-from dtwin.modules import EULER
+from dtwin.twin.paper_modules import EULER
 
 __all__ = [
     "N_BLOCKS",

@@ -9,8 +9,8 @@ The **gap** of a signal is a normalised RMS error over the held-out samples::
 A module's **local** gap drives its twin with the module's *recorded* input, so nothing
 upstream can leak into it. Its **chain** gap runs the whole twin from the most upstream
 recorded signal (``u_cmd`` when present), every module fed by its simulated predecessor, as the
-deployed twin runs (the contract's chain runner, :func:`dtwin.modules.run_modules`); a chain
-gap well above the local gap is inherited from upstream.
+deployed twin runs (the contract's chain runner, :func:`dtwin.twin.paper_modules.run_modules`); a
+chain gap well above the local gap is inherited from upstream.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ import numpy as np
 
 from dtwin.gap.effects import Effect, Scales
 from dtwin.gap.models import ModuleData, simulate_module, velocity_from_position
-from dtwin.modules import CONTRACTS, Step, run_modules
-from dtwin.wiring import MODULES, Module, module_by_name
+from dtwin.twin.paper_modules import CONTRACTS, Step, run_modules
+from dtwin.twin.wiring import MODULES, Module, module_by_name
 
 __all__ = [
     "normalised_rms",

@@ -4,9 +4,10 @@ Specification: docs/gap.md §Modules (recursions) and §Candidate effects (stage
 
 One function, :func:`simulate_module`, drives one module's twin with given input signals and
 returns its output, shape ``(n_samples,)``. The linear part of each module is the module contract
-(:mod:`dtwin.modules`: :func:`~dtwin.modules.lag_response`,
-:func:`~dtwin.modules.plant_response`, :func:`~dtwin.modules.fuse`, :func:`~dtwin.modules.kpi`;
-the paper's laws of r_notes.md §1 with the Euler discretisation), with one-sample input delays:
+(:mod:`dtwin.twin.paper_modules`: :func:`~dtwin.twin.paper_modules.lag_response`,
+:func:`~dtwin.twin.paper_modules.plant_response`, :func:`~dtwin.twin.paper_modules.fuse`,
+:func:`~dtwin.twin.paper_modules.kpi`; the paper's laws of r_notes.md §1 with the Euler
+discretisation), with one-sample input delays:
 
 - M0 ``u_act[k] = a·u_act[k−1] + (1−a)·u_cmd[k−1]``, ``a = exp(−dt/tau)``;
 - M1 explicit Euler ``a = (u[k−1] − u_offset − c·v[k−1] − k·x[k−1] − F(x, v))/m``,
@@ -31,12 +32,6 @@ import numpy as np
 from scipy.signal import lfilter, savgol_filter
 
 from dtwin._jit import HAVE_NUMBA
-from dtwin.exact_plant import (
-    exact_plant_response,
-    force_substeps,
-    free_response_basis,
-    hold_matrices,
-)
 from dtwin.gap.effects import (
     ARRAY_OPS,
     FRICTION_SMOOTHING,
@@ -46,7 +41,13 @@ from dtwin.gap.effects import (
     fractional_delay,
 )
 from dtwin.gap.noise import robust_std
-from dtwin.modules import (
+from dtwin.twin.exact import (
+    exact_plant_response,
+    force_substeps,
+    free_response_basis,
+    hold_matrices,
+)
+from dtwin.twin.paper_modules import (
     EULER,
     LINEAR_PARAMS,
     fuse,
@@ -55,7 +56,7 @@ from dtwin.modules import (
     lag_response,
     plant_response,
 )
-from dtwin.wiring import ACTUATOR, FUSION, KPI, PLANT, SENSOR, role_of
+from dtwin.twin.wiring import ACTUATOR, FUSION, KPI, PLANT, SENSOR, role_of
 
 __all__ = [
     "LINEAR_PARAMS",
@@ -96,7 +97,7 @@ class ModuleData:
         Data scales for effect bounds.
     discretisation : str
         M1: ``"euler"`` (the paper's twin), ``"zoh"``, ``"foh"`` or ``"bandlimited"`` (exact;
-        :func:`dtwin.exact_plant.exact_plant_response`).
+        :func:`dtwin.twin.exact.exact_plant_response`).
     horizon : int or None
         M1 with an exact discretisation: simulate in windows of this many samples, each
         restarted from the recorded state (None: free run).
@@ -132,7 +133,7 @@ class ModuleData:
 
     @property
     def role(self) -> str:
-        """The module's role (:data:`dtwin.wiring.ROLES`; ``"plant"`` for M1)."""
+        """The module's role (:data:`dtwin.twin.wiring.ROLES`; ``"plant"`` for M1)."""
         return role_of(self.name)
 
 
@@ -259,8 +260,8 @@ def _piece_velocity(x: np.ndarray, dt: float, discretisation: str) -> np.ndarray
 def first_order_lag(u: np.ndarray, tau: float, dt: float, initial: float) -> np.ndarray:
     """Return ``y[k] = a·y[k−1] + (1−a)·u[k−1]``, ``y[0] = initial``, ``a = exp(−dt/tau)``.
 
-    The contract's lag (:func:`dtwin.modules.lag_response`); ``tau ≤ 0`` (a fit's trial value)
-    gives ``a = 0``, the input delayed by one sample.
+    The contract's lag (:func:`dtwin.twin.paper_modules.lag_response`); ``tau ≤ 0`` (a fit's trial
+    value) gives ``a = 0``, the input delayed by one sample.
     """
     a = lag_coefficient(tau, dt) if tau > 0 else 0.0
     return lag_response(u, a, initial)
@@ -305,10 +306,10 @@ def _force(effect: Effect | None, theta: Sequence[float], velocity_std: float, *
     """Return the candidate's plant force ``F(x, v)``, or None.
 
     With ``arrays`` it takes numpy arrays (ufuncs) and carries the same law on Python floats as
-    its ``scalar`` attribute (:data:`dtwin.exact_plant.SCALAR_WINDOWS`), its largest velocity
+    its ``scalar`` attribute (:data:`dtwin.twin.exact.SCALAR_WINDOWS`), its largest velocity
     slope as its ``slope`` attribute (:func:`_velocity_slope`, which sets the exact plant's
     sub-steps) and, for a law the compiled loop knows, its name and parameters as its ``law``
-    attribute (:mod:`dtwin._force_kernels`).
+    attribute (:mod:`dtwin.twin._force_kernels`).
     """
     if effect is None or effect.stage != "force":
         return None
@@ -343,12 +344,12 @@ def _velocity_slope(force, velocity_std: float) -> float:
 
 
 def _known_law(effect: Effect, theta: Sequence[float], velocity_std: float):
-    """Return the :class:`~dtwin._force_kernels.ForceLaw` of the effect's ``force_law``, or None.
+    """Return the effect's ``force_law`` as a :class:`~dtwin.twin._force_kernels.ForceLaw`, or None.
 
     The same law with the same parameters (the effect's ``compiled_law``), for the compiled
     loop.
     """
-    from dtwin._force_kernels import ForceLaw
+    from dtwin.twin._force_kernels import ForceLaw
 
     if effect.compiled_law is None:
         return None
@@ -454,7 +455,7 @@ def _window_states(data, u, m, c, k, windows, warmup, drive=None) -> tuple[np.nd
     """Return the windows' initial states: least squares on each one's first ``warmup`` samples.
 
     The linear plant's forced response from rest is removed from the recorded position; the
-    rest is the free response ``Φ·s₀`` (:func:`~dtwin.exact_plant.free_response_basis`). The
+    rest is the free response ``Φ·s₀`` (:func:`~dtwin.twin.exact.free_response_basis`). The
     forced response is simulated over the warm-ups only (it is causal: the same values as over
     the whole windows); ``drive`` is the hold's drive of ``u/m`` when the caller has it.
     """
@@ -485,7 +486,7 @@ def _window_states(data, u, m, c, k, windows, warmup, drive=None) -> tuple[np.nd
 def _warmup_solve(c_per_m: float, k_per_m: float, dt: float, hold: str, warmup: int) -> np.ndarray:
     """Return ``Φ⁺``, shape ``(2, warmup)``: the warm-up's least-squares map to the initial state.
 
-    ``Φ`` is the free response over the warm-up (:func:`~dtwin.exact_plant.free_response_basis`).
+    ``Φ`` is the free response over the warm-up (:func:`~dtwin.twin.exact.free_response_basis`).
     Cached per argument tuple (both state estimates of a simulation, and every fit step that
     moves only the effect, ask for the same one): read-only.
     """
@@ -805,13 +806,14 @@ def _simulate_plant(data, lin, effect, theta, stop, segments, keep_warmup=False)
 def _euler_stepper(effect: Effect | None, theta: Sequence[float], velocity_std: float, force):
     """Return ``step(u, m, c, k, dt, x0, v0, limit) → x``: the Euler plant's positions.
 
-    :func:`~dtwin.modules.plant_response` (``force`` the candidate's scalar law, or None), or,
-    where numba is installed and the force is None or a law the compiled loop knows, the same
-    loop compiled (:func:`dtwin._force_kernels.euler_response`: the same bits, ~30× faster).
+    :func:`~dtwin.twin.paper_modules.plant_response` (``force`` the candidate's scalar law, or
+    None), or, where numba is installed and the force is None or a law the compiled loop knows, the
+    same loop compiled (:func:`dtwin.twin._force_kernels.euler_response`: the same bits, ~30×
+    faster).
     """
     law = _known_law(effect, theta, velocity_std) if force is not None and HAVE_NUMBA else None
     if HAVE_NUMBA and (force is None or law is not None):
-        from dtwin._force_kernels import euler_response
+        from dtwin.twin._force_kernels import euler_response
 
         def compiled(u, m, c, k, dt, x0, v0, limit):
             return euler_response(u, m, c, k, dt, x0, v0, law, limit)[0]
@@ -850,7 +852,7 @@ def profiled_window_error(
         ``recorded − predicted``. For the windowed exact plant: over every sample of each
         window, warm-up included, less its least-squares projection on the linear plant's free
         response from the window's start (``lin``'s ``c/m, k/m``:
-        :func:`~dtwin.exact_plant.free_response_basis`), i.e. the error with the window's
+        :func:`~dtwin.twin.exact.free_response_basis`), i.e. the error with the window's
         initial position and velocity fitted to the whole window (to first order in them when
         the effect's force depends on the state); NaN outside the windows. Any other module:
         the plain simulation error.

@@ -43,9 +43,9 @@ from scipy.optimize import nnls
 from scipy.stats import chi2
 
 from dtwin._ljung_box import ljung_box_statistic
-from dtwin.modules import CONTRACTS, lag_coefficient, plant_matrices
 from dtwin.params import NoiseParams
-from dtwin.wiring import ACTUATOR, PLANT, SENSOR, role_of
+from dtwin.twin.paper_modules import CONTRACTS, lag_coefficient, plant_matrices
+from dtwin.twin.wiring import ACTUATOR, PLANT, SENSOR, role_of
 
 __all__ = [
     "NoiseFloor",
@@ -101,7 +101,7 @@ def plant_noise_gain(m: float, c: float, k: float, dt: float, n_lags: int = 400)
     """Return ``(√P_xx, acf)``: position std per unit acceleration noise and its autocorrelation.
 
     ``P = A·P·Aᵀ + b·bᵀ`` for the Euler plant's state ``(x, v)``
-    (:func:`dtwin.modules.plant_matrices`, ``b`` its acceleration input);
+    (:func:`dtwin.twin.paper_modules.plant_matrices`, ``b`` its acceleration input);
     ``acf[l] = (A^l P)_xx / P_xx``.
     An unstable or undamped plant has no stationary variance; then the variance after
     ``n_lags`` steps is used.

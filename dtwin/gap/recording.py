@@ -3,7 +3,7 @@
 Specification: docs/gap.md §Recording format and §Bad input.
 
 A recording has a header row, then one row per sample: column ``t`` (seconds, uniform step) and
-any of the module signals of :data:`dtwin.wiring.SIGNALS` (``u_cmd, u_act, x, v, y_A, y_B,
+any of the module signals of :data:`dtwin.twin.wiring.SIGNALS` (``u_cmd, u_act, x, v, y_A, y_B,
 y_fused, z``). Columns with other names are ignored (and listed in the report). Arrays are
 time-first, shape ``(n_samples,)``.
 
@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from dtwin._validation import DtwinValueError
-from dtwin.wiring import MODULES, SIGNALS
+from dtwin.twin.wiring import MODULES, SIGNALS
 
 __all__ = [
     "MIN_SAMPLES",

@@ -22,7 +22,7 @@ from dtwin.artifacts import atomic_write, to_jsonable, write_json
 from dtwin.gap.effects import NONE, UNEXPLAINED, effect_by_name
 from dtwin.gap.results import Diagnosis
 from dtwin.gap.which import required_share
-from dtwin.wiring import PLANT, only_module
+from dtwin.twin.wiring import PLANT, only_module
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

@@ -52,9 +52,9 @@ from dtwin.gap.noise import (
 )
 from dtwin.gap.oe_reference import output_error_reference
 from dtwin.gap.recording import Recording
-from dtwin.modules import EULER
 from dtwin.params import TwinParams
-from dtwin.wiring import PLANT, module_by_name, role_of
+from dtwin.twin.paper_modules import EULER
+from dtwin.twin.wiring import PLANT, module_by_name, role_of
 
 if TYPE_CHECKING:
     from dtwin.gap.which import FittedCandidate

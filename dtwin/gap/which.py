@@ -35,8 +35,8 @@ from dtwin.gap.models import module_part, profiled_window_error, simulate_module
 from dtwin.gap.oe_reference import plain_linear_error
 from dtwin.gap.results import CandidateReport, GapSettings
 from dtwin.gap.where import ModuleWork, Split
-from dtwin.modules import BANDLIMITED, EULER, FOH
-from dtwin.wiring import PLANT
+from dtwin.twin.paper_modules import BANDLIMITED, EULER, FOH
+from dtwin.twin.wiring import PLANT
 
 __all__ = [
     "FittedCandidate",

@@ -47,8 +47,8 @@ import numpy as np
 from scipy.signal import lfilter
 
 from dtwin.gapbench.case_effects import CaseEffect, log_between, spec_value
-from dtwin.modules import lag_coefficient
-from dtwin.wiring import ACTUATOR, role_of
+from dtwin.twin.paper_modules import lag_coefficient
+from dtwin.twin.wiring import ACTUATOR, role_of
 
 __all__ = [
     "ARMS",
@@ -343,7 +343,7 @@ def stiction_plant(u, m, c, k, dt, noise, spec) -> tuple[np.ndarray, np.ndarray]
 
     At rest the mass sticks until the applied force ``u − c·v − k·x + m·ξ`` exceeds ``Fs``;
     sliding, the friction is ``Fc·sign(v)``, and a velocity sign change sticks it again.
-    Otherwise the paper's explicit Euler step (``dtwin.modules.plant_response``).
+    Otherwise the paper's explicit Euler step (``dtwin.twin.paper_modules.plant_response``).
     """
     fs, fc = spec["Fs"], spec["Fc"]
     n = len(u)
@@ -417,7 +417,7 @@ def continuous_chain(
     asset : mapping
         The asset's sections (``dt``, ``actuator.tau``, ``plant``, ``sensor_A/B.tau``).
     law : (str, tuple of float) or None
-        The plant's extra force ``F(x, v)`` (N): a law of :data:`dtwin._force_kernels.LAWS`
+        The plant's extra force ``F(x, v)`` (N): a law of :data:`dtwin.twin._force_kernels.LAWS`
         and its parameters (a case effect's ``force``), None for none.
     act_noise, accel_noise : array, shape (n,)
         The Euler twin's per-step actuator noise ``w[j]`` (held on the lag's input as
@@ -438,7 +438,7 @@ def continuous_chain(
     p = asset["plant"]
     a = lag_coefficient(tau, dt)
     eta = np.asarray(act_noise) / (1 - a)
-    from dtwin._force_kernels import ForceLaw, rk4_chain  # numba (~0.5 s) only when run
+    from dtwin.twin._force_kernels import ForceLaw, rk4_chain  # numba (~0.5 s) only when run
 
     force = None if law is None else ForceLaw(*law)
     fine = rk4_chain(u_in, tau, p["m"], p["c"], p["k"], dt, eta, accel_noise, substeps, force)

@@ -56,7 +56,8 @@ from dtwin.gapbench.arms import (
     unseen_expected,
 )
 from dtwin.gapbench.case_effects import CaseEffect, log_between
-from dtwin.modules import (
+from dtwin.params import CommandParams
+from dtwin.twin.paper_modules import (
     CONTRACTS,
     Step,
     fuse,
@@ -66,8 +67,7 @@ from dtwin.modules import (
     plant_response,
     run_modules,
 )
-from dtwin.params import CommandParams
-from dtwin.wiring import (
+from dtwin.twin.wiring import (
     ACTUATOR,
     FUSION,
     KPI,
@@ -301,7 +301,7 @@ def _plant(u, m, c, k, dt, noise, spec, n):
     law = _plant_force(spec, c, k)
     force = None
     if law is not None:
-        from dtwin._force_kernels import ForceLaw, law_function  # numba only for a force
+        from dtwin.twin._force_kernels import ForceLaw, law_function  # numba only for a force
 
         force = law_function(ForceLaw(*law))
     x, v = plant_response(u[:n], m, c, k, dt, force=force, accel_noise=noise[:n])
@@ -333,7 +333,7 @@ def _algebraic_steps(asset) -> dict[str, Step]:
 
 
 def _run(u_cmd, steps: Mapping[str, Step]) -> dict[str, np.ndarray]:
-    """Return every signal of the asset, in :data:`dtwin.wiring.SIGNALS` order, each ``(n,)``."""
+    """Return the asset's signals, each ``(n,)``, in :data:`dtwin.twin.wiring.SIGNALS` order."""
     return {"u_cmd": u_cmd, **run_modules(steps, {"u_cmd": u_cmd})}
 
 

@@ -189,7 +189,7 @@ class RigForce:
     law : callable
         ``law(strength, rig, u_std, x_rms, v_rms) -> ((name, params), its parameters in
         physical units)``: the force ``F(x, v)`` (N) as a law of
-        :data:`dtwin._force_kernels.LAWS` and its parameters (a case effect's ``force``).
+        :data:`dtwin.twin._force_kernels.LAWS` and its parameters (a case effect's ``force``).
     strength : (float, float)
         Strength (relative to the linear force it competes with) at magnitude 0 and 1.
     size : str
@@ -231,12 +231,16 @@ def _force_law(effect: str, strength: float, rig: dict, u_std: float, x_rms: flo
 def _integrate(rig: dict, drive: _Drive, law, n: int, noise: np.ndarray) -> np.ndarray:
     """Runge-Kutta integration; return the states ``(x, v)`` at the sample instants, ``(n, 2)``.
 
-    :func:`dtwin._force_kernels.rk4_plant` (the step of the continuous asset's loop) under
+    :func:`dtwin.twin._force_kernels.rk4_plant` (the step of the continuous asset's loop) under
     ``drive``'s force, or its PD loop closed on the position plus ``noise`` (``drive.held``
     becomes the force the loop held); ``law`` is the withheld force ``(name, params)``, None
     for none. ``n`` is the drive's length.
     """
-    from dtwin._force_kernels import ForceLaw, PdLoop, rk4_plant  # numba (~0.5 s) only when run
+    from dtwin.twin._force_kernels import (  # numba (~0.5 s) only when run
+        ForceLaw,
+        PdLoop,
+        rk4_plant,
+    )
 
     plant = rig["plant"]
     force = drive.held if drive.continuous is None else drive.continuous

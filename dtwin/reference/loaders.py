@@ -30,7 +30,7 @@ from dtwin.reference.columns import (
     R_THETA_MODULES,
     R_VITERBI_COLUMN,
 )
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 
 __all__ = [
     "load_r_physics",

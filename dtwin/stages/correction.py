@@ -26,7 +26,7 @@ from dtwin.bias_correction import BiasCorrection, correct_bias
 from dtwin.config_sections import CorrectionSettings
 from dtwin.params import ALGEBRAIC_SECTIONS, TwinParams, twin_params_from_mapping
 from dtwin.state_tables import posterior_matrix
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 
 __all__ = [
     "VARIANTS",

@@ -33,7 +33,7 @@ from dtwin.fault_claim_criteria import fault_claims, feature_claims, feature_sta
 from dtwin.fault_injection import regime_features
 from dtwin.hmm_basics import zscore
 from dtwin.residual_stats import acf_table, ljung_box_table
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 
 __all__ = ["judge_draw"]
 

@@ -35,7 +35,7 @@ from dtwin.stages.decisions import select_mcda_actions
 from dtwin.stages.faults import run_fault_scenario
 from dtwin.stages.regimes import fit_nominal_regimes, sweep_bic
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 
 __all__ = [
     "REGIME_SECTIONS",

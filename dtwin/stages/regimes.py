@@ -32,7 +32,7 @@ from dtwin.physics import backward_velocity, fuse, kpi
 from dtwin.reference.columns import R_PHYSICS_COLUMNS, R_SURROGATE_COLUMNS
 from dtwin.state_tables import posterior_matrix, state_labels
 from dtwin.surrogate import compute_residuals
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 
 __all__ = [
     "SEED_STREAMS",
@@ -298,7 +298,7 @@ def r_nominal_residuals(r_pipeline: pd.DataFrame, twin: Mapping[str, Any]) -> pd
     Returns
     -------
     DataFrame
-        Columns ``t`` and :data:`dtwin.wiring.RESIDUALS`, one row per sample (T = 1000).
+        Columns ``t`` and :data:`dtwin.twin.wiring.RESIDUALS`, one row per sample (T = 1000).
     """
     params = twin_params_from_mapping(twin, require_all=False, required=("fusion", "kpi"))
     physics = pd.DataFrame({ours: r_pipeline[theirs] for ours, theirs in R_PHYSICS_COLUMNS.items()})

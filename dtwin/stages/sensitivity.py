@@ -33,7 +33,7 @@ from dtwin.sensitivity_sweep import (
     scale_twin,
 )
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 
 __all__ = ["r_sweep_physics", "sweep_point", "sweep_point_on_r_signals"]
 

@@ -12,6 +12,9 @@ numpy, scipy (lazily), numba (lazily, through :mod:`dtwin._jit`) and the helpers
   ``integrator``, ``gain``, ``weighted_sum``, ``state_space``) lowered to equations.
 - :mod:`dtwin.twin.simulate`: a unit of modules (one module, or modules joined by unrecorded
   signals) integrated over windows that restart from the recording.
+- the paper's six modules: :mod:`dtwin.twin.wiring` (the wiring table and roles),
+  :mod:`dtwin.twin.paper_modules` (their contract and laws), :mod:`dtwin.twin.exact` (the plant
+  discretised exactly for any hold) and :mod:`dtwin.twin._force_kernels` (its compiled loops).
 
 Arrays are time-first: ``(n_samples,)`` or ``(n_samples, n_channels)``.
 """

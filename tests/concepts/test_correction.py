@@ -16,7 +16,7 @@ from dtwin.bias_correction import (
     state_residual_means,
 )
 from dtwin.hmm import fit_hmm, zscore
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 from tests.conftest import REFERENCE
 
 TWIN = {"alpha": 0.6, "w1": 1.0, "w2": 0.2, "dt": 0.02}

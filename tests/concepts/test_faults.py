@@ -20,7 +20,7 @@ from dtwin.fault_injection import (
     regime_labels,
 )
 from dtwin.regime_matching import UNMATCHED, classification_scores, hungarian_map, mapped_posteriors
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 from tests.conftest import REFERENCE
 
 TWIN = {"alpha": 0.6, "w1": 1.0, "w2": 0.2, "dt": 0.02}

@@ -50,9 +50,9 @@ def test_twin_sections_come_from_the_module_table():
     """Each TwinParams section's dataclass has exactly the contract's keys, in its order."""
     from dataclasses import fields
 
-    from dtwin.modules import CONTRACTS
     from dtwin.params import _SECTION_FIELDS, TwinParams
-    from dtwin.wiring import MODULES
+    from dtwin.twin.paper_modules import CONTRACTS
+    from dtwin.twin.wiring import MODULES
 
     assert list(_SECTION_FIELDS) == [m.section for m in MODULES] + ["noise"]
     for section, (cls, keys) in _SECTION_FIELDS.items():

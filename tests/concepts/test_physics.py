@@ -9,7 +9,6 @@ import pandas as pd
 import pytest
 
 from dtwin.command import make_command, n_steps_for
-from dtwin.modules import lag_coefficient, run_modules
 from dtwin.params import command_params_from_mapping
 from dtwin.physics import (
     actuator_lpf,
@@ -18,7 +17,8 @@ from dtwin.physics import (
     sensor_first_order,
     simulate_physics,
 )
-from dtwin.wiring import SIGNALS
+from dtwin.twin.paper_modules import lag_coefficient, run_modules
+from dtwin.twin.wiring import SIGNALS
 from tests.conftest import REFERENCE
 
 
@@ -107,15 +107,15 @@ def test_command_deterministic_part_matches_r(config):
     assert np.ptp(offsets[:125]) < 1e-9
 
 
-# --- the module contract (dtwin.modules) ------------------------------------------------------
+# --- the module contract (dtwin.twin.paper_modules) -----------------------------------------------
 
 
 def test_contract_follows_the_wiring_table_and_the_twin_sections():
     import dataclasses
 
-    from dtwin.modules import CONTRACTS, LINEAR_PARAMS
     from dtwin.params import TwinParams
-    from dtwin.wiring import MODULES
+    from dtwin.twin.paper_modules import CONTRACTS, LINEAR_PARAMS
+    from dtwin.twin.wiring import MODULES
 
     assert list(CONTRACTS) == [module.name for module in MODULES]
     hints = {f.name: f.type for f in dataclasses.fields(TwinParams)}
@@ -128,7 +128,7 @@ def test_contract_follows_the_wiring_table_and_the_twin_sections():
 def test_zoh_plant_matches_scipy_cont2discrete():
     from scipy.signal import cont2discrete
 
-    from dtwin.modules import ZOH, plant_matrices
+    from dtwin.twin.paper_modules import ZOH, plant_matrices
 
     m, c, k, dt = 1.3, 0.4, 4.0, 0.05
     a, b_force, _ = plant_matrices(m, c, k, dt, ZOH)
@@ -140,7 +140,7 @@ def test_zoh_plant_matches_scipy_cont2discrete():
 
 
 def test_zoh_plant_step_response_is_exact_and_euler_is_the_papers():
-    from dtwin.modules import EULER, ZOH, plant_response
+    from dtwin.twin.paper_modules import EULER, ZOH, plant_response
 
     m, c, k, dt = 1.0, 0.4, 4.0, 0.02
     u = np.ones(3000)

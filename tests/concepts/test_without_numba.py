@@ -9,10 +9,10 @@ import numpy as np
 
 from dtwin.hmm import fit_hmm
 
-#: A continuous asset's run with a friction law (dtwin._force_kernels.rk4_chain's arguments).
+#: A continuous asset's run with a friction law (dtwin.twin._force_kernels.rk4_chain's arguments).
 #: And a rig's (rk4_plant): a drive given at every Runge-Kutta instant, then a PD loop.
 RK4_SETUP = """
-from dtwin._force_kernels import ForceLaw, PdLoop
+from dtwin.twin._force_kernels import ForceLaw, PdLoop
 u = np.sin(np.arange(60) * 0.3)
 RK4_ARGS = (u, 0.05, 1.3, 0.4, 40.0, 0.01, 0.1 * u[::-1], np.cos(np.arange(60)), 20,
             ForceLaw("generalised_stribeck", (0.3, 0.2, 0.05, 1.4, 0.02, 0.1)))
@@ -30,7 +30,7 @@ SCRIPT = (
     import json
     import numpy as np
     from dtwin._jit import HAVE_NUMBA
-    from dtwin._force_kernels import ForceLaw, force_windows, rk4_chain, rk4_plant
+    from dtwin.twin._force_kernels import ForceLaw, force_windows, rk4_chain, rk4_plant
     from dtwin.hmm import fit_hmm
     """
     )
@@ -76,7 +76,7 @@ def test_diagnoser_kernels_and_em_run_without_numba():
     assert np.isclose(result["loglik"], reference, rtol=1e-9)
     setup = {"np": np}
     exec(RK4_SETUP, setup)  # the same run where numba is installed: the same bits
-    from dtwin._force_kernels import rk4_chain, rk4_plant
+    from dtwin.twin._force_kernels import rk4_chain, rk4_plant
 
     assert result["rk4"] == rk4_chain(*setup["RK4_ARGS"]).tobytes().hex()
     for args, bits in zip(setup["PLANT_ARGS"], result["plant"], strict=True):

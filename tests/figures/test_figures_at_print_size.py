@@ -45,7 +45,7 @@ from dtwin.figures.fig11_sensitivity import plot_sensitivity
 from dtwin.figures.fig12_claims_across_draws import plot_claims_across_draws
 from dtwin.figures.fig13_ar_hmm import plot_ar_hmm
 from dtwin.figures.gap_benchmark import gap_benchmark
-from dtwin.wiring import MODULES
+from dtwin.twin.wiring import MODULES
 from tests.conftest import REPO
 from tests.figures.test_figure_style import benchmark_metrics_of, benchmark_table
 

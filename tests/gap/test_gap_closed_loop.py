@@ -10,7 +10,6 @@ import pytest
 from scipy.signal import lfilter, ss2tf
 from scipy.stats import chi2
 
-from dtwin.exact_plant import hold_matrices
 from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping
 from dtwin.gap.closed_loop import (
     FEEDBACK_LAGS,
@@ -22,6 +21,7 @@ from dtwin.gap.closed_loop import (
 )
 from dtwin.gapbench.generator import generate_case
 from dtwin.gapbench.rigs import generate_rig_case
+from dtwin.twin.exact import hold_matrices
 from tests.conftest import paper_twin
 
 

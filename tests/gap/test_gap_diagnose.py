@@ -16,7 +16,6 @@ import pytest
 import yaml
 
 from dtwin.cli import main
-from dtwin.exact_plant import exact_plant_response
 from dtwin.gap import (
     diagnose,
     diagnosis_to_dict,
@@ -27,6 +26,7 @@ from dtwin.gap import (
 from dtwin.gap.effects import EFFECT_NAMES
 from dtwin.gapbench import generate_case
 from dtwin.gapbench.generator import IN_LIST_EFFECTS
+from dtwin.twin.exact import exact_plant_response
 from tests.conftest import paper_twin
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,4 +1,4 @@
-"""The diagnoser's exact plant (dtwin.exact_plant) against the continuous solution.
+"""The diagnoser's exact plant (dtwin.twin.exact) against the continuous solution.
 
 docs/gap.md §Modules: zero- and first-order hold discretisations must match the continuous
 mass-spring-damper at 3, 10 and 150 samples per period, damping ratios 0.005–1, and k = 0; the
@@ -12,13 +12,13 @@ import pandas as pd
 import pytest
 from scipy.integrate import solve_ivp
 
-from dtwin.exact_plant import (
+from dtwin.twin.exact import (
     EXACT_HOLDS,
     exact_plant_response,
     free_response_basis,
     hold_matrices,
 )
-from dtwin.modules import BANDLIMITED, FOH, ZOH
+from dtwin.twin.paper_modules import BANDLIMITED, FOH, ZOH
 
 #: The holds with a piecewise-polynomial input between samples (a continuous reference exists
 #: sample by sample).
@@ -122,7 +122,7 @@ def test_force_loop_equals_the_linear_filter_for_a_zero_force(hold, dt, substeps
 @pytest.mark.parametrize("k3", [30.0, -3e4])  # a stiffening spring; one that diverges
 def test_one_window_float_loop_equals_the_lockstep_array_loop_bit_for_bit(k3):
     """Windows run one by one (Python floats) and in lockstep (numpy arrays): the same bits."""
-    from dtwin.exact_plant import SCALAR_WINDOWS
+    from dtwin.twin.exact import SCALAR_WINDOWS
 
     rng = np.random.default_rng(5)
     n_windows, length = SCALAR_WINDOWS + 2, 40
@@ -147,7 +147,7 @@ def _law_force(name: str, params: tuple[float, ...]):
     """A force of a known law: the Python callable, and the same with its ``law`` attached."""
     import math
 
-    from dtwin._force_kernels import ForceLaw
+    from dtwin.twin._force_kernels import ForceLaw
 
     laws = {
         "tanh_friction": lambda x, v: params[0] * np.tanh(v / params[1]),
@@ -362,7 +362,7 @@ def test_substeps_bring_a_coarsely_sampled_friction_to_the_continuous_plant():
     errors of 0.098 and 0.0037); ``δ`` is far below the velocity change of a sample, so the
     force changes sign inside the sample that holds a reversal.
     """
-    from dtwin.exact_plant import force_substeps
+    from dtwin.twin.exact import force_substeps
 
     m, period, zeta = 1.0, 1.0, 0.1
     omega = 2 * np.pi / period
@@ -410,8 +410,8 @@ def test_substeps_bring_a_coarsely_sampled_friction_to_the_continuous_plant():
 )
 def test_compiled_euler_loop_gives_the_python_loops_bits(name, params):
     """The diagnoser's Euler twin stepped by numba: plant_response's positions, bit for bit."""
-    from dtwin._force_kernels import ForceLaw, euler_response
-    from dtwin.modules import plant_response
+    from dtwin.twin._force_kernels import ForceLaw, euler_response
+    from dtwin.twin.paper_modules import plant_response
 
     rng = np.random.default_rng(5)
     u = np.sign(np.sin(np.arange(600) * 0.05)) + 0.1 * rng.normal(size=600)

@@ -145,7 +145,7 @@ def test_every_effects_form_changes_the_twin_and_keeps_its_shape(effect):
 @pytest.mark.parametrize("effect", [e for e in EFFECTS if e.stage == "force"], ids=lambda e: e.name)
 def test_a_force_effects_compiled_law_is_its_array_law(effect):
     """The compiled loop steps the same force as the numpy and scalar forms (to rounding)."""
-    from dtwin._force_kernels import LAWS, _law_value
+    from dtwin.twin._force_kernels import LAWS, _law_value
 
     theta = _inside(effect)
     smooth = max(FRICTION_SMOOTHING * SCALES.velocity_std, 1e-300)
@@ -184,7 +184,7 @@ def test_each_effect_is_one_module_holding_its_fitted_form_and_its_case(module):
     """
     from dtwin.gapbench.generator import CASE_EFFECTS, generate_case
     from dtwin.gapbench.scores import true_parameter
-    from dtwin.modules import LINEAR_PARAMS
+    from dtwin.twin.paper_modules import LINEAR_PARAMS
 
     effect, case = module.EFFECT, module.CASE
     assert module.__name__.rsplit(".", 1)[1] == effect.name
@@ -242,7 +242,7 @@ def test_every_case_effects_truth_is_a_parameter_of_its_answer():
     """
     from dtwin.gapbench.generator import ARM_EFFECTS, CASE_EFFECTS, generate_case
     from dtwin.gapbench.scores import true_parameter
-    from dtwin.modules import LINEAR_PARAMS
+    from dtwin.twin.paper_modules import LINEAR_PARAMS
 
     scored = [name for name, effect in CASE_EFFECTS.items() if effect.truth is not None]
     assert len(scored) >= 10

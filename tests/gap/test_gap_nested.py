@@ -140,9 +140,9 @@ def test_each_windows_initial_state_is_profiled_out_of_the_error():
     white noise's. With the state fitted to the whole window it is the noise less two
     directions per window, ``σ²·(1 − 2/600)``.
     """
-    from dtwin.exact_plant import exact_plant_response
     from dtwin.gap.models import ModuleData, profiled_window_error, simulate_module
-    from dtwin.modules import ZOH
+    from dtwin.twin.exact import exact_plant_response
+    from dtwin.twin.paper_modules import ZOH
 
     n, dt, horizon, sigma = 6000, 0.001, 600, 0.01
     rng = np.random.default_rng(11)
@@ -174,7 +174,7 @@ def test_the_linear_alternative_fits_a_linear_chain_the_twin_cannot():
     """
     from dtwin.gap.models import ModuleData
     from dtwin.gap.oe_reference import plain_linear_error
-    from dtwin.modules import ZOH
+    from dtwin.twin.paper_modules import ZOH
 
     n, dt, sigma = 4000, 0.01, 0.01
     rng = np.random.default_rng(13)

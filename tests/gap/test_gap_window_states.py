@@ -10,7 +10,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dtwin.exact_plant import exact_plant_response
 from dtwin.gap.effects import FRICTION_SMOOTHING, Scales, effect_by_name
 from dtwin.gap.models import (
     STIFF_BAND,
@@ -22,7 +21,8 @@ from dtwin.gap.models import (
     simulate_module,
     warmup_samples,
 )
-from dtwin.modules import ZOH
+from dtwin.twin.exact import exact_plant_response
+from dtwin.twin.paper_modules import ZOH
 
 
 def _damped_rig(noise: float, seed: int = 3):

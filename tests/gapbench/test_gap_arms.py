@@ -26,7 +26,7 @@ from dtwin.gapbench.arms import (
 )
 from dtwin.gapbench.generator import ARM_EFFECTS, case_spec, generate_case
 from dtwin.gapbench.rigs import generate_any_case
-from dtwin.modules import plant_response
+from dtwin.twin.paper_modules import plant_response
 from tests.conftest import paper_twin
 
 N = 1200
@@ -473,7 +473,7 @@ def test_continuous_assets_runge_kutta_is_a_fine_adaptive_integration(law):
     At ``h = dt/20`` (``h/τ = 0.01``) classical RK4 is ~1e-9 off; a first- or second-order
     slip in its stages would be 1e-4 or more. The force is the law the loop is given.
     """
-    from dtwin._force_kernels import ForceLaw, law_function, rk4_chain
+    from dtwin.twin._force_kernels import ForceLaw, law_function, rk4_chain
 
     n, tau, m, c, k, dt = 100, 0.05, 1.3, 0.4, 40.0, 0.01
     rng = np.random.default_rng(2)
@@ -489,7 +489,7 @@ def test_continuous_assets_runge_kutta_is_a_fine_adaptive_integration(law):
 
 def test_a_case_forces_interpreted_law_has_the_compiled_laws_bits():
     """The generator's Euler plant and the continuous asset step the same force, to the bit."""
-    from dtwin._force_kernels import LAWS, ForceLaw, _law_value, law_function
+    from dtwin.twin._force_kernels import LAWS, ForceLaw, _law_value, law_function
 
     params = {
         "tanh_friction": (0.7, 0.03),

@@ -117,8 +117,8 @@ def test_unknown_hard_rig_effects_are_refused_and_the_prefix_dispatches():
 
 
 def test_cogging_is_a_near_catalogue_plant_force_periodic_in_the_position():
-    from dtwin._force_kernels import ForceLaw, law_function
     from dtwin.gapbench.arms import ARM_CASE_EFFECTS, NEAR_CATALOGUE
+    from dtwin.twin._force_kernels import ForceLaw, law_function
 
     assert "cogging" in NEAR_CATALOGUE and "stiction" not in NEAR_CATALOGUE
     spec = {"effect": "cogging", "A": 2.0, "period": 0.5, "phase": 0.3}
@@ -260,8 +260,8 @@ def test_dtwin_generate_writes_a_harder_rig_case(tmp_path):
 def test_the_window_noise_gain_counts_the_noise_colour(pole):
     """The gain is the error variance a window's least-squares initial state carries forward
     from AR(1) measurement noise; checked against 4000 simulated windows."""
-    from dtwin.exact_plant import free_response_basis, hold_matrices
     from dtwin.gap.models import warmup_samples, window_noise_gain
+    from dtwin.twin.exact import free_response_basis, hold_matrices
 
     lin, dt, horizon = {"m": 1.0, "c": 2.0, "k": 400.0}, 0.005, 120
     gain = window_noise_gain(lin, dt, "zoh", horizon, pole)
@@ -303,12 +303,12 @@ def test_every_rig_force_sizes_itself_by_a_parameter_of_its_catalogue_effect():
 
 
 def test_the_rig_runge_kutta_loop_is_a_fine_adaptive_integration_and_closes_its_loop():
-    """The rig's loop (dtwin._force_kernels.rk4_plant, the continuous asset's step) against
+    """The rig's loop (dtwin.twin._force_kernels.rk4_plant, the continuous asset's step) against
     scipy's DOP853 with the force held over each sample: within 1e-7 of the range; and the PD
     loop's held force is its law on the positions the loop returns, to the bit."""
     from scipy.integrate import solve_ivp
 
-    from dtwin._force_kernels import ForceLaw, PdLoop, law_function, rk4_plant
+    from dtwin.twin._force_kernels import ForceLaw, PdLoop, law_function, rk4_plant
 
     n, m, c, k, dt = 80, 1.3, 0.4, 40.0, 0.01
     law = ForceLaw("stribeck_friction", (0.3, 0.2, 0.05, 0.02))

@@ -9,7 +9,7 @@ import pytest
 from dtwin._validation import DtwinValueError
 from dtwin.figures.fig13_ar_hmm import ar_hmm_checks
 from dtwin.stages.ar_regimes import ar_regime_sweep
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 
 SETTINGS = {
     "seed": 3,

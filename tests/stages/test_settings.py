@@ -21,7 +21,7 @@ from dtwin._validation import DtwinValueError
 from dtwin.config_sections import EmSettings, HmmSettings
 from dtwin.hmm import fit_hmm
 from dtwin.sensitivity_sweep import SweepPoint
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 from tests.conftest import REPO
 
 ODD = {"n_restarts": 2, "max_iter": 7, "tol": 3.5e-5, "var_floor": 0.0123}

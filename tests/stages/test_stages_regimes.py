@@ -31,7 +31,7 @@ from dtwin.stages.regimes import (
     sweep_bic,
 )
 from dtwin.stages.twin import fit_twin_surrogates, roll_out_twin, simulate_asset
-from dtwin.wiring import RESIDUALS
+from dtwin.twin.wiring import RESIDUALS
 from tests.conftest import REFERENCE
 
 TWIN_KEYS = ("dt", "fusion", "kpi")

@@ -350,7 +350,7 @@ JOB_SERVER_SKIP = ("dtwin._em_reference",)
 # Modules whose warm_up() the server runs once after the imports: the EM kernels' and the force
 # loop's cache loads, and a figure drawn in the set's style (matplotlib's fonts, mathtext parser
 # and writers; dtwin.figures._style.warm_up).
-JOB_SERVER_WARM_UP = ("dtwin._em_kernels", "dtwin._force_kernels", "dtwin.figures._style")
+JOB_SERVER_WARM_UP = ("dtwin._em_kernels", "dtwin.twin._force_kernels", "dtwin.figures._style")
 
 
 def expected_start_order(jobs):

@@ -157,7 +157,7 @@ class Effect:
         A ``force`` effect's law: ``force_law(theta, velocity_std, ops) -> F(x, v)``, built on
         ``ops`` (:data:`ARRAY_OPS` for numpy arrays, :data:`SCALAR_OPS` for Python floats).
     compiled_law : callable or None
-        The same law for the exact plant's compiled loop (:mod:`dtwin._force_kernels`):
+        The same law for the exact plant's compiled loop (:mod:`dtwin.twin._force_kernels`):
         ``compiled_law(values, smoothing) -> (kernel name, parameters)``, ``values`` the floats
         of ``theta``, ``smoothing`` the friction's smoothing velocity.
     input_map : callable or None

@@ -81,7 +81,7 @@ class CaseEffect:
         ``actuator(u_cmd, spec, dt) -> u``: the command after the effect, before the lag.
     force : callable, optional
         ``force(spec, c, k, min_smoothing) -> (law, params)``: an extra plant force ``F(x, v)``
-        (N), a law of :data:`dtwin._force_kernels.LAWS` and its parameters (the Euler plant and
+        (N), a law of :data:`dtwin.twin._force_kernels.LAWS` and its parameters (the Euler plant and
         the continuous asset step the same law); a friction's sign is smoothed over at least
         ``min_smoothing`` (m/s).
     plant : callable, optional

@@ -12,8 +12,8 @@ from typing import Any
 
 from dtwin.gap.effects._base import PARAMETER_MISMATCH, Effect
 from dtwin.gap.effects._case import CaseEffect, log_between
-from dtwin.modules import CONTRACTS
-from dtwin.wiring import SENSOR, role_of
+from dtwin.twin.paper_modules import CONTRACTS
+from dtwin.twin.wiring import SENSOR, role_of
 
 __all__ = ["EFFECT", "CASE"]
 

@@ -1,17 +1,17 @@
 """Compiled step loop of the exact plant with a known force law (numba; docs/gap.md §Speed).
 
-:func:`dtwin.exact_plant.exact_plant_response` steps a plant with a state-dependent force one
+:func:`dtwin.twin.exact.exact_plant_response` steps a plant with a state-dependent force one
 sample at a time, the force evaluated twice per step; on Python floats that costs ~1.5 µs per
 step and was half of a 130,000-sample rig's diagnosis. A force that names its law
 (:class:`ForceLaw`, attached by :func:`dtwin.gap.models` to the candidate's force as its
 ``law`` attribute) is stepped here instead, compiled by numba (``cache=True``: compiled once
 per machine into ``__pycache__``), with the same arithmetic in the same order. Any other force
-keeps the Python loop. :mod:`dtwin.exact_plant` imports this module (and numba, ~0.5 s) only
+keeps the Python loop. :mod:`dtwin.twin.exact` imports this module (and numba, ~0.5 s) only
 when it first steps such a force. Without numba the same loop runs in Python (:mod:`dtwin._jit`).
 
-The paper's explicit-Euler plant (:func:`dtwin.modules.plant_response`, the loop of
-``dtwin.modules._euler_loop``) is stepped here too, by :func:`euler_response`, when the force is
-None or a known law: the same arithmetic in the same order on the same doubles, so the same
+The paper's explicit-Euler plant (:func:`dtwin.twin.paper_modules.plant_response`, the loop of
+``dtwin.twin.paper_modules._euler_loop``) is stepped here too, by :func:`euler_response`, when the
+force is None or a known law: the same arithmetic in the same order on the same doubles, so the same
 bits (tests/gap/test_gap_discretisation.py), at ~30 ns instead of ~1 µs per step. The
 diagnoser's Euler twin uses it only where numba is installed (:data:`dtwin._jit.HAVE_NUMBA`).
 The benchmark's continuous asset is integrated here (:func:`rk4_chain`, its one Runge-Kutta
@@ -184,8 +184,8 @@ def euler_response(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Return the explicit-Euler plant's position and velocity, each shape ``(n_steps,)``.
 
-    :func:`dtwin.modules.plant_response` with ``force`` None (``law`` None) or the force of
-    ``law``, no acceleration noise and the divergence guard ``limit`` (once ``|x|`` reaches it
+    :func:`dtwin.twin.paper_modules.plant_response` with ``force`` None (``law`` None) or the force
+    of ``law``, no acceleration noise and the divergence guard ``limit`` (once ``|x|`` reaches it
     or is NaN, the rest of ``x`` is ``limit`` and of ``v`` 0): the same arithmetic, the same
     bits. ``u`` shape ``(n_steps,)``, input units; ``u[k−1]`` drives step ``k``.
     """
@@ -202,7 +202,7 @@ def euler_response(
 def force_windows(drive, x0, v0, steps, law: ForceLaw, inv_m: float) -> np.ndarray:
     """Return the positions of windows stepped with a known force law, ``(n_windows, length)``.
 
-    The loop of :func:`dtwin.exact_plant._force_windows` (the same arguments: ``drive`` of
+    The loop of :func:`dtwin.twin.exact._force_windows` (the same arguments: ``drive`` of
     shape (n_windows, length, 2), ``steps`` the eight step coefficients ``a11 … r2``), ``inf``
     from a window's first sample whose position is not finite or beyond ±1e300.
     """
@@ -257,7 +257,7 @@ def substepped_windows(
     """Return the positions at the samples of windows stepped ``substeps`` times per sample.
 
     The loop of :func:`force_windows` over the fine grid of
-    :func:`dtwin.exact_plant._substepped_response` (``fine_drive`` of shape
+    :func:`dtwin.twin.exact._substepped_response` (``fine_drive`` of shape
     ``(n_samples·substeps, 2)``; window ``(a, b)`` runs over fine steps ``a·substeps …
     (b−1)·substeps`` from ``(x_start[a], v_start[a])``), reading the fine drive in place and
     keeping every ``substeps``-th position: shape ``(n_samples,)``, 0 outside the windows,

@@ -1,10 +1,11 @@
 """The wiring table of the six-module twin (paper §3, Fig. 1).
 
 One table says which signals each module reads and writes, and names its parameter section; it
-is the one table of the modules, which the module contract (:data:`dtwin.modules.CONTRACTS`)
-and the twin's parameters (:class:`dtwin.params.TwinParams`) extend. The simulator, the surrogate
-chain, the residual definitions and ``fig01_pipeline`` all read it, so the picture and the
-loops cannot drift from each other.
+is the one table of the modules, which the module contract
+(:data:`dtwin.twin.paper_modules.CONTRACTS`) and the twin's parameters
+(:class:`dtwin.params.TwinParams`) extend. The simulator, the surrogate chain, the residual
+definitions and ``fig01_pipeline`` all read it, so the picture and the loops cannot drift from
+each other.
 
 Signals keep the paper's names: ``u_cmd`` (command), ``u_act`` (realised actuation),
 ``x`` (position), ``v`` (velocity), ``y_A``/``y_B`` (sensor readings), ``y_fused``
@@ -69,7 +70,7 @@ class Module:
         Name of its residual channel, surrogate − physics (paper Eq. (1)).
     section : str
         Name of its parameter section in :class:`dtwin.params.TwinParams` (``"plant"``); its
-        parameters and law are the module's contract (:data:`dtwin.modules.CONTRACTS`).
+        parameters and law are the module's contract (:data:`dtwin.twin.paper_modules.CONTRACTS`).
     surrogate : str
         ``"arx"`` when the twin replaces it with an ARX model, ``"algebraic"`` when the
         twin recomputes it from upstream surrogate signals.

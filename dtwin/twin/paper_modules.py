@@ -4,7 +4,7 @@ The six modules of the paper's pipeline (§3.1, r_notes.md §1) are written here
 the paper simulator (:mod:`dtwin.physics`), the gap diagnoser's module twins
 (:mod:`dtwin.gap.models`, :mod:`dtwin.gap.noise`) and the gap generator's asset
 (:mod:`dtwin.gapbench.generator`), in the way python-control's interconnected systems keep each
-subsystem's law apart from the wiring (:data:`dtwin.wiring.MODULES`). Arrays are time-first,
+subsystem's law apart from the wiring (:data:`dtwin.twin.wiring.MODULES`). Arrays are time-first,
 shape ``(n_steps,)``.
 
 Each :class:`ModuleContract` names the module's linear parameters (the fields of its
@@ -38,7 +38,7 @@ from typing import NamedTuple
 import numpy as np
 
 from dtwin._lfilter import lfilter
-from dtwin.wiring import MODULES, Module
+from dtwin.twin.wiring import MODULES, Module
 
 __all__ = [
     "EULER",
@@ -71,7 +71,7 @@ ZOH = "zoh"
 FOH = "foh"
 #: Exact discretisation of a band-limited input (a windowed-sinc interpolation of the samples).
 BANDLIMITED = "bandlimited"
-#: Every discretisation a twin file may name (the exact ones: :mod:`dtwin.exact_plant`).
+#: Every discretisation a twin file may name (the exact ones: :mod:`dtwin.twin.exact`).
 DISCRETISATIONS: tuple[str, ...] = (EULER, ZOH, FOH, BANDLIMITED)
 
 
@@ -81,7 +81,7 @@ class ModuleContract:
 
     Attributes
     ----------
-    module : dtwin.wiring.Module
+    module : dtwin.twin.wiring.Module
         The wiring entry (name, input and output signals, parameter section).
     law : str
         ``"lag"``, ``"plant"``, ``"fusion"`` or ``"kpi"`` (see the module docstring).
@@ -120,7 +120,7 @@ class ModuleContract:
 
 
 #: Each module's law, linear parameters, parameters of its recursion, whether it has a noise
-#: channel (named as its section) and its effect hooks; keyed by :data:`dtwin.wiring.MODULES`.
+#: channel (named as its section) and its effect hooks; keyed by :data:`dtwin.twin.wiring.MODULES`.
 _LAWS: dict[str, tuple[str, tuple[str, ...], tuple[str, ...], bool, tuple[str, ...]]] = {
     "M0": ("lag", ("tau",), ("tau",), True, ("input",)),
     "M1": ("plant", ("m", "c", "k"), ("m", "c", "k"), True, ("input", "force")),
@@ -137,7 +137,7 @@ def _contract(module: Module) -> ModuleContract:
     return ModuleContract(module, law, params, dynamic_params, noise, hooks)
 
 
-#: The contract of every module, keyed and ordered as :data:`dtwin.wiring.MODULES`.
+#: The contract of every module, keyed and ordered as :data:`dtwin.twin.wiring.MODULES`.
 CONTRACTS: dict[str, ModuleContract] = {module.name: _contract(module) for module in MODULES}
 
 #: The linear parameters of each module (a view of :data:`CONTRACTS`).
@@ -145,7 +145,7 @@ LINEAR_PARAMS: dict[str, tuple[str, ...]] = {name: c.params for name, c in CONTR
 
 
 #: One module's step in a chain: the signals so far (by name, each ``(n_steps,)``) → the
-#: module's outputs (some of its :attr:`dtwin.wiring.Module.outputs`), or None when it cannot
+#: module's outputs (some of its :attr:`dtwin.twin.wiring.Module.outputs`), or None when it cannot
 #: run (an input is missing).
 Step = Callable[[Mapping[str, np.ndarray]], Mapping[str, np.ndarray] | None]
 
@@ -311,7 +311,7 @@ def plant_matrices(
     Continuous ``ṡ = F·s + g·(u/m + ξ)``, ``F = [[0, 1], [−k/m, −c/m]]``, ``g = (0, 1)ᵀ``.
     Euler: ``A = I + dt·F``, ``b_accel = dt·g``. Zero-order hold: ``A = exp(F·dt)``,
     ``b_accel = ∫₀^dt exp(F·s) ds·g`` (one matrix exponential of the augmented matrix).
-    In both ``b_force = b_accel/m``. Other holds: :func:`dtwin.exact_plant.hold_matrices`.
+    In both ``b_force = b_accel/m``. Other holds: :func:`dtwin.twin.exact.hold_matrices`.
     """
     require_discretisation(discretisation, (EULER, ZOH))
     if discretisation == EULER:
@@ -386,7 +386,7 @@ def plant_response(
     ``v[k] = v[k−1] + dt·acc``, ``x[k] = x[k−1] + dt·v[k−1]`` (position uses the old
     velocity). The arithmetic is done in this order, on the element types given, so every user
     gets the same bits as its former copy of the loop. The gap diagnoser's exact plant is
-    :func:`dtwin.exact_plant.exact_plant_response`.
+    :func:`dtwin.twin.exact.exact_plant_response`.
     """
     require_discretisation(discretisation, (EULER, ZOH))
     n_steps = len(u)

@@ -3,14 +3,14 @@
 Specification: docs/gap.md §Modules (the plant's discretisation).
 
 The paper's simulator steps the plant ``m·ẍ = u − c·ẋ − k·x − F(x, ẋ)`` by explicit Euler
-(:func:`dtwin.modules.plant_response`), right at its ~150 samples per period and wrong at 10.
-Here the linear part is discretised exactly, through matrix exponentials, for what the input does
-between samples (the **hold**):
+(:func:`dtwin.twin.paper_modules.plant_response`), right at its ~150 samples per period and wrong at
+10. Here the linear part is discretised exactly, through matrix exponentials, for what the input
+does between samples (the **hold**):
 
-- :data:`~dtwin.modules.ZOH`: held (a digital controller's output);
-- :data:`~dtwin.modules.FOH`: linear between samples (it lets ``u[k]`` act on ``x[k]``);
-- :data:`~dtwin.modules.BANDLIMITED`: the band-limited interpolation of the samples (a windowed
-  sinc, :data:`SINC_TAPS` samples each side), what a multisine through a DAC and an
+- :data:`~dtwin.twin.paper_modules.ZOH`: held (a digital controller's output);
+- :data:`~dtwin.twin.paper_modules.FOH`: linear between samples (it lets ``u[k]`` act on ``x[k]``);
+- :data:`~dtwin.twin.paper_modules.BANDLIMITED`: the band-limited interpolation of the samples (a
+  windowed sinc, :data:`SINC_TAPS` samples each side), what a multisine through a DAC and an
   anti-aliasing filter is; exact for any input below the Nyquist frequency up to the window.
 
 One step is ``s[k] = a·s[k−1] + d[k−1]`` with ``s = (x, v)`` and the drive
@@ -33,7 +33,7 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.signal import lfilter
 
-from dtwin.modules import BANDLIMITED, FOH, ZOH, Force, require_discretisation
+from dtwin.twin.paper_modules import BANDLIMITED, FOH, ZOH, Force, require_discretisation
 
 __all__ = [
     "EXACT_HOLDS",
@@ -217,14 +217,14 @@ def _force_windows(drive, x0, v0, a, force_step: HoldMatrices, force: Force, inv
     one predictor-corrector pass: a force held over the sample (explicit) feeds energy into a
     lightly damped plant and can diverge. A force with a ``scalar`` attribute (the same law
     on Python floats) uses it when the windows are stepped one by one (:data:`SCALAR_WINDOWS`);
-    one with a ``law`` attribute (:class:`dtwin._force_kernels.ForceLaw`) is stepped by the
-    compiled loop of :mod:`dtwin._force_kernels`, the same arithmetic ~50× faster.
+    one with a ``law`` attribute (:class:`dtwin.twin._force_kernels.ForceLaw`) is stepped by the
+    compiled loop of :mod:`dtwin.twin._force_kernels`, the same arithmetic ~50× faster.
     """
     (a11, a12), (a21, a22) = a.tolist()
     (q1, q2), (r1, r2) = force_step.taps.tolist()
     law = getattr(force, "law", None)
-    if law is not None:  # a known law: the compiled loop (dtwin._force_kernels)
-        from dtwin._force_kernels import force_windows
+    if law is not None:  # a known law: the compiled loop (dtwin.twin._force_kernels)
+        from dtwin.twin._force_kernels import force_windows
 
         steps = (a11, a12, a21, a22, q1, q2, r1, r2)
         return force_windows(drive, x0, v0, steps, law, inv_m)
@@ -443,7 +443,7 @@ def _substepped_response(u, m, c, k, dt, windows, x_start, v_start, hold, force,
     fine_drive[substeps - 1 :: substeps] += drive - per_sample
     law = getattr(force, "law", None)
     if law is not None and _disjoint(windows):  # a known law: the compiled loop, in place
-        from dtwin._force_kernels import substepped_windows
+        from dtwin.twin._force_kernels import substepped_windows
 
         force_step = fine if fine_hold == FOH else hold_matrices(c / m, k / m, fine_dt, FOH)
         (a11, a12), (a21, a22) = fine.a.tolist()
