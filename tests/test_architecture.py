@@ -2,10 +2,10 @@
 
 Layers of ``dtwin/`` (who may import whom, directly or through any chain of dtwin imports):
 
-- concept modules (``dtwin/*.py``): one paper concept each; import only other concept modules
-  and the helpers (``_validation``, ``artifacts``); never a stage, figure, reference, gap or
-  gapbench module, never a front end (``cli``, ``_script``, ``claims``), never ``yaml`` (no
-  config files) and never Snakemake;
+- concept modules (``dtwin/*.py``): one paper concept each; import only other concept modules,
+  the twin package and the helpers (``_validation``, ``artifacts``); never a stage, figure,
+  reference, gap or gapbench module, never a front end (``cli``, ``_script``, ``claims``), never
+  ``yaml`` (no config files) and never Snakemake;
 - stages (``dtwin/stages/``): config section → concept calls; may import concepts and R's
   column maps and loaders, never figures, gap or the crosschecks;
 - figures (``dtwin/figures/``): draw and judge the paper's claims from tables they are given;
