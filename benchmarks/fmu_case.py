@@ -1,66 +1,41 @@
 """The `fmu` benchmark section's case: a two-state FMU module, and where its diagnosis spends time.
 
-The test FMU (tests/twin/fmu: ``x' = w, w' = (u − c·w − k·x)/m``, k = 4, c = 0.4, m = 1, FMI
-2.0, built from source by tests/twin/fmu/build.py) as the twin; the asset is the same oscillator
-behind an input dead zone of 0.5 (integrated by scipy's solve_ivp, rtol 1e-9), driven by random
-steps held over 2 s, dt = 0.02 s, 1 % white noise on ``x``.
+A motor benchmark family case (dtwin/gapbench/families.py: ``motor_bare_input_deadzone``, seed
+3, full strength; drive voltage ``V`` in, speed ``w`` recorded) against the test FMU
+(tests/twin/fmu/motor.c: ``i' = (V − R·i − Ke·w)/L``, ``w' = (Kt·i − b·w)/J``, FMI 2.0, built
+from source by tests/twin/fmu/build.py) with the case's declared params; the asset has an input
+dead zone the twin does not.
 
 ``python benchmarks/fmu_case.py N_SAMPLES FOLDER [INTERFACE]`` writes ``recording.csv``,
-``twin.yaml`` and ``models/oscillator.fmu`` into FOLDER; with ``--profile`` after them it also
-diagnoses the case in this process with ``calibrate`` and prints a JSON line: seconds in the
-FMU's model (``simulate`` and ``derivatives``: the FMU's C functions and the RK4 around them,
-and the FMU's re-initialisation through fmpy) against the whole diagnosis, and the answer.
+``twin.yaml``, ``models/motor.fmu`` and ``key.json`` (the truth) into FOLDER
+(tests/twin/fmu/twins.py::write_fmu_case); with ``--profile`` after them it also diagnoses the
+case in this process with ``calibrate`` and prints a JSON line: seconds in the FMU's model
+(``simulate`` and ``derivatives``: the FMU's C functions and the RK4 around them, and the
+FMU's re-initialisation through fmpy) against the whole diagnosis, and the answer.
 """
 
 from __future__ import annotations
 
 import json
-import shutil
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
-import pandas as pd
-import yaml
-from scipy.integrate import solve_ivp
-
 REPO = Path(__file__).resolve().parents[1]
-DT = 0.02
+CASE_TYPE, SEED = "motor_bare_input_deadzone", 3
 
 
 def write_case(n_samples: int, folder: Path, interface: str = "model_exchange") -> None:
     """Write the case (module docstring) with ``n_samples`` samples into ``folder``."""
     sys.path.insert(0, str(REPO))
+    from dtwin.artifacts import write_json
+    from dtwin.gapbench.families import generate_family_case
     from tests.twin.fmu.build import build_fmu
+    from tests.twin.fmu.twins import write_fmu_case
 
-    rng = np.random.default_rng(0)
-    u = np.repeat(rng.uniform(-2, 2, n_samples // 100 + 1), 100)[:n_samples]
-    driven = np.sign(u) * np.maximum(np.abs(u) - 0.5, 0.0)
-
-    def rhs(t, s):
-        return [s[1], driven[min(int(t / DT), n_samples - 1)] - 0.4 * s[1] - 4.0 * s[0]]
-
-    times = np.arange(n_samples) * DT
-    sol = solve_ivp(rhs, (0, times[-1]), [0.0, 0.0], t_eval=times, max_step=DT / 2, rtol=1e-9)
-    x = sol.y[0] + 0.01 * rng.standard_normal(n_samples)
-    (folder / "models").mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(build_fmu(), folder / "models" / "oscillator.fmu")
-    pd.DataFrame({"t": times, "u": u, "x": x}).to_csv(folder / "recording.csv", index=False)
-    twin = {
-        "dt": DT,
-        "modules": {
-            "plant": {
-                "fmu": "models/oscillator.fmu",
-                "interface": interface,
-                "inputs": {"u": "u"},
-                "outputs": {"x": "x"},
-                "params": {"k": 4.0, "c": 0.4},
-            }
-        },
-        "noise": {"x": 0.01},
-    }
-    (folder / "twin.yaml").write_text(yaml.safe_dump(twin, sort_keys=False))
+    case = generate_family_case(CASE_TYPE, SEED, n_samples=n_samples, magnitude=1.0)
+    write_fmu_case(case, build_fmu(), folder, interface)
+    write_json(case.key, folder / "key.json")
 
 
 def profile(folder: Path) -> dict:
@@ -89,7 +64,7 @@ def profile(folder: Path) -> dict:
     fmu._Instance.start = timed(fmu._Instance.start, "start")
     begin = time.perf_counter()
     table = table_file(load_twin_text((folder / "twin.yaml").read_text()), base_dir=folder)
-    recording = read_recording(folder / "recording.csv", columns=("u", "x"))
+    recording = read_recording(folder / "recording.csv", columns=("V", "w"))
     result = diagnose_table(recording, table, calibrate=True)
     total = time.perf_counter() - begin
     return {

@@ -32,8 +32,9 @@ load average before and after it), medians where repeated. Sections (`python ben
   and `--calibrate` on a 130,000-sample plant-only rig (target: ≤ 30 s);
 - ``table``: `dtwin diagnose --calibrate` on a two-state expression module written as a twin
   table, 10,000 and 100,000 samples (benchmarks/table_cases.py): wall, CPU, peak RSS, answer;
-- ``fmu``: `dtwin diagnose --calibrate` on a two-state FMU module (the test FMU, Model Exchange
-  and Co-Simulation), 10,000 samples (benchmarks/fmu_case.py; target ≤ 60 s): wall, CPU, peak
+- ``fmu``: `dtwin diagnose --calibrate` on a two-state FMU module (the test FMU, a DC motor,
+  Model Exchange and Co-Simulation), a 10,000-sample motor family case with an input dead zone
+  (benchmarks/fmu_case.py; target ≤ 60 s): wall, CPU, peak
   RSS and answer of the command, and in-process where the diagnosis spends its time (the FMU's
   model against the fitting);
 - ``monitor``: `dtwin regimes` on a 100,000-sample recording of the paper's six modules (with

@@ -1,20 +1,23 @@
-/* A two-state oscillator as an FMI 2.0 FMU (Model Exchange and Co-Simulation), built at test
- * time by tests/twin/fmu/build.py with the FMI headers fmpy ships:
+/* A DC motor as an FMI 2.0 FMU (Model Exchange and Co-Simulation), built at test time by
+ * tests/twin/fmu/build.py with the FMI headers fmpy ships:
  *
- *     x' = w,   w' = (u - c*w - k*x)/m,   outputs x and a = w'
+ *     i' = (V - R*i - Ke*w)/L,   w' = (Kt*i - b*w)/J,   outputs i and w
  *
- * the same physics as the expression module of tests/twin/test_fmu.py. Co-Simulation steps
- * with RK4 (COSIM_SUBSTEPS per communication step), the input linear over the step when its
- * derivative is set (canInterpolateInputs). A mass m <= 0 fails to initialise with a logged
- * error. */
+ * the physics of the motor benchmark family (dtwin/gapbench/family_assets.py), written as the
+ * one expression module of tests/twin/fmu/twins.py with the same operations in the same order.
+ * Co-Simulation steps with RK4 (COSIM_SUBSTEPS per communication step), the input linear over
+ * the step when its derivative is set (canInterpolateInputs). An inductance L <= 0 or an
+ * inertia J <= 0 fails to initialise with a logged error. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fmi2Functions.h"
 
-enum { VR_X, VR_DER_X, VR_W, VR_DER_W, VR_U, VR_K, VR_C, VR_M, VR_OMEGA0, VR_A, N_VARS };
+enum { VR_V, VR_I, VR_DER_I, VR_W, VR_DER_W, VR_R, VR_L, VR_KE, VR_KT, VR_J, VR_B, VR_TAU_M,
+       N_VARS };
 #define COSIM_SUBSTEPS 8
+#define GUID "{dtwin-motor-1}"
 
 typedef struct {
     fmi2Real r[N_VARS];
@@ -27,32 +30,41 @@ typedef struct {
 
 static void set_start(Model *m) {
     memset(m->r, 0, sizeof(m->r));
-    m->r[VR_K] = 4.0;
-    m->r[VR_C] = 0.4;
-    m->r[VR_M] = 1.0;
+    m->r[VR_R] = 2.0;
+    m->r[VR_L] = 0.01;
+    m->r[VR_KE] = 0.1;
+    m->r[VR_KT] = 0.1;
+    m->r[VR_J] = 5e-4;
+    m->r[VR_B] = 7.5e-4;
     m->time = 0.0;
     m->du = 0.0;
 }
 
-static void derive(Model *m, fmi2Real u, const fmi2Real *s, fmi2Real *d) {
-    d[0] = s[1];
-    d[1] = (u - m->r[VR_C] * s[1] - m->r[VR_K] * s[0]) / m->r[VR_M];
+static void derive(Model *m, fmi2Real V, const fmi2Real *s, fmi2Real *d) {
+    const fmi2Real *r = m->r;
+    d[0] = (V - r[VR_R] * s[0] - r[VR_KE] * s[1]) / r[VR_L];
+    d[1] = (r[VR_KT] * s[0] - r[VR_B] * s[1]) / r[VR_J];
 }
 
 static void calculate(Model *m) {
-    fmi2Real s[2] = {m->r[VR_X], m->r[VR_W]}, d[2];
-    derive(m, m->r[VR_U], s, d);
-    m->r[VR_DER_X] = d[0];
+    fmi2Real s[2] = {m->r[VR_I], m->r[VR_W]}, d[2];
+    derive(m, m->r[VR_V], s, d);
+    m->r[VR_DER_I] = d[0];
     m->r[VR_DER_W] = d[1];
-    m->r[VR_A] = d[1];
-    m->r[VR_OMEGA0] = m->r[VR_M] > 0 ? sqrt(m->r[VR_K] / m->r[VR_M]) : 0.0;
+    m->r[VR_TAU_M] = m->r[VR_J] * m->r[VR_R] / (m->r[VR_KT] * m->r[VR_KE]);
+}
+
+static fmi2Status refuse(Model *m, const char *what, fmi2Real value) {
+    m->cb.logger(m->cb.componentEnvironment, m->name, fmi2Error, "logStatusError",
+                 "motor: %s must be > 0 (got %g)", what, value);
+    return fmi2Error;
 }
 
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid,
                               fmi2String resources, const fmi2CallbackFunctions *cb,
                               fmi2Boolean visible, fmi2Boolean logging) {
     (void)resources; (void)visible; (void)logging;
-    if (strcmp(guid, "{dtwin-oscillator-1}") != 0) return NULL;
+    if (strcmp(guid, GUID) != 0) return NULL;
     Model *m = calloc(1, sizeof(Model));
     if (!m) return NULL;
     m->type = type;
@@ -77,11 +89,8 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_defined, fmi2Rea
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) { (void)c; return fmi2OK; }
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     Model *m = c;
-    if (!(m->r[VR_M] > 0)) {
-        m->cb.logger(m->cb.componentEnvironment, m->name, fmi2Error, "logStatusError",
-                     "oscillator: mass m must be > 0 (got %g)", m->r[VR_M]);
-        return fmi2Error;
-    }
+    if (!(m->r[VR_L] > 0)) return refuse(m, "inductance L", m->r[VR_L]);
+    if (!(m->r[VR_J] > 0)) return refuse(m, "inertia J", m->r[VR_J]);
     calculate(m);
     return fmi2OK;
 }
@@ -161,15 +170,15 @@ fmi2Status fmi2SetTime(fmi2Component c, fmi2Real t) { ((Model *)c)->time = t; re
 fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t n) {
     Model *m = c;
     if (n != 2) return fmi2Error;
-    m->r[VR_X] = x[0];
+    m->r[VR_I] = x[0];
     m->r[VR_W] = x[1];
     return fmi2OK;
 }
 fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real d[], size_t n) {
     Model *m = c;
     if (n != 2) return fmi2Error;
-    fmi2Real s[2] = {m->r[VR_X], m->r[VR_W]};
-    derive(m, m->r[VR_U], s, d);
+    fmi2Real s[2] = {m->r[VR_I], m->r[VR_W]};
+    derive(m, m->r[VR_V], s, d);
     return fmi2OK;
 }
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real z[], size_t n) {
@@ -178,7 +187,7 @@ fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real z[], size_t n) {
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t n) {
     Model *m = c;
     if (n != 2) return fmi2Error;
-    x[0] = m->r[VR_X];
+    x[0] = m->r[VR_I];
     x[1] = m->r[VR_W];
     return fmi2OK;
 }
@@ -193,7 +202,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
                                        const fmi2Integer order[], const fmi2Real v[]) {
     Model *m = c;
     for (size_t i = 0; i < n; i++) {
-        if (vr[i] != VR_U || order[i] != 1) return fmi2Error;
+        if (vr[i] != VR_V || order[i] != 1) return fmi2Error;
         m->du = v[i];
     }
     return fmi2OK;
@@ -205,7 +214,7 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_prior) {
     Model *m = c;
     (void)no_prior;
-    fmi2Real u0 = m->r[VR_U], s[2] = {m->r[VR_X], m->r[VR_W]}, trial[2];
+    fmi2Real u0 = m->r[VR_V], s[2] = {m->r[VR_I], m->r[VR_W]}, trial[2];
     fmi2Real k1[2], k2[2], k3[2], k4[2], step = h / COSIM_SUBSTEPS;
     for (int j = 0; j < COSIM_SUBSTEPS; j++) {
         fmi2Real a = j * step, u_a = u0 + m->du * a, u_m = u0 + m->du * (a + 0.5 * step);
@@ -219,9 +228,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_pr
         derive(m, u_b, trial, k4);
         for (int i = 0; i < 2; i++) s[i] += step / 6.0 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]);
     }
-    m->r[VR_X] = s[0];
+    m->r[VR_I] = s[0];
     m->r[VR_W] = s[1];
-    m->r[VR_U] = u0 + m->du * h;
+    m->r[VR_V] = u0 + m->du * h;
     m->du = 0.0;
     m->time = t + h;
     return fmi2OK;
