@@ -169,6 +169,19 @@ def test_an_fmu_that_cannot_restart_runs_once_per_part(fmu_path):
     assert (result.effect, result.at) == ("input_deadzone", "V")
 
 
+#: A valid FMI 3.0 description (refused: dtwin drives FMI 2.0 FMUs only).
+FMI3_DESCRIPTION = b"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="3.0" modelName="motor" instantiationToken="{dtwin-motor-3}">
+  <ModelExchange modelIdentifier="motor"/>
+  <ModelVariables>
+    <Float64 name="time" valueReference="0" causality="independent" variability="continuous"/>
+    <Float64 name="V" valueReference="1" causality="input" start="0"/>
+    <Float64 name="w" valueReference="2" causality="output"/>
+  </ModelVariables>
+  <ModelStructure><Output valueReference="2"/></ModelStructure>
+</fmiModelDescription>"""
+
+
 def _zip(path, files: dict[str, bytes]):
     with zipfile.ZipFile(path, "w") as archive:
         for name, data in files.items():
@@ -184,6 +197,7 @@ def _zip(path, files: dict[str, bytes]):
         ({"fmu": "empty.fmu"}, "fmu", "has no modelDescription.xml"),
         ({"fmu": "nobinary.fmu"}, "fmu", "has no binary for this platform"),
         ({"fmu": "badxml.fmu"}, "fmu", "modelDescription.xml:"),
+        ({"fmu": "fmi3.fmu"}, "fmu", "'fmi3.fmu' is FMI 3.0; an FMU module must be FMI 2.0"),
         ({"inputs": {"V": "F"}}, "inputs.V", "'F' is not an input of the FMU"),
         ({"outputs": {"w": "s"}}, "outputs.w", "'s' is not an output of the FMU"),
         ({"outputs": {"w": "V"}}, "outputs.w", "'V' is not an output of the FMU (it is input"),
@@ -202,6 +216,7 @@ def test_a_bad_fmu_is_one_line_naming_module_and_key(fmu_path, tmp_path, change,
     _zip(tmp_path / "empty.fmu", {"readme.txt": b"x"})
     _zip(tmp_path / "nobinary.fmu", {"modelDescription.xml": SOURCES[1].read_bytes()})
     _zip(tmp_path / "badxml.fmu", {"modelDescription.xml": b"<fmiModelDescription"})
+    _zip(tmp_path / "fmi3.fmu", {"modelDescription.xml": FMI3_DESCRIPTION})
     shutil.copy(fmu_path, tmp_path / "motor.fmu")
     mapping = _fmu_table("motor.fmu", **change)
     with pytest.raises(TwinTableError) as caught:
