@@ -1,34 +1,43 @@
 """The monitor on the benchmark families (tanks, motor, thermal) with an effect switched on halfway.
 
-Usage: python benchmarks/monitor_families.py [N_SEEDS] [N_SAMPLES] [--diagnose N]
-(default 5 seeds, 4000 samples; prints one JSON object; docs/monitor.md §Checked on the families)
+Usage: python benchmarks/monitor_families.py [N_SEEDS] [N_SAMPLES] [--diagnose N] [--cache DIR]
+(default 14 seeds, 4000 samples; prints one JSON object; docs/monitor.md §Checked on the families)
 
 Per family and seed (the ``bare`` arm: only the input and the last output recorded, the
 modules one unit, the twin file of the case):
 
 - ``dtwin regimes`` (:func:`dtwin.monitor.batch_regimes.regimes_of`, defaults) is fitted on the
   first half of the ``none`` case: a clean recording, so the model holds nominal regimes only
-  and any effect is one it never saw (the ``unknown`` regime);
+  and any effect is one it never saw (the ``unknown`` regime, the novelty test);
 - **clean**: the monitor over the whole ``none`` case (its second half unseen by the fit): an
-  event there is a false alarm;
+  event there is a false alarm (rate per hour of the clean samples monitored, Poisson 95 %
+  upper bound);
 - **switch**: for every effect of the family, the monitor over the ``none`` case's first half
-  followed by the effect case's second half (same seed: same asset, input and noise). The
-  delay is the first ``left_nominal`` event's change sample minus the switch. For an effect at
-  an output the splice is exactly the effect switching on; for one in the dynamics the effect
-  case's states have run with the effect from the start, so the splice also jumps the states.
-  An effect that acts only beyond a level (a limit, a saturation) shows when the signal gets
-  there: the delay counts from its **onset**, the first sample after the switch at which it
-  moves an output by a noise standard deviation (the two recordings share their noise); an
-  effect that never does is not counted.
+  followed by the effect case's second half (same seed: same asset, input and noise). For an
+  effect at an output the splice is exactly the effect switching on; for one in the dynamics
+  the effect case's states have run with the effect from the start, so the splice also jumps
+  the states. An effect that acts only beyond a level (a limit, a saturation) shows when the
+  signal gets there: the delay counts from its **onset**, the first sample after the switch at
+  which it moves an output by a noise standard deviation (the two recordings share their
+  noise); an effect that never does is not counted. **Detected**: the first ``left_nominal``
+  event fired from 200 samples before the switch on is fired (its ``t``, after the hold) 0–200
+  samples after the onset.
 
-``--diagnose N``: for the first N seeds, ``dtwin diagnose`` on the 1000 samples since the
-detected change (what the monitor runs in the background), scored with the family's key.
+Rates come with their case counts and Wilson 95 % intervals, split by the effect's size in noise
+units (the case key's ``snr``: the effect's RMS over the noise standard deviation).
+
+``--diagnose N``: for the first N seeds, every detected case is diagnosed twice with
+``dtwin diagnose`` (a subprocess, as the monitor's background job): on the 1000 samples from the
+detected change (what the monitor runs) and on the 1000 samples from the switch (the window
+itself); each scored with the family's key. ``--cache DIR``: the generated cases are kept in DIR
+(``<family>_<seed>.pkl``: effect → recording, twin, key) and read back on a rerun.
 """
 
 from __future__ import annotations
 
 import io
 import json
+import pickle
 import subprocess
 import sys
 import tempfile
@@ -45,11 +54,14 @@ from dtwin.gapbench.families import FAMILY_EFFECTS, generate_family_case, score_
 from dtwin.monitor.batch_regimes import regimes_of
 from dtwin.monitor.live import Monitor, MonitorSettings
 from dtwin.monitor.model_file import monitor_model_from_mapping, regimes_file_mapping
+from dtwin.monitor.regime_model import poisson_upper
+from dtwin.proportions import wilson_interval
 
 PY = sys.executable
 OUTPUT_EFFECTS = ("output_bias_drift", "output_quantization", "output_scale_error",
                   "output_delay", "output_saturation")  # fmt: skip
 WINDOW = 200
+SNR_BANDS = ((0.0, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, float("inf")))
 
 
 def _events(model, table, frame: pd.DataFrame) -> list[dict]:
@@ -87,8 +99,31 @@ def _onset(none, case, half: int) -> int | None:
     return None
 
 
-def _family_seed(family: str, seed: int, n: int, diagnose: bool) -> dict:
-    none = generate_family_case(f"{family}_bare_none", seed, n_samples=n)
+class _Case:
+    """A generated case (recording, twin, key), as :func:`generate_family_case` returns it."""
+
+    def __init__(self, recording, twin, key):
+        self.recording, self.twin, self.key = recording, twin, key
+
+
+def _cases(family: str, seed: int, n: int, cache: Path | None) -> dict[str, _Case]:
+    path = None if cache is None else cache / f"{family}_{seed}.pkl"
+    if path is not None and path.exists():
+        return {k: _Case(*v) for k, v in pickle.loads(path.read_bytes()).items()}
+    cases = {}
+    for effect in FAMILY_EFFECTS[family]:
+        case = generate_family_case(f"{family}_bare_{effect}", seed, n_samples=n)
+        cases[effect] = _Case(case.recording, case.twin, case.key)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        plain = {k: (c.recording, c.twin, c.key) for k, c in cases.items()}
+        path.write_bytes(pickle.dumps(plain))
+    return cases
+
+
+def _family_seed(family: str, seed: int, n: int, diagnose: bool, cache: Path | None) -> dict:
+    cases = _cases(family, seed, n, cache)
+    none = cases["none"]
     table = table_file(none.twin)
     half = n // 2
     fitted = none.recording.iloc[:half]
@@ -101,49 +136,89 @@ def _family_seed(family: str, seed: int, n: int, diagnose: bool) -> dict:
     dt = none.key["dt"]
     clean = [e for e in _events(model, table, none.recording) if e["since"] / dt >= result.settling]
     out = {"settling": result.settling, "k": result.regime_fit.model.n_states,
-           "fit_cpu_s": round(fit_cpu, 2), "clean_events": len(clean), "effects": {}}  # fmt: skip
+           "ar_order": list(result.regime_fit.model.novelty.order),
+           "fit_cpu_s": round(fit_cpu, 2), "clean_events": len(clean),
+           "clean_hours": (len(none.recording) - result.settling) * dt / 3600.0,
+           "effects": {}}  # fmt: skip
     for effect in FAMILY_EFFECTS[family][1:]:
-        case = generate_family_case(f"{family}_bare_{effect}", seed, n_samples=n)
+        case = cases[effect]
         stream = pd.concat([none.recording.iloc[:half], case.recording.iloc[half:]])
         onset = _onset(none, case, half)
-        events = [e for e in _events(model, table, stream) if e["since"] / dt >= half - WINDOW]
+        events = [e for e in _events(model, table, stream) if e["t"] / dt >= half - WINDOW]
         delay = None
         if events and onset is not None:
-            delay = round(events[0]["since"] / dt) - onset
+            delay = round(events[0]["t"] / dt) - onset
         entry = {"onset": None if onset is None else onset - half, "delay": delay,
                  "regime": events[0]["regime"] if events else None,
                  "snr": round(float(case.key["snr"]), 2)}  # fmt: skip
-        if diagnose and events:
-            entry["diagnosis"] = _diagnose(stream, none.twin, half + max(delay, 0), case.key)
+        if diagnose and delay is not None and 0 <= delay <= WINDOW:
+            since = round(events[0]["since"] / dt)
+            entry["diagnosis"] = _diagnose(stream, none.twin, since, case.key)
+            entry["diagnosis_at_switch"] = _diagnose(stream, none.twin, half, case.key)
         out["effects"][effect] = entry
     return out
 
 
+def _rate(flags: list[bool]) -> dict:
+    k, n = int(sum(flags)), len(flags)
+    low, high = wilson_interval(k, n) if n else (float("nan"), float("nan"))
+    return {"k": k, "n": n, "rate": k / n if n else None,
+            "wilson95": [round(low, 3), round(high, 3)]}  # fmt: skip
+
+
+def _detected(entry: dict) -> bool:
+    return entry["delay"] is not None and 0 <= entry["delay"] <= WINDOW
+
+
+def _block(runs: list[dict]) -> dict:
+    """Clean, detection (by SNR band and kind), delays and diagnoses over some seeds' runs."""
+    entries = [(effect, e) for run in runs for effect, e in run["effects"].items()
+               if e["onset"] is not None]  # fmt: skip
+    events = sum(run["clean_events"] for run in runs)
+    hours = sum(run["clean_hours"] for run in runs)
+    row = {
+        "settling": sorted({run["settling"] for run in runs}),
+        "clean_without_event": _rate([run["clean_events"] == 0 for run in runs]),
+        "clean_events_per_hour": {"events": events, "hours": round(hours, 3),
+                                  "per_hour": events / hours if hours else None,
+                                  "upper95_per_hour": poisson_upper(events, hours)},
+        "detected": _rate([_detected(e) for _, e in entries]),
+        "not_counted_no_onset": sum(e["onset"] is None for run in runs
+                                    for e in run["effects"].values()),
+    }  # fmt: skip
+    for low, high in SNR_BANDS:
+        band = [_detected(e) for _, e in entries if low <= e["snr"] < high]
+        row[f"detected_snr_{low:g}_{high:g}"] = _rate(band)
+    for kind in ("output", "dynamics"):
+        row[f"detected_{kind}"] = _rate(
+            [
+                _detected(e)
+                for effect, e in entries
+                if (effect in OUTPUT_EFFECTS) == (kind == "output")
+            ]
+        )
+    found = [e["delay"] for _, e in entries if _detected(e)]
+    row["median_delay"] = float(np.median(found)) if found else None
+    diagnosed = [e for _, e in entries if "diagnosis" in e]
+    for key in ("diagnosis", "diagnosis_at_switch"):
+        row[key] = {
+            "named": _rate([bool(e[key].get("named")) for e in diagnosed]),
+            "located": _rate([bool(e[key].get("located")) for e in diagnosed]),
+        }
+    return row
+
+
 def _summary(results: dict) -> dict:
-    summary = {}
-    for family, seeds in results.items():
-        delays = {"output": [], "dynamics": []}
-        for run in seeds.values():
-            for effect, entry in run["effects"].items():
-                kind = "output" if effect in OUTPUT_EFFECTS else "dynamics"
-                if entry["onset"] is not None:  # an effect that never shows is not counted
-                    delays[kind].append(entry["delay"])
-        row = {"settling": sorted({run["settling"] for run in seeds.values()}),
-               "clean_without_event": sum(run["clean_events"] == 0 for run in seeds.values()),
-               "clean_runs": len(seeds)}  # fmt: skip
-        for kind, values in delays.items():
-            found = [d for d in values if d is not None and 0 <= d <= WINDOW]
-            row[kind] = {"n": len(values), "within_200": len(found),
-                         "median_delay": float(np.median(found)) if found else None}  # fmt: skip
-        summary[family] = row
+    summary = {family: _block(list(seeds.values())) for family, seeds in results.items()}
+    summary["all"] = _block([run for seeds in results.values() for run in seeds.values()])
     return summary
 
 
-def main(n_seeds: int, n_samples: int, n_diagnosed: int) -> dict:
+def main(n_seeds: int, n_samples: int, n_diagnosed: int, cache: Path | None = None) -> dict:
     results = {family: {} for family in FAMILY_EFFECTS}
     for family in FAMILY_EFFECTS:
         for seed in range(n_seeds):
-            run = _family_seed(family, seed, n_samples, seed < n_diagnosed)
+            run = _family_seed(family, seed, n_samples, seed < n_diagnosed, cache)
             results[family][seed] = run
             print(family, seed, json.dumps(run), file=sys.stderr, flush=True)
     return {"summary": _summary(results), "runs": results}
@@ -151,10 +226,13 @@ def main(n_seeds: int, n_samples: int, n_diagnosed: int) -> dict:
 
 if __name__ == "__main__":
     args = sys.argv[1:]
-    n_diagnosed = 0
+    n_diagnosed, folder = 0, None
     if "--diagnose" in args:
         n_diagnosed = int(args[args.index("--diagnose") + 1])
         del args[args.index("--diagnose") : args.index("--diagnose") + 2]
-    seeds = int(args[0]) if args else 5
+    if "--cache" in args:
+        folder = Path(args[args.index("--cache") + 1])
+        del args[args.index("--cache") : args.index("--cache") + 2]
+    seeds = int(args[0]) if args else 14
     samples = int(args[1]) if len(args) > 1 else 4000
-    print(json.dumps(main(seeds, samples, n_diagnosed)))
+    print(json.dumps(main(seeds, samples, n_diagnosed, folder)))

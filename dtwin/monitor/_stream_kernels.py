@@ -15,7 +15,7 @@ import numpy as np
 
 from dtwin._jit import njit
 
-__all__ = ["filter_rows", "warm_up"]
+__all__ = ["filter_rows", "cusum_rows", "warm_up"]
 
 
 @njit(cache=True)
@@ -104,7 +104,51 @@ def filter_rows(z, means, precision, log_norm, transmat, alpha, fresh):  # pragm
     return out
 
 
+@njit(cache=True)
+def cusum_rows(e, stats, shift, ratio, threshold):  # pragma: no cover - compiled
+    """Return the novelty statistic of each row of innovations, continuing ``stats``.
+
+    Parameters
+    ----------
+    e : ndarray, shape (n, C)
+        Standardised innovations (:mod:`dtwin.monitor.novelty`); NaN: the channel's statistics
+        stay as they were.
+    stats : ndarray, shape (C, 3)
+        Per channel the CUSUMs of a mean shift up, down and a variance increase (nats); left at
+        the last row's.
+    shift, ratio : float
+        The mean shift (innovation sds) and the variance ratio the CUSUMs are designed for.
+    threshold : float
+        ``h``, nats; each statistic is capped at ``2h``.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        The largest statistic over channels and tests after each row, in units of ``h``.
+    """
+    n, c = e.shape
+    out = np.empty(n)
+    half_shift2 = 0.5 * shift * shift
+    log_term = 0.5 * math.log(ratio)
+    square_term = 0.5 * (1.0 - 1.0 / ratio)
+    cap = 2.0 * threshold
+    for t in range(n):
+        peak = 0.0
+        for j in range(c):
+            x = e[t, j]
+            if not np.isnan(x):
+                gains = (shift * x - half_shift2, -shift * x - half_shift2,
+                         square_term * x * x - log_term)  # fmt: skip
+                for i in range(3):
+                    stats[j, i] = min(max(0.0, stats[j, i] + gains[i]), cap)
+            for i in range(3):
+                peak = max(peak, stats[j, i])
+        out[t] = peak / threshold
+    return out
+
+
 def warm_up() -> None:
-    """Compile the filter into numba's on-disk cache."""
+    """Compile the filter and the CUSUMs into numba's on-disk cache."""
     filter_rows(np.zeros((2, 1)), np.zeros((2, 1)), np.ones((2, 1)), np.zeros(2),
                 np.full((2, 2), 0.5), np.full(2, 0.5), True)  # fmt: skip
+    cusum_rows(np.zeros((2, 1)), np.zeros((1, 3)), 1.0, 4.0, 10.0)

@@ -221,8 +221,8 @@ def false_alarms(
     }
 
 
-def _tracked(model_fit, actions, residuals, simulated) -> TrackedRows:
-    return RegimeTracker(model_fit.model, actions).feed(residuals, simulated)
+def _tracked(model_fit, actions, residuals, simulated, gap_hold: int) -> TrackedRows:
+    return RegimeTracker(model_fit.model, actions, gap_hold).feed(residuals, simulated)
 
 
 def regimes_of(
@@ -274,7 +274,9 @@ def regimes_of(
         np.arange(s, recording.n_samples) < rows[1]
     )
     model_fit = fit_regime_model(residuals, in_stretch, settings)
-    tracked = _tracked(model_fit, actions, causal.residuals[s:, kept], causal.simulated[s:, kept])
+    tracked = _tracked(
+        model_fit, actions, causal.residuals[s:, kept], causal.simulated[s:, kept], s
+    )
     model = model_fit.model
     smoothed = shaped_bias(
         model_fit.fit.smoothed @ (model.state_means / model.scale), kappa=model.kappa,

@@ -5,8 +5,10 @@ Specification: docs/monitor.md §Residuals. The diagnoser's residuals
 itself, which needs the window's future. Here each unit of the twin table
 (:func:`dtwin.twin.simulate.units_of`) is **frozen** (:func:`freeze_units`: its params fitted
 once, on the nominal stretch, as the diagnoser fits them) and then **continued**: from its state
-at the previous sample to the next, a state that is a recorded output reset to its recorded
-value at every window start (every :attr:`FrozenUnit.window` samples), the others carried on.
+at the previous sample to the next, a state that is a recorded output moved by its mean
+residual over the last :func:`reset_span` samples at every window start (every
+:attr:`FrozenUnit.window` samples; a reset to the reading itself would put the reading's noise
+into the state for a time constant), the others carried on.
 At a start (the first sample, or after a jump in time) the states are unknown: the first
 :attr:`CausalTwin.settling` samples are the **settling period**, over which each unit's initial
 states are fitted by least squares (params held, as the diagnoser fits a window's states); no
@@ -38,6 +40,7 @@ __all__ = [
     "frozen_units_from_mapping",
     "channel_names",
     "settling_samples",
+    "reset_span",
     "SETTLE_SHARE",
     "MIN_SETTLE",
 ]
@@ -63,6 +66,21 @@ def settling_samples(window: int) -> int:
     (104, 20)
     """
     return max(MIN_SETTLE, math.ceil(SETTLE_SHARE * window))
+
+
+def reset_span(window: int) -> int:
+    """Return the samples whose mean residual moves a recorded state at a window cut.
+
+    One time constant of the unit's slowest mode (a tenth of its window), at least 1: the
+    reading's noise enters the state divided by about the square root of it, while a drift
+    slower than a time constant is followed.
+
+    Examples
+    --------
+    >>> reset_span(335), reset_span(5)
+    (33, 1)
+    """
+    return max(1, window // 10)
 
 
 def channel_names(units: Sequence[FrozenUnit]) -> list[str]:
@@ -310,6 +328,8 @@ class _UnitRunner:
         self.reset_states = np.array([p[0] for p in pairs], dtype=np.int64)
         self.reset_outputs = np.array([p[1] for p in pairs], dtype=np.int64)
         self.state = np.zeros(len(spec.states))
+        self.span = reset_span(unit.window)
+        self.recent = np.zeros((0, len(pairs)))
 
     def start_state(self, rows: np.ndarray) -> None:
         """Fit the initial states on the first ``settle`` rows (params held)."""
@@ -319,6 +339,7 @@ class _UnitRunner:
         if self.unit.settle > 1 and len(x):
             x = self._fitted_start(u[: self.unit.settle], y[: self.unit.settle], x)
         self.state = x
+        self.recent = np.zeros((0, len(self.reset_states)))
 
     def _fitted_start(self, u: np.ndarray, y: np.ndarray, guess: np.ndarray) -> np.ndarray:
         from scipy.optimize import least_squares
@@ -354,8 +375,9 @@ class _UnitRunner:
 
         Rows are run in windows cut where the global index ``k0 + r`` is a multiple of the
         unit's window (never at row 0: its state is given); at a cut the states that are
-        recorded outputs are reset to their recorded values (when finite), and the cut's output
-        is the reset state's. A unit without such states runs in one piece.
+        recorded outputs are moved by their outputs' mean residual over the last
+        :func:`reset_span` samples (finite ones), and the cut's output is the moved state's. A
+        unit without such states runs in one piece.
         """
         u, y = rows[:, self.in_cols], rows[:, self.out_cols]
         n, window = len(rows), self.unit.window
@@ -369,16 +391,21 @@ class _UnitRunner:
             outputs, states = self._simulate(u[a : b + 1], t0 + a * self.dt)
             out[a : b + 1] = outputs
             self.state = states[-1].copy()
+            if len(self.reset_states):
+                gaps = y[a + 1 : b + 1, self.reset_outputs] - outputs[1:, self.reset_outputs]
+                self.recent = np.vstack([self.recent, gaps])[-self.span :]
             if b in cuts:
-                self._reset(y[b])
+                self._reset()
                 if b == n - 1:
                     out[b] = self._simulate(u[b : b + 1], t0 + b * self.dt)[0][0]
         return out
 
-    def _reset(self, recorded: np.ndarray) -> None:
-        values = recorded[self.reset_outputs]
-        keep = np.isfinite(values)
-        self.state[self.reset_states[keep]] = values[keep]
+    def _reset(self) -> None:
+        finite = np.isfinite(self.recent)
+        counts = finite.sum(axis=0)
+        keep = counts > 0
+        shift = np.where(finite, self.recent, 0.0).sum(axis=0)[keep] / counts[keep]
+        self.state[self.reset_states[keep]] += shift
 
 
 class CausalTwin:

@@ -10,7 +10,9 @@ writes to standard output:
   period** (samples and seconds);
 - one line per sample (or per ``every`` samples): ``t``, ``settling: true`` inside a settling
   period, else the filtered posteriors ``p`` (``S1 … SK, unknown``), the most probable
-  ``regime``, ``nominal``, the ``corrected`` twin outputs and the ``action``;
+  ``regime`` (``unknown`` while the novelty test alarms), ``nominal``, the ``novelty``
+  statistic (:mod:`dtwin.monitor.novelty`, alarm at 1), the ``corrected`` twin outputs and the
+  ``action``;
 - ``left_nominal`` / ``back_to_nominal`` events when the nominal regimes lose / regain half the
   probability for ``hold`` samples (never inside a settling period); a ``left_nominal`` starts
   a background ``dtwin diagnose`` (:class:`~dtwin.monitor.background.DiagnosisJobs`) on the
@@ -100,7 +102,7 @@ class Monitor:
                  err: IO[str], jobs: DiagnosisJobs | None = None, header=None):  # fmt: skip
         self.model, self.settings, self.out, self.err, self.jobs = model, settings, out, err, jobs
         self.twin = CausalTwin(model.units, table, model.dt, model.model.channels)
-        self.tracker = RegimeTracker(model.model, model.actions)
+        self.tracker = RegimeTracker(model.model, model.actions, gap_hold=self.twin.settling)
         self.hold = HoldRule(settings.hold or model.hold)
         self.parser = RowParser(self.twin.columns, model.dt, settings.max_gap, header, model.ranges)
         self.modelled = [self.twin.channels.index(c) for c in model.model.channels]
@@ -128,8 +130,8 @@ class Monitor:
         p = ", ".join(["%.12g"] * k)
         corrected = ", ".join(["%.12g"] * c)
         action = ', "action": "%s"' if self.names is not None else ""
-        return ('{"t": %r, "regime": "%s", "nominal": %s, "p": [' + p + '], "corrected": ['
-                + corrected + "]" + action + "}\n")  # fmt: skip
+        return ('{"t": %r, "regime": "%s", "nominal": %s, "novelty": %.4g, "p": [' + p
+                + '], "corrected": [' + corrected + "]" + action + "}\n")  # fmt: skip
 
     # --- writing ---------------------------------------------------------------------------
 
@@ -293,18 +295,18 @@ class Monitor:
             return [self._json_line(times[i], tracked, i) for i in picked]
         labels = [self.labels[r] for r in tracked.regime[picked].tolist()]
         flags = ["true" if f else "false" for f in tracked.nominal[picked].tolist()]
-        rows = zip(
-            times[picked].tolist(), labels, flags, p.tolist(), corrected.tolist(), strict=True
-        )
+        rows = zip(times[picked].tolist(), labels, flags, tracked.novelty[picked].tolist(),
+                   p.tolist(), corrected.tolist(), strict=True)  # fmt: skip
         if self.names is None:
-            return [self.line % (t, lab, f, *pp, *cc) for t, lab, f, pp, cc in rows]
+            return [self.line % (t, lab, f, v, *pp, *cc) for t, lab, f, v, pp, cc in rows]
         actions = [self.names[a] for a in tracked.action[picked].tolist()]
-        return [self.line % (t, lab, f, *pp, *cc, act)
-                for (t, lab, f, pp, cc), act in zip(rows, actions, strict=True)]  # fmt: skip
+        return [self.line % (t, lab, f, v, *pp, *cc, act)
+                for (t, lab, f, v, pp, cc), act in zip(rows, actions, strict=True)]  # fmt: skip
 
     def _json_line(self, t: float, tracked, i: int) -> str:
         payload = {"t": float(t), "regime": self.labels[int(tracked.regime[i])],
-                   "nominal": bool(tracked.nominal[i]), "p": tracked.posteriors[i],
+                   "nominal": bool(tracked.nominal[i]),
+                   "novelty": round(float(tracked.novelty[i]), 4), "p": tracked.posteriors[i],
                    "corrected": tracked.corrected[i]}  # fmt: skip
         if self.names is not None:
             payload["action"] = self.names[int(tracked.action[i])]
@@ -324,9 +326,13 @@ class Monitor:
         }
         opens = -1
         if event.kind == "left":
-            posteriors = tracked.posteriors[event.fired - first].copy()
-            posteriors[self.model.model.nominal_mask] = -1.0
-            payload["regime"] = self.labels[int(np.argmax(posteriors))]
+            row = event.fired - first
+            regime = int(tracked.regime[row])  # unknown while the novelty test alarms
+            if self.model.model.nominal_mask[regime]:
+                posteriors = tracked.posteriors[row].copy()
+                posteriors[self.model.model.nominal_mask] = -1.0
+                regime = int(np.argmax(posteriors))
+            payload["regime"] = self.labels[regime]
             opens = event.change if self.jobs is not None else -1
         self._emit(payload)
         return opens

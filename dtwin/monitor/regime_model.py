@@ -22,7 +22,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -32,6 +32,13 @@ from dtwin._validation import DtwinValueError
 from dtwin.bias_correction import state_residual_means
 from dtwin.config_sections import EmSettings, HmmSettings
 from dtwin.hmm import HmmFit, ZScored, bic_by_k, fit_zscored_hmm, zscore
+from dtwin.monitor._stream_kernels import filter_rows
+from dtwin.monitor.novelty import (
+    NoveltyTest,
+    fit_novelty,
+    predicted_probabilities,
+    predictive_scores,
+)
 from dtwin.state_tables import state_labels
 
 __all__ = [
@@ -142,6 +149,8 @@ class RegimeModel:
         The unknown regime (:data:`UNKNOWN_SD`, :data:`UNKNOWN_HAZARD`, :data:`UNKNOWN_STAY`).
     kappa, ema_alpha, rate_max : float
         The correction's shaping (:class:`RegimeSettings`).
+    novelty : NoveltyTest or None
+        The novelty test on the innovations (:mod:`dtwin.monitor.novelty`); None: none.
     """
 
     channels: tuple[str, ...]
@@ -160,6 +169,7 @@ class RegimeModel:
     kappa: float = 0.8
     ema_alpha: float = 0.15
     rate_max: float = 0.5
+    novelty: NoveltyTest | None = None
 
     @property
     def n_states(self) -> int:
@@ -201,6 +211,7 @@ class RegimeModel:
         out["state_means"] = self.state_means.tolist()
         for key in ("unknown_sd", "hazard", "stay", "kappa", "ema_alpha", "rate_max"):
             out[key] = float(getattr(self, key))
+        out["novelty"] = None if self.novelty is None else self.novelty.to_mapping()
         return out
 
     @classmethod
@@ -220,7 +231,25 @@ class RegimeModel:
             raise DtwinValueError(f"regimes file: model is malformed ({error})") from error
         if len(nominal) != k or not any(nominal) or np.any(values["sds"] <= 0):
             raise DtwinValueError("regimes file: model.nominal or model.sds is not valid")
-        return cls(channels=channels, nominal=nominal, **values, **numbers)
+        novelty = raw.get("novelty")
+        if novelty is not None:
+            novelty = NoveltyTest.from_mapping(novelty, c)
+        return cls(channels=channels, nominal=nominal, novelty=novelty, **values, **numbers)
+
+    def standardised(self, z: np.ndarray) -> np.ndarray:
+        """Return z-scored rows of a sequence standardised by the nominal regimes' prediction.
+
+        The filter is run over ``z`` from its start (:func:`dtwin.monitor.novelty.
+        predictive_scores`); shape (n, C).
+        """
+        arrays = self.filter_arrays()
+        alpha = arrays.start.copy()
+        posteriors = filter_rows(np.ascontiguousarray(z), arrays.means, arrays.precision,
+                                 arrays.log_norm, arrays.transmat, alpha, True)  # fmt: skip
+        predicted = predicted_probabilities(posteriors, arrays.start, True, arrays.transmat)
+        return predictive_scores(
+            z, predicted[:, :-1], self.means, self.sds, np.asarray(self.nominal)
+        )
 
 
 @dataclass(frozen=True)
@@ -330,6 +359,9 @@ def fit_regime_model(
         ema_alpha=settings.ema_alpha,
         rate_max=settings.rate_max,
     )
+    x = model.standardised((residuals.to_numpy() - model.center) / model.scale)
+    x[~nominal_rows] = np.nan  # the whitening is fitted on the nominal stretch only
+    model = replace(model, novelty=fit_novelty(x))
     return RegimeFit(model, scaled, fit, bic, n_sweep)
 
 

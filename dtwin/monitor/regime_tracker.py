@@ -5,7 +5,10 @@ filter's last vector and the correction's last values, so a series fed in chunks
 gives the bits it gives in one call (``dtwin regimes`` feeds the whole recording, ``dtwin
 monitor`` what the stream holds). Per row: the filtered posteriors of the K fitted regimes and
 ``unknown`` (:func:`dtwin.monitor._stream_kernels.filter_rows`, paper Eq. (4)); the most
-probable regime; whether the nominal regimes hold at least half the probability; the
+probable regime; the novelty test (:mod:`dtwin.monitor.novelty`: CUSUMs on the residuals'
+innovations under the nominal regimes, its statistic in units of its threshold; while it is at
+or above 1 the sample is not nominal and its regime ``unknown`` unless a non-nominal regime is
+the most probable); whether the nominal regimes hold at least half the probability; the
 posterior-weighted bias ``b̂ = Σ_k γ_t(k) μ_k`` (Eq. (25); ``μ_unknown = 0``: no correction for a
 regime never seen), shaped in residual standard deviations by the DAG's own
 :func:`dtwin.bias_correction.shaped_bias` and added to the twin's outputs; and, with an
@@ -19,8 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from dtwin.bias_correction import shaped_bias
-from dtwin.monitor._stream_kernels import filter_rows
+from dtwin.monitor._stream_kernels import cusum_rows, filter_rows
 from dtwin.monitor.action_table import ActionTable
+from dtwin.monitor.novelty import predicted_probabilities, predictive_scores
 from dtwin.monitor.regime_model import RegimeModel
 
 __all__ = ["TrackedRows", "RegimeTracker", "HoldEvent", "HoldRule"]
@@ -37,7 +41,10 @@ class TrackedRows:
     regime : ndarray of int, shape (n,)
         The most probable of them.
     nominal : ndarray of bool, shape (n,)
-        The nominal regimes hold at least half the probability.
+        The nominal regimes hold at least half the probability and the novelty test does not
+        alarm.
+    novelty : ndarray, shape (n,)
+        The novelty statistic in units of its threshold (alarm at 1; zeros without a test).
     applied : ndarray, shape (n, C)
         The shaped bias added to the twin's outputs, channel units.
     corrected : ndarray, shape (n, C)
@@ -49,6 +56,7 @@ class TrackedRows:
     posteriors: np.ndarray
     regime: np.ndarray
     nominal: np.ndarray
+    novelty: np.ndarray
     applied: np.ndarray
     corrected: np.ndarray
     action: np.ndarray | None
@@ -61,10 +69,14 @@ class RegimeTracker:
     ----------
     model : RegimeModel
     actions : ActionTable, optional
+    gap_hold : int
+        Rows after a missing row (a bridged gap: the twin ran on guessed inputs) over which the
+        novelty test is held (its statistics kept as they were); the twin's settling period.
     """
 
-    def __init__(self, model: RegimeModel, actions: ActionTable | None = None):
+    def __init__(self, model: RegimeModel, actions: ActionTable | None = None, gap_hold: int = 0):
         self.model = model
+        self.gap_hold = int(gap_hold)
         self.arrays = model.filter_arrays()
         self.mask = model.nominal_mask
         self.bias_z = np.vstack([model.state_means / model.scale, np.zeros(len(model.scale))])
@@ -77,6 +89,11 @@ class RegimeTracker:
         self.alpha = self.arrays.start.copy()
         self.fresh = True
         self.shaping: tuple[np.ndarray, np.ndarray] | None = None
+        c = len(self.model.scale)
+        test = self.model.novelty
+        self.history = np.full((0 if test is None else test.lags, c), np.nan)
+        self.cusums = np.zeros((c, 3))
+        self.since_gap = self.gap_hold  # rows since the last missing row
 
     def feed(self, residuals: np.ndarray, simulated: np.ndarray) -> TrackedRows:
         """Track the next rows.
@@ -97,11 +114,16 @@ class RegimeTracker:
         with np.errstate(invalid="ignore", over="ignore"):
             z = np.ascontiguousarray((residuals - model.center) / model.scale)
         z[~np.isfinite(z)] = np.nan  # a diverged twin's row: a prediction step
+        before, fresh = self.alpha.copy(), self.fresh
         posteriors = filter_rows(
             z, arrays.means, arrays.precision, arrays.log_norm, arrays.transmat, self.alpha,
             self.fresh,
         )  # fmt: skip
         self.fresh = False
+        novelty = self._novelty(z, posteriors, before, fresh)
+        novel = novelty >= 1.0
+        regime = np.argmax(posteriors, axis=1)
+        regime[novel & self.mask[regime]] = model.n_states  # unknown
         shaped = shaped_bias(
             posteriors @ self.bias_z, kappa=model.kappa, ema_alpha=model.ema_alpha,
             rate_max=model.rate_max, initial=self.shaping,
@@ -111,11 +133,35 @@ class RegimeTracker:
         action = None if self.actions is None else self.actions.decide(posteriors, self.stacked)
         return TrackedRows(
             posteriors=posteriors,
-            regime=np.argmax(posteriors, axis=1),
-            nominal=posteriors[:, self.mask].sum(axis=1) >= 0.5,
+            regime=regime,
+            nominal=(posteriors[:, self.mask].sum(axis=1) >= 0.5) & ~novel,
+            novelty=novelty,
             applied=applied,
             corrected=simulated + applied,
             action=action,
+        )
+
+    def _novelty(self, z, posteriors, before, fresh) -> np.ndarray:
+        """Return the novelty statistic of the rows (units of its threshold), continued."""
+        test, model = self.model.novelty, self.model
+        if test is None:
+            return np.zeros(len(z))
+        predicted = predicted_probabilities(posteriors, before, fresh, self.arrays.transmat)
+        x = predictive_scores(
+            z, predicted[:, :-1], model.means, model.sds, np.asarray(model.nominal)
+        )
+        innovations = test.innovations(x, self.history)
+        if self.gap_hold:
+            missing = np.isnan(z).any(axis=1)
+            index = np.arange(len(z))
+            last = np.maximum.accumulate(np.where(missing, index, -1 - self.since_gap))
+            since = index - last
+            innovations[since <= self.gap_hold] = np.nan
+            self.since_gap = int(since[-1]) if len(z) else self.since_gap
+        if test.lags:
+            self.history = np.vstack([self.history, x])[-test.lags :]
+        return cusum_rows(
+            np.ascontiguousarray(innovations), self.cusums, test.shift, test.ratio, test.threshold
         )
 
 

@@ -47,6 +47,7 @@ def posteriors_table(result: RegimesResult) -> pd.DataFrame:
     table = pd.DataFrame({"t": result.t, "settling": (np.arange(n) < s).astype(int)})
     table["regime"] = regime
     table["nominal"] = _padded(tracked.nominal.astype(float), n)
+    table["novelty"] = _padded(tracked.novelty, n)
     smoothed = _padded(result.regime_fit.fit.smoothed, n)
     for j, label in enumerate(labels[:-1]):
         table[f"smoothed_{label}"] = smoothed[:, j]

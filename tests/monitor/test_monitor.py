@@ -57,8 +57,9 @@ TWIN = {
 
 @cache
 def _asset(seed: int, effect: str | None = None, n: int = N) -> pd.DataFrame:
-    """The valve and tank; ``effect`` (``bias``: the level sensor reads 0.08 high; ``leak``: the
-    outflow coefficient 25 % larger) from sample ``SWITCH`` on."""
+    """The valve and tank; ``effect`` (``bias``: the level sensor reads 0.08 high; ``faint``:
+    0.01 high, the noise's sd; ``leak``: the outflow coefficient 25 % larger) from sample
+    ``SWITCH`` on."""
     rng = np.random.default_rng(seed)
     u = np.repeat(rng.uniform(0.4, 1.4, n // 40 + 1), 40)[:n]
     leak = 1.25 if effect == "leak" else 1.0
@@ -74,6 +75,8 @@ def _asset(seed: int, effect: str | None = None, n: int = N) -> pd.DataFrame:
     level = sol.y[1] + 0.01 * rng.standard_normal(n)
     if effect == "bias":
         level[SWITCH:] += 0.08
+    if effect == "faint":  # one noise standard deviation
+        level[SWITCH:] += 0.01
     return pd.DataFrame({"t": times, "u": u, "level": level})
 
 
@@ -172,6 +175,34 @@ def test_an_unseen_effect_moves_to_the_unknown_regime(clean):
     _, _, summary = _monitor(result, table, _lines(_asset(14)))
     assert summary["left_nominal"] == 0
     assert result.false_alarms["simulated_unknown"]["events"] == 0
+
+
+def test_a_faint_unseen_change_is_found_by_the_novelty_test_alone(clean):
+    """A level bias of one noise sd: no sample is outside what the fitted regime explains, so
+    the regime filter stays nominal; the CUSUMs on the innovations leave nominal."""
+    _, table, result = clean
+    test = result.regime_fit.model.novelty
+    assert test.order == (0,) and test.threshold == pytest.approx(np.log(3e6))
+    output, _, _ = _monitor(result, table, _lines(_asset(17, "faint")))
+    rows = [row for row in output if "p" in row]
+    left = [row for row in output if row.get("event") == "left_nominal"]
+    assert left and left[0]["regime"] == "unknown"
+    assert 0 <= left[0]["t"] / DT - SWITCH <= 200
+    fired = next(i for i, row in enumerate(rows) if row["t"] == left[0]["t"])
+    assert rows[fired]["novelty"] >= 1 and rows[fired]["p"][0] > 0.5  # the filter: nominal
+    assert max(row["novelty"] for row in rows if row["t"] / DT < SWITCH) < 1
+
+
+def test_a_monitor_attached_mid_run_settles_first_and_raises_no_event(clean):
+    """Started at sample 1000 of a running asset (its flow unknown): the first line declares
+    the settling period, whose samples carry no posterior, and no event comes in or after it."""
+    _, table, result = clean
+    lines = _lines(_asset(16))
+    output, _, summary = _monitor(result, table, [lines[0], *lines[1001:]])
+    settling = output[0]["settling"]["samples"]
+    assert settling == result.settling > 1
+    assert all(row == {"t": row["t"], "settling": True} for row in output[1 : settling + 1])
+    assert "p" in output[settling + 1] and summary["left_nominal"] == 0
 
 
 def test_hostile_rows_are_events_and_counted(clean):
@@ -285,7 +316,8 @@ def test_on_the_paper_asset_with_its_faults_the_monitor_scores_as_the_batch(conf
     result = regimes_of(recording, table, nominal=(0.0, 4.98), settings=RegimeSettings(4))
     labels = regime_labels(recording.t[result.settling :], schedule)
     output, _, _ = _monitor(result, table, _lines(faulted), chunks=[7, 300, 41])
-    live = np.argmax([row["p"] for row in output if "p" in row], axis=1)
+    names = output[0]["regimes"]  # the monitor's regime: unknown while the novelty test alarms
+    live = np.array([names.index(row["regime"]) for row in output if "p" in row])
     batch = hungarian_map(result.tracked.regime, labels)
     replay = hungarian_map(live, labels)
     assert np.mean(replay.predicted == labels) == np.mean(batch.predicted == labels) > 0.5
