@@ -23,7 +23,9 @@ accumulates the evidence instead:
    residuals are nominal again.
 
 A row with a missing value (or with one among its AR lags) leaves the statistics as they were.
-Arrays are time-first.
+The loops are compiled (:func:`dtwin.monitor._stream_kernels.standardise_rows`,
+:func:`~dtwin.monitor._stream_kernels.cusum_rows`); this module fits the whitening and holds
+the test's constants. Arrays are time-first.
 """
 
 from __future__ import annotations
@@ -44,8 +46,6 @@ __all__ = [
     "ARL_SAMPLES",
     "N_TESTS",
     "NoveltyTest",
-    "predicted_probabilities",
-    "predictive_scores",
     "fit_novelty",
 ]
 
@@ -129,89 +129,6 @@ class NoveltyTest:
             raise DtwinValueError("regimes file: model.novelty is not valid")
         return cls(coef, sigma, order, **numbers)
 
-    def innovations(self, x: np.ndarray, history: np.ndarray) -> np.ndarray:
-        """Return the standardised innovations of rows ``x`` after rows ``history``.
-
-        Parameters
-        ----------
-        x : ndarray, shape (n, C)
-            Standardised residual rows (:func:`predictive_scores`); NaN where missing.
-        history : ndarray, shape (lags, C)
-            The rows before ``x`` (NaN where unknown: at a start).
-
-        Returns
-        -------
-        ndarray, shape (n, C)
-            ``ε_t``; NaN where ``x_t`` or one of its lags is missing.
-        """
-        p = self.lags
-        joined = np.vstack([history[len(history) - p :], x]) if p else x
-        out = x - self.coef[:, 0]
-        for i in range(1, p + 1):
-            lagged = joined[p - i : p - i + len(x)]
-            out = out - self.coef[:, i] * lagged
-            out[np.isnan(lagged)] = np.nan  # a lag unknown: no innovation
-        return out / self.sigma
-
-
-def predicted_probabilities(
-    posteriors: np.ndarray, before: np.ndarray, fresh: bool, transmat: np.ndarray
-) -> np.ndarray:
-    """Return each row's predicted state probabilities from the filter's output.
-
-    Parameters
-    ----------
-    posteriors : ndarray, shape (n, S)
-        The filtered posteriors of the rows.
-    before : ndarray, shape (S,)
-        The filtered vector before row 0 (the initial distribution when ``fresh``).
-    fresh : bool
-        Row 0 starts a sequence: its prediction is ``before`` itself.
-    transmat : ndarray, shape (S, S)
-
-    Returns
-    -------
-    ndarray, shape (n, S)
-        ``P(S_t = k | e_1:t−1)``: the previous row's filtered vector times ``transmat``.
-    """
-    previous = np.vstack([before[None, :], posteriors[:-1]])
-    predicted = previous @ transmat
-    if fresh:
-        predicted[0] = before
-    return predicted
-
-
-def predictive_scores(
-    z: np.ndarray, predicted: np.ndarray, means: np.ndarray, sds: np.ndarray, nominal: np.ndarray
-) -> np.ndarray:
-    """Return z-scored residual rows standardised by the nominal regimes' predictive density.
-
-    Parameters
-    ----------
-    z : ndarray, shape (n, C)
-        z-scored residual rows.
-    predicted : ndarray, shape (n, K)
-        Each row's predicted probabilities of the K fitted regimes (the filter's previous
-        filtered vector times the transition matrix).
-    means, sds : ndarray, shape (K, C)
-        The regimes' emission means and standard deviations, z-units.
-    nominal : ndarray of bool, shape (K,)
-
-    Returns
-    -------
-    ndarray, shape (n, C)
-        ``(z − m) / s`` with ``m``, ``s²`` the mean and variance of the nominal regimes' mixture
-        weighted by their predicted probabilities (renormalised; equal weights when none is
-        predicted).
-    """
-    weights = predicted * nominal
-    total = weights.sum(axis=1, keepdims=True)
-    equal = nominal / nominal.sum()
-    weights = np.where(total > 0, weights / np.where(total > 0, total, 1.0), equal)
-    m = weights @ means
-    variance = weights @ (sds**2 + means**2) - m**2
-    return (z - m) / np.sqrt(np.maximum(variance, 1e-12))
-
 
 def _ar_fit(x: np.ndarray, p: int) -> tuple[np.ndarray, float, int]:
     """Least-squares AR(p) with intercept on the rows of ``x`` whose lags are known."""
@@ -231,8 +148,9 @@ def fit_novelty(x: np.ndarray) -> NoveltyTest:
     Parameters
     ----------
     x : ndarray, shape (T, C)
-        Standardised rows of the nominal stretch (:func:`predictive_scores`); NaN rows (outside
-        the stretch) are left out with the rows that lag on them.
+        Standardised rows of the nominal stretch (:meth:`dtwin.monitor.regime_model.
+        RegimeModel.standardised`); NaN rows (outside the stretch) are left out with the rows
+        that lag on them.
 
     Returns
     -------

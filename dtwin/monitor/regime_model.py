@@ -32,13 +32,8 @@ from dtwin._validation import DtwinValueError
 from dtwin.bias_correction import state_residual_means
 from dtwin.config_sections import EmSettings, HmmSettings
 from dtwin.hmm import HmmFit, ZScored, bic_by_k, fit_zscored_hmm, zscore
-from dtwin.monitor._stream_kernels import filter_rows
-from dtwin.monitor.novelty import (
-    NoveltyTest,
-    fit_novelty,
-    predicted_probabilities,
-    predictive_scores,
-)
+from dtwin.monitor._stream_kernels import filter_rows, standardise_rows
+from dtwin.monitor.novelty import NoveltyTest, fit_novelty
 from dtwin.state_tables import state_labels
 
 __all__ = [
@@ -239,17 +234,16 @@ class RegimeModel:
     def standardised(self, z: np.ndarray) -> np.ndarray:
         """Return z-scored rows of a sequence standardised by the nominal regimes' prediction.
 
-        The filter is run over ``z`` from its start (:func:`dtwin.monitor.novelty.
-        predictive_scores`); shape (n, C).
+        The filter is run over ``z`` (shape (n, C)) from its start, and each row standardised
+        by the nominal regimes' one-step predictive mean and sd
+        (:func:`dtwin.monitor._stream_kernels.standardise_rows`); shape (n, C).
         """
         arrays = self.filter_arrays()
-        alpha = arrays.start.copy()
-        posteriors = filter_rows(np.ascontiguousarray(z), arrays.means, arrays.precision,
-                                 arrays.log_norm, arrays.transmat, alpha, True)  # fmt: skip
-        predicted = predicted_probabilities(posteriors, arrays.start, True, arrays.transmat)
-        return predictive_scores(
-            z, predicted[:, :-1], self.means, self.sds, np.asarray(self.nominal)
-        )
+        z = np.ascontiguousarray(z, dtype=float)
+        posteriors = filter_rows(z, arrays.means, arrays.precision, arrays.log_norm,
+                                 arrays.transmat, arrays.start.copy(), True)  # fmt: skip
+        return standardise_rows(z, posteriors, arrays.start, True, arrays.transmat, self.means,
+                                self.sds**2, np.asarray(self.nominal))  # fmt: skip
 
 
 @dataclass(frozen=True)

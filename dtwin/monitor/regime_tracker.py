@@ -22,9 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from dtwin.bias_correction import shaped_bias
-from dtwin.monitor._stream_kernels import cusum_rows, filter_rows
+from dtwin.monitor._stream_kernels import cusum_rows, filter_rows, standardise_rows
 from dtwin.monitor.action_table import ActionTable
-from dtwin.monitor.novelty import predicted_probabilities, predictive_scores
 from dtwin.monitor.regime_model import RegimeModel
 
 __all__ = ["TrackedRows", "RegimeTracker", "HoldEvent", "HoldRule"]
@@ -79,6 +78,7 @@ class RegimeTracker:
         self.gap_hold = int(gap_hold)
         self.arrays = model.filter_arrays()
         self.mask = model.nominal_mask
+        self.variances = model.sds**2
         self.bias_z = np.vstack([model.state_means / model.scale, np.zeros(len(model.scale))])
         self.actions = actions
         self.stacked = None if actions is None else actions.stacked(model.labels, self.mask)
@@ -146,23 +146,20 @@ class RegimeTracker:
         test, model = self.model.novelty, self.model
         if test is None:
             return np.zeros(len(z))
-        predicted = predicted_probabilities(posteriors, before, fresh, self.arrays.transmat)
-        x = predictive_scores(
-            z, predicted[:, :-1], model.means, model.sds, np.asarray(model.nominal)
-        )
-        innovations = test.innovations(x, self.history)
-        if self.gap_hold:
-            missing = np.isnan(z).any(axis=1)
+        x = standardise_rows(z, posteriors, before, fresh, self.arrays.transmat, model.means,
+                             self.variances, self.mask[:-1])  # fmt: skip
+        held = np.zeros(len(z), dtype=bool)
+        missing = np.isnan(z).any(axis=1)
+        if self.gap_hold and (missing.any() or self.since_gap < self.gap_hold):
             index = np.arange(len(z))
             last = np.maximum.accumulate(np.where(missing, index, -1 - self.since_gap))
-            since = index - last
-            innovations[since <= self.gap_hold] = np.nan
-            self.since_gap = int(since[-1]) if len(z) else self.since_gap
-        if test.lags:
-            self.history = np.vstack([self.history, x])[-test.lags :]
-        return cusum_rows(
-            np.ascontiguousarray(innovations), self.cusums, test.shift, test.ratio, test.threshold
-        )
+            held = index - last <= self.gap_hold
+        if missing.any():
+            self.since_gap = len(z) - 1 - int(np.flatnonzero(missing)[-1])
+        else:
+            self.since_gap = min(self.since_gap + len(z), self.gap_hold)
+        return cusum_rows(x, self.history, test.coef, test.sigma, self.cusums, test.shift,
+                          test.ratio, test.threshold, held)  # fmt: skip
 
 
 @dataclass(frozen=True)
