@@ -197,7 +197,10 @@ def false_alarms(
     dict
         ``nominal_stretch``: events whose change lies on the stretch, its hours, the rate per
         hour and its 95 % upper bound; ``simulated_unknown``: the same for events into
-        ``unknown`` on :data:`SIMULATED_SAMPLES` rows drawn from the fitted regimes.
+        ``unknown`` on :data:`SIMULATED_SAMPLES` rows drawn from the fitted regimes;
+        ``novelty_bound``: the novelty test's threshold (nats) and its false alarms at most,
+        one per ``samples`` samples and per hour, on residuals that follow the model
+        (:mod:`dtwin.monitor.novelty`).
     """
     model = model_fit.model
     stretch_events = _count_events(tracked.nominal, hold, keep=lambda e: bool(in_stretch[e.change]))
@@ -214,11 +217,16 @@ def false_alarms(
         upper = poisson_upper(count, exposure)
         return {"events": count, "hours": exposure, "per_hour": rate, "upper95_per_hour": upper}
 
+    test = model.novelty
     return {
         "hold": hold,
         "nominal_stretch": entry(stretch_events, hours),
         f"simulated_{UNKNOWN}": entry(sim_events, sim_hours),
-    }
+        "novelty_bound": None if test is None else {
+            "threshold_nats": test.threshold, "samples": test.arl,
+            "per_hour": test.per_hour(dt),
+        },
+    }  # fmt: skip
 
 
 def _tracked(model_fit, actions, residuals, simulated, gap_hold: int) -> TrackedRows:

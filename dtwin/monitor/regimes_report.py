@@ -122,6 +122,13 @@ def render_markdown(result: RegimesResult, figure: str | None) -> str:
         f"95 %); {simulated['events']} into `unknown` on {simulated['hours']:.3g} h simulated "
         f"from the fitted regimes (≤ {simulated['upper95_per_hour']:.3g}/h at 95 %).",
     ]
+    bound = alarms.get("novelty_bound")
+    if bound is not None:
+        lines[-1] += (
+            f" The novelty test alarms at {bound['threshold_nats']:.3g} nats: at most once per "
+            f"{bound['samples']:.3g} samples ({bound['per_hour']:.3g}/h) on residuals that "
+            "follow the model."
+        )
     if figure:
         lines += ["", f"![regimes]({figure})"]
     return "\n".join(lines) + "\n"

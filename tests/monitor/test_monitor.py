@@ -183,6 +183,8 @@ def test_a_faint_unseen_change_is_found_by_the_novelty_test_alone(clean):
     _, table, result = clean
     test = result.regime_fit.model.novelty
     assert test.order == (0,) and test.threshold == pytest.approx(np.log(3e6))
+    bound = result.false_alarms["novelty_bound"]
+    assert bound["per_hour"] == pytest.approx(3600.0 / (1e6 * DT))
     output, _, _ = _monitor(result, table, _lines(_asset(17, "faint")))
     rows = [row for row in output if "p" in row]
     left = [row for row in output if row.get("event") == "left_nominal"]
