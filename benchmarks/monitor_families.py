@@ -20,8 +20,10 @@ modules one unit, the twin file of the case):
   signal gets there: the delay counts from its **onset**, the first sample after the switch at
   which it moves an output by a noise standard deviation (the two recordings share their
   noise); an effect that never does is not counted. **Detected**: the first ``left_nominal``
-  event fired from 200 samples before the switch on is fired (its ``t``, after the hold) 0–200
-  samples after the onset.
+  event fired from 200 samples before the switch on is fired (its ``t``, after the hold) at or
+  after the switch and at most 200 samples after the onset (an event before the switch is a
+  false alarm; one between the switch and the onset found the effect while it was still below
+  a noise sd). ``delay`` is the event's sample minus the onset's.
 
 Rates come with their case counts and Wilson 95 % intervals, split by the effect's size in noise
 units (the case key's ``snr``: the effect's RMS over the noise standard deviation).
@@ -151,7 +153,7 @@ def _family_seed(family: str, seed: int, n: int, diagnose: bool, cache: Path | N
         entry = {"onset": None if onset is None else onset - half, "delay": delay,
                  "regime": events[0]["regime"] if events else None,
                  "snr": round(float(case.key["snr"]), 2)}  # fmt: skip
-        if diagnose and delay is not None and 0 <= delay <= WINDOW:
+        if diagnose and _detected(entry):
             since = round(events[0]["since"] / dt)
             entry["diagnosis"] = _diagnose(stream, none.twin, since, case.key)
             entry["diagnosis_at_switch"] = _diagnose(stream, none.twin, half, case.key)
@@ -167,7 +169,8 @@ def _rate(flags: list[bool]) -> dict:
 
 
 def _detected(entry: dict) -> bool:
-    return entry["delay"] is not None and 0 <= entry["delay"] <= WINDOW
+    """The first event fired from the switch on and at most WINDOW samples after the onset."""
+    return entry["delay"] is not None and -entry["onset"] <= entry["delay"] <= WINDOW
 
 
 def _block(runs: list[dict]) -> dict:

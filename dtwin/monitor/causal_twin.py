@@ -387,24 +387,33 @@ class _UnitRunner:
         bounds = [0, *cuts] + ([n - 1] if not cuts or cuts[-1] != n - 1 else [])
         if n == 1:
             out[:] = self._simulate(u, t0)[0]
+        recorded = y[:, self.reset_outputs]
+        before = np.full_like(recorded, np.nan)  # the outputs before any move: residuals
         for a, b in itertools.pairwise(bounds):
             outputs, states = self._simulate(u[a : b + 1], t0 + a * self.dt)
             out[a : b + 1] = outputs
+            before[a + 1 : b + 1] = outputs[1:, self.reset_outputs]
             self.state = states[-1].copy()
-            if len(self.reset_states):
-                gaps = y[a + 1 : b + 1, self.reset_outputs] - outputs[1:, self.reset_outputs]
-                self.recent = np.vstack([self.recent, gaps])[-self.span :]
             if b in cuts:
-                self._reset()
+                self._move(recorded, before, b)
                 if b == n - 1:
                     out[b] = self._simulate(u[b : b + 1], t0 + b * self.dt)[0][0]
+        if len(self.reset_states):
+            gaps = recorded[1:] - before[1:]
+            self.recent = np.vstack([self.recent, gaps])[-self.span :]
         return out
 
-    def _reset(self) -> None:
-        finite = np.isfinite(self.recent)
+    def _move(self, recorded: np.ndarray, before: np.ndarray, b: int) -> None:
+        """Move the reset states by the mean residual of the ``span`` samples up to row ``b``."""
+        lo = max(1, b - self.span + 1)
+        gaps = recorded[lo : b + 1] - before[lo : b + 1]
+        older = self.span - len(gaps)
+        if older > 0 and len(self.recent):
+            gaps = np.vstack([self.recent[-older:], gaps])
+        finite = np.isfinite(gaps)
         counts = finite.sum(axis=0)
         keep = counts > 0
-        shift = np.where(finite, self.recent, 0.0).sum(axis=0)[keep] / counts[keep]
+        shift = np.where(finite, gaps, 0.0).sum(axis=0)[keep] / counts[keep]
         self.state[self.reset_states[keep]] += shift
 
 
