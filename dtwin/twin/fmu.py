@@ -306,6 +306,17 @@ _CS_FUNCTIONS = (
 )  # fmt: skip
 
 
+def _owned(array, width: int | None = None) -> np.ndarray:
+    """Return ``array`` as a writable C-ordered float64 array, shape ``(len(array), width)``.
+
+    The numba loops are compiled (and cached by ``make venv``) for writable arrays; a read-only
+    one (a pandas frame's ``to_numpy()`` under copy-on-write) would compile them again, for
+    about a minute. Copies only when needed.
+    """
+    out = np.require(array, dtype=np.float64, requirements=("C", "W"))
+    return out.reshape(len(out), -1 if width is None else width)
+
+
 def _pointers(dll, table) -> tuple:
     """Return the FMI functions as ctypes function pointers with plain C argument types."""
     out = []
@@ -478,7 +489,7 @@ class FmuModel:
         windows and where the FMU failed. ``substeps`` and ``limits`` are unused (the FMU
         steps itself, its states are closed).
         """
-        u = np.ascontiguousarray(inputs, dtype=np.float64).reshape(len(inputs), -1)
+        u = _owned(inputs)
         linear = np.ones(u.shape[1], dtype=np.bool_) if linear is None else np.asarray(linear)
         params = np.asarray(theta[: len(self.param_names)], dtype=float)
         x0 = np.asarray(x0, dtype=float).reshape(len(starts), -1)
@@ -517,10 +528,10 @@ class FmuModelExchange(FmuModel):
 
         ``limits`` (lo, hi) clamp the states after each step, as for an expression module.
         """
-        u = np.ascontiguousarray(inputs, dtype=np.float64).reshape(len(inputs), -1)
+        u = _owned(inputs)
         linear = np.ones(u.shape[1], dtype=np.bool_) if linear is None else np.asarray(linear)
         n_states = len(self.spec.states)
-        x0 = np.ascontiguousarray(x0, dtype=np.float64).reshape(len(starts), n_states)
+        x0 = _owned(np.reshape(x0, (len(starts), n_states)), n_states)
         if limits is None:
             limits = (np.full(n_states, -np.inf), np.full(n_states, np.inf))
         instance = _instance(self.info)

@@ -23,6 +23,7 @@ from dtwin.cli import main
 from dtwin.gap.recording import recording_with_columns
 from dtwin.gap.table_diagnose import diagnose_table
 from dtwin.gapbench.families import generate_family_case
+from dtwin.twin import _fmu_kernels
 from dtwin.twin.fmu import FmuModel, FmuModelExchange, model_for
 from dtwin.twin.simulate import UnitModel, units_of
 from dtwin.twin.table import TwinTableError, table_from_mapping
@@ -88,7 +89,7 @@ def test_the_fmu_simulates_as_the_expression_module(fmu_path, interface):
     expression = table_from_mapping(expression_twin(case))
     reference = UnitModel.from_spec(units_of(expression, ["V", "w"])[0])
     theta = list(expression.module(MODULE).params.values())
-    u = case.recording[["V"]].to_numpy()
+    u = np.array(case.recording[["V"]], dtype=float)  # writable: the loops are compiled for it
     spread = np.array([0.01, 1.0]) * case.recording["w"].std()  # i is about w/100 here
     rng = np.random.default_rng(0)
     starts = np.arange(0, len(u), 200)
@@ -106,6 +107,11 @@ def test_the_fmu_simulates_as_the_expression_module(fmu_path, interface):
     if interface == "model_exchange":
         point = (np.array([1.0, 20.0]), np.array([12.0]), theta)
         assert np.array_equal(model.derivatives(*point), reference.derivatives(*point))
+    loop = _fmu_kernels.me_windows if interface == "model_exchange" else _fmu_kernels.cs_window
+    compiled = len(loop.signatures)
+    u.setflags(write=False)  # as a pandas frame's to_numpy() under copy-on-write
+    again, _ = model.simulate(*args, substeps=8, linear=[True])
+    assert np.array_equal(again, y) and len(loop.signatures) == compiled
 
 
 @functools.cache
@@ -265,6 +271,4 @@ def test_an_fmu_joined_to_a_module_by_an_unrecorded_signal_is_refused(fmu_path):
 
 def test_the_fmu_loops_compile_for_stand_ins():
     """``make venv`` warms the numba cache with stand-in functions of the FMI signatures."""
-    from dtwin.twin import _fmu_kernels
-
     _fmu_kernels.warm_up()
