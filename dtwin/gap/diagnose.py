@@ -243,7 +243,7 @@ def _diagnose(recording, twin, calibrate, train_frac, settings, discretisation, 
         fit_candidates(work, split)
     for work in works.values():
         if (
-            work.calibrated
+            (work.calibrated or work.floor.process > 0.0)
             and work not in flagged
             and effects_for_module(work.name, include_mismatch=False)
         ):

@@ -67,6 +67,8 @@ __all__ = [
     "plant_horizon",
     "warmup_samples",
     "window_noise_gain",
+    "held_noise_autocovariance",
+    "window_error_covariance",
     "plant_bandwidth_hz",
     "plant_state_from_position",
     "simulate_module",
@@ -542,6 +544,88 @@ def window_noise_gain(
     ahead = a ** np.arange(1, scored.shape[0] + 1, dtype=float)  # (scored,)
     cross = (scored @ (solve @ to_last)) * ahead
     return float(1.0 + np.mean(within - 2.0 * cross))
+
+
+def held_noise_autocovariance(
+    lin: Mapping[str, float], dt: float, n_lags: int
+) -> np.ndarray | None:
+    """Return the position's autocovariance per unit acceleration noise held over each sample.
+
+    Parameters
+    ----------
+    lin : mapping
+        ``m, c, k`` of the plant.
+    dt : float
+        Sample period, s.
+    n_lags : int
+        Lags ``0 … n_lags−1`` returned.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_lags,), or None
+        ``(A^l·P)_xx`` (m² per (m/s²)²), with ``s[k+1] = A·s[k] + b·ξ[k]`` the zero-order hold
+        of ``ẍ = ξ − (c/m)·ẋ − (k/m)·x`` (:func:`~dtwin.exact_plant.hold_matrices`: the
+        continuous asset holds its acceleration noise over each sample) and ``P = A·P·Aᵀ +
+        b·bᵀ`` its stationary covariance; None for a plant without one (integrating or
+        unstable: no stationary variance).
+    """
+    from scipy.linalg import solve_discrete_lyapunov
+
+    m, c, k = float(lin["m"]), float(lin["c"]), float(lin["k"])
+    step = hold_matrices(c / m, k / m, dt, "zoh")
+    if not np.max(np.abs(np.linalg.eigvals(step.a))) < 1.0 - 1e-9:
+        return None
+    b = step.taps[0][:, None]
+    state = solve_discrete_lyapunov(step.a, b @ b.T)
+    out = np.empty(int(n_lags))
+    for lag in range(int(n_lags)):
+        out[lag] = state[0, 0]
+        state = step.a @ state
+    return out
+
+
+def window_error_covariance(
+    lin: Mapping[str, float],
+    dt: float,
+    hold: str,
+    horizon: int,
+    length: int,
+    autocovariance: np.ndarray,
+) -> np.ndarray:
+    """Return the covariance of a window's error on its scored samples from a stationary noise.
+
+    Parameters
+    ----------
+    lin : mapping
+        ``m, c, k`` of the plant.
+    dt : float
+        Sample period, s.
+    hold : str
+        The exact plant's hold.
+    horizon : int
+        The plant's window (sets the warm-up, :func:`warmup_samples`).
+    length : int
+        This window's length, samples (the last window of a recording may be longer).
+    autocovariance : array, shape (≥ length,)
+        The noise's autocovariance at lags ``0 … length−1`` (output units²).
+
+    Returns
+    -------
+    numpy.ndarray, shape (length − warm-up, length − warm-up)
+        ``G·T·Gᵀ`` with ``T`` the noise's Toeplitz covariance over the window and
+        ``G = [−Φ_s·Φ_w⁺, I]``: the error at a scored sample is the noise there less the free
+        response ``Φ_s`` of the initial state fitted to the warm-up's noise (``Φ_w⁺``), as over
+        the windows of :func:`simulate_module`. Its mean diagonal over ``autocovariance[0]`` is
+        :func:`window_noise_gain` for AR(1) noise.
+    """
+    from scipy.linalg import toeplitz
+
+    m, c, k = float(lin["m"]), float(lin["c"]), float(lin["k"])
+    warmup = warmup_samples(horizon)
+    basis = free_response_basis(hold_matrices(c / m, k / m, dt, hold), int(length))
+    carried = basis[warmup:] @ np.linalg.pinv(basis[:warmup])  # (scored, warmup)
+    spread = np.hstack([-carried, np.eye(int(length) - warmup)])
+    return spread @ toeplitz(np.asarray(autocovariance, dtype=float)[: int(length)]) @ spread.T
 
 
 def _ar1_toeplitz_product(values: np.ndarray, pole: float) -> np.ndarray:

@@ -35,6 +35,7 @@ twin's level is trusted to the ``noise_tolerance`` that the threshold includes.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +56,7 @@ __all__ = [
     "data_noise_floor",
     "spectral_noise_floor",
     "residual_noise_floor",
+    "process_noise_floor",
     "reconcile_noise_floor",
     "effective_samples",
     "gap_threshold",
@@ -82,6 +84,9 @@ class NoiseFloor:
     identified : bool, default True
         False for a data floor whose process noise could not be told from the model's own
         error (:func:`_plant_data_floor`); it then never overrules a twin's floor.
+    process : float, default 0
+        The part of ``rms`` that is process noise read from the data by
+        :func:`process_noise_floor` (a twin file without noise levels), output units.
     """
 
     rms: float
@@ -89,6 +94,7 @@ class NoiseFloor:
     acf: np.ndarray
     measurement: float = 0.0
     identified: bool = True
+    process: float = 0.0
 
 
 def robust_std(values: np.ndarray) -> float:
@@ -345,6 +351,31 @@ def _lag_products(values: np.ndarray, runs: list[tuple[int, int]], lag: int) -> 
     return total, count
 
 
+def _white(innovations: np.ndarray, significance: float) -> bool:
+    """Return whether centred innovations (NaN between runs) pass the Ljung–Box test of whiteness.
+
+    Lags 1–:data:`WHITENESS_LAGS` over the pairs inside runs, ``χ²`` of ``lags − 1`` degrees
+    of freedom (one fitted noise parameter besides the level), size ``significance``.
+    """
+    kept = np.isfinite(innovations)
+    n = int(np.count_nonzero(kept))
+    centred = innovations
+    variance = float(np.mean(centred[kept] ** 2))
+    if variance <= 0.0:
+        return False
+    inner = _runs(kept)
+    acf = [1.0]
+    for lag in range(1, WHITENESS_LAGS + 1):
+        total, count = _lag_products(centred, inner, lag)
+        if count == 0:
+            break
+        acf.append(total / (n * variance))
+    lags = len(acf) - 1
+    if lags < 2:
+        return False
+    return chi2.sf(ljung_box_statistic(np.asarray(acf), n)[-1], lags - 1) >= significance
+
+
 def residual_noise_floor(residual: np.ndarray, significance: float) -> NoiseFloor | None:
     """Return the AR(1) noise the whole residual is, or None when the residual is not such noise.
 
@@ -396,25 +427,131 @@ def residual_noise_floor(residual: np.ndarray, significance: float) -> NoiseFloo
         innovations[start + 1 : stop] = centred[start + 1 : stop] - pole * centred[start : stop - 1]
     kept = np.isfinite(innovations)
     innovations = np.where(kept, innovations - np.mean(innovations[kept]), np.nan)
-    n = int(np.count_nonzero(kept))
     variance = float(np.mean(innovations[kept] ** 2))
     if variance <= 0.0:
         return None
-    inner = _runs(kept)
-    acf = [1.0]
-    for lag in range(1, WHITENESS_LAGS + 1):
-        total, count = _lag_products(innovations, inner, lag)
-        if count == 0:
-            break
-        acf.append(total / (n * variance))
-    lags = len(acf) - 1
-    if lags < 2 or chi2.sf(ljung_box_statistic(np.asarray(acf), n)[-1], lags - 1) < significance:
+    if not _white(innovations, significance):
         return None
     sigma = math.sqrt(variance / (1.0 - pole * pole))
     if pole <= 0.0:
         return NoiseFloor(sigma, "data", _white_acf(), identified=False)
     n_lags = max(2, min(400, int(10 / (1.0 - pole))))
     return NoiseFloor(sigma, "data", pole ** np.arange(n_lags), identified=False)
+
+
+#: Ratios of process to measurement noise variance :func:`process_noise_floor` starts from,
+#: per unit of the process covariance's mean eigenvalue (a log grid, then a bounded search).
+PROCESS_RATIO_GRID = np.logspace(-4.0, 4.0, 33)
+
+
+def process_noise_floor(
+    groups: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
+    process_acf: np.ndarray,
+    pole: float,
+    significance: float,
+) -> NoiseFloor | None:
+    """Return the floor of process noise through the plant beside AR(1) measurement noise.
+
+    Parameters
+    ----------
+    groups : sequence of ``(errors, process, measurement)``
+        Windows of one length each: ``errors`` shape ``(n_windows, n_scored)``, the linear
+        twin's error on the windows' scored samples (output units); ``process`` and
+        ``measurement`` shape ``(n_scored, n_scored)``, the covariance of that error per unit
+        acceleration noise held over each sample and per unit-variance AR(1) measurement noise
+        of pole ``pole`` (:func:`~dtwin.gap.models.window_error_covariance`).
+    process_acf : array, shape (n_lags,)
+        The process noise's stationary autocorrelation in the position, lags 0, 1, ….
+    pole : float
+        The measurement noise's AR(1) pole (:func:`spectral_noise_floor`'s).
+    significance : float
+        Size of the whiteness test of the model's innovations.
+
+    Returns
+    -------
+    NoiseFloor or None
+        The windows' error taken as Gaussian with covariance ``σ_e²·(R_e + s·R_p)``: the
+        measurement noise's level ``σ_e²`` profiled out and the variance ratio ``s`` by
+        maximum likelihood (per window the generalised eigenvalues ``λ`` of ``R_p`` against
+        ``R_e``: ``−2 log L = N·ln mean(z²/(1 + s·λ)) + Σ ln(1 + s·λ)``). The floor is that
+        covariance's mean diagonal (the mean square the windows show under the model), its
+        ``measurement`` and ``process`` parts, its autocorrelation their variance-weighted mix,
+        ``identified`` False. None when the likelihood puts no process noise (``s = 0``), or
+        the innovations (each window's error through the inverse Cholesky factor of the fitted
+        covariance, in time order) are not white (:func:`_white`): the error then holds more
+        than the two noises, an effect's structured part among it.
+
+    Notes
+    -----
+    docs/gap.md §Noise floors. A twin file without noise levels leaves the plant's process
+    noise to the data; the band above the plant shows only the measurement noise, and the
+    process noise the plant passes near its resonance is what a clean recording's gap holds
+    beside it. A faint effect of the motion that passes for process noise raises this floor;
+    the nested test (docs/gap.md §Where), which tests each candidate's law and needs no noise
+    level, then judges it.
+    """
+    from scipy.linalg import cholesky, eigh, solve_triangular
+    from scipy.optimize import minimize_scalar
+
+    eigen, squares, n_total = [], [], 0
+    for errors, process, measurement in groups:
+        lower = cholesky(measurement, lower=True)
+        reduced = solve_triangular(
+            lower, solve_triangular(lower, process, lower=True).T, lower=True
+        )
+        values, vectors = eigh(reduced)
+        rotated = vectors.T @ solve_triangular(lower, np.atleast_2d(errors).T, lower=True)
+        eigen.append(np.repeat(np.maximum(values, 0.0)[:, None], rotated.shape[1], axis=1).ravel())
+        squares.append((rotated**2).ravel())
+        n_total += rotated.size
+    lam, z2 = np.concatenate(eigen), np.concatenate(squares)
+    scale = float(np.mean(lam))
+    if n_total == 0 or scale <= 0.0 or not np.all(np.isfinite(z2)):
+        return None
+
+    def deviance(ratio: float) -> float:
+        spread = 1.0 + ratio * lam
+        return n_total * math.log(float(np.mean(z2 / spread))) + float(np.sum(np.log(spread)))
+
+    grid = PROCESS_RATIO_GRID / scale
+    scores = [deviance(r) for r in grid]
+    best = int(np.argmin(scores))
+    low, high = grid[max(best - 1, 0)], grid[min(best + 1, len(grid) - 1)]
+    found = minimize_scalar(lambda t: deviance(math.exp(t)), bounds=(math.log(low), math.log(high)))
+    ratio = math.exp(found.x) if found.fun < scores[best] else float(grid[best])
+    if deviance(ratio) >= deviance(0.0):
+        return None
+    level = float(np.mean(z2 / (1.0 + ratio * lam)))
+    parts = [[], []]
+    runs = []
+    for errors, process, measurement in groups:
+        fitted = cholesky(level * (measurement + ratio * process), lower=True)
+        for error in np.atleast_2d(errors):
+            runs.append(solve_triangular(fitted, error, lower=True))
+            runs.append([np.nan])
+        weight = np.atleast_2d(errors).shape[0]
+        parts[0].append(weight * np.diag(measurement))
+        parts[1].append(weight * np.diag(process))
+    innovations = np.concatenate(runs)
+    kept = np.isfinite(innovations)
+    innovations[kept] -= np.mean(innovations[kept])
+    if not _white(innovations, significance):
+        return None
+    measurement_ms = level * float(np.sum([p.sum() for p in parts[0]])) / n_total
+    process_ms = level * ratio * float(np.sum([p.sum() for p in parts[1]])) / n_total
+    total = measurement_ms + process_ms
+    n_lags = len(process_acf)
+    acf = (
+        process_ms * np.asarray(process_acf) + measurement_ms * pole ** np.arange(n_lags)
+    ) / total
+    return NoiseFloor(
+        math.sqrt(total),
+        "data",
+        acf,
+        measurement=math.sqrt(measurement_ms),
+        identified=False,
+        process=math.sqrt(process_ms),
+    )
 
 
 def window_gain_pole(floor: NoiseFloor) -> float:

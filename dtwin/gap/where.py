@@ -32,11 +32,14 @@ from dtwin.gap.models import (
     LINEAR_PARAMS,
     MIN_HORIZON,
     ModuleData,
+    held_noise_autocovariance,
     plant_bandwidth_hz,
     plant_horizon,
     plant_state_from_position,
     plant_windows,
     simulate_module,
+    warmup_samples,
+    window_error_covariance,
     window_noise_gain,
 )
 from dtwin.gap.noise import (
@@ -44,6 +47,7 @@ from dtwin.gap.noise import (
     data_noise_floor,
     effective_samples,
     gap_threshold,
+    process_noise_floor,
     reconcile_noise_floor,
     residual_noise_floor,
     spectral_noise_floor,
@@ -271,9 +275,9 @@ def _in_band_bounds(lin: Mapping[str, float], typical: Mapping[str, float], tol:
 
 
 def _exact_plant_floor(
-    data: ModuleData, simulated, lin: dict, n_train: int, significance: float
+    data: ModuleData, simulated, lin: dict, n_train: int, significance: float, refit=None
 ) -> NoiseFloor:
-    """Return the exact plant's data floor: the spectral one, or the whole-band one if larger.
+    """Return the exact plant's data floor: the spectral one, or a whole-band one if larger.
 
     docs/gap.md §Noise floors: the spectral noise above the plant times the window's noise
     gain (over windows the initial state estimated from the warm-up samples carries part of the
@@ -281,7 +285,12 @@ def _exact_plant_floor(
     AR(1) pole unless it sits at the top of its grid, :func:`window_gain_pole`); and the linear
     twin's training error taken as AR(1) noise over the whole band when that model explains it
     (:func:`residual_noise_floor`, its innovations white at size ``significance``), which a
-    coloured noise with its power below the plant's resonance needs.
+    coloured noise with its power below the plant's resonance needs. ``refit``: ``(lin,
+    simulated)`` of the twin file's plant re-fitted freely on the training part (a twin file
+    with the plant's parameters but no noise levels); its training error is also taken as
+    process noise through that plant beside the measurement noise read above it, when that
+    model explains it (:func:`_process_floor`): a re-fit, so that a parameter mismatch does
+    not pass for process noise.
     """
     residual = (data.output - simulated)[:n_train]
     # the scored samples only: the windows' unscored warm-ups (a fifth of every window) read
@@ -294,6 +303,10 @@ def _exact_plant_floor(
     floor = replace(above, rms=above.rms * math.sqrt(gain))
     # the realised error of the windows carries their warm-ups' noise already: no gain
     whole = residual_noise_floor(residual, significance)
+    if refit is not None:
+        process = _process_floor(data, *refit, n_train, pole, significance)
+        if process is not None and (whole is None or process.rms > whole.rms):
+            whole = process
     if whole is not None and whole.rms > floor.rms:
         return whole
     # the noise read above the plant is measurement noise on the position, which a twin file
@@ -302,6 +315,47 @@ def _exact_plant_floor(
     # steep spectrum of a force's sign changes, window_gain_pole)
     estimated = len(above.acf) < 2 or pole > 0.0
     return replace(floor, measurement=floor.rms) if estimated else floor
+
+
+def _process_floor(data, lin, simulated, n_train: int, pole: float, significance: float):
+    """Return the windows' process and measurement noise floor, or None (docs/gap.md §Noise floors).
+
+    The windows inside the training part, grouped by length, with the covariances of their
+    scored errors per unit of each noise (:func:`~dtwin.gap.models.window_error_covariance`:
+    acceleration noise held over each sample through ``lin``'s plant, AR(1) noise of ``pole``),
+    go to :func:`~dtwin.gap.noise.process_noise_floor`; None for a plant without a stationary
+    variance.
+    """
+    windows = [
+        (a, b)
+        for a, b in plant_windows(len(data.output), data.horizon, data.restarts)
+        if b <= n_train
+    ]
+    if not windows:
+        return None
+    longest = max(b - a for a, b in windows)
+    autocovariance = held_noise_autocovariance(lin, data.dt, longest)
+    if autocovariance is None or autocovariance[0] <= 0.0:
+        return None
+    warmup = warmup_samples(data.horizon)
+    error = data.output - simulated
+    rows: dict[int, list[np.ndarray]] = {}
+    for a, b in windows:
+        rows.setdefault(b - a, []).append(error[a + warmup : b])
+    noise = pole ** np.arange(longest)
+    groups = [
+        (
+            np.array(errors),
+            window_error_covariance(
+                lin, data.dt, data.discretisation, data.horizon, n, autocovariance
+            ),
+            window_error_covariance(lin, data.dt, data.discretisation, data.horizon, n, noise),
+        )
+        for n, errors in rows.items()
+    ]
+    if not all(np.all(np.isfinite(errors)) for errors, _, _ in groups):
+        return None
+    return process_noise_floor(groups, autocovariance / autocovariance[0], pole, significance)
 
 
 def _exact_plant_window(data, nominal, n_train, n_held) -> tuple[int, dict | None, int | None]:
@@ -380,7 +434,15 @@ def analyse_module(name, rec, twin, t, split: Split, calibrate, settings, layout
     norm = float(np.std(data.output)) or 1.0
     sim_before = simulate_module(data, lin_base)
     if data.discretisation != EULER:
-        floor_data = _exact_plant_floor(data, sim_before, lin_base, n_train, settings.significance)
+        refit = None
+        if not calibrated and twin.noise is None:
+            # the scales of the final data (a linear fit reads no noise level)
+            scaled = replace(data, scales=_scales(data, n_train, 0.0, lin_base, sim_before))
+            lin = fit_candidate(scaled, None, lin_base, n_train=n_train).lin
+            refit = (lin, simulate_module(data, lin))
+        floor_data = _exact_plant_floor(
+            data, sim_before, lin_base, n_train, settings.significance, refit
+        )
     else:
         floor_data = data_noise_floor(name, data.inputs, data.output, sim_before, lin_base, rec.dt)
     floor_twin = (
