@@ -522,3 +522,18 @@ def test_the_exact_plants_floor_adds_the_positions_measurement_noise_to_the_twin
     plant = result.modules["M1"]
     assert plant.noise_floor > plant.noise_floor_twin * 1.2
     assert (result.module, result.effect) == (None, "none")
+
+
+@pytest.mark.parametrize("seed", [99003, 99033])
+def test_a_clean_plant_without_noise_levels_reads_its_process_noise_from_the_data(seed):
+    """Arm (h), no noise levels: the band above the plant shows only the position's noise, and
+    the process noise the plant passes near its resonance made these clean recordings read
+    ``unexplained`` and cubic stiffness in M1. The windows' error modelled as process noise
+    through the twin's plant beside the AR(1) measurement noise (maximum likelihood, white
+    innovations) is their floor, which the measurement noise alone is not."""
+    case, result = _diagnose_case("harder__none", seed)
+    assert case.key["noise_levels"] == "absent"
+    plant = result.modules["M1"]
+    assert plant.noise_floor_twin is None
+    assert plant.gap_calibrated <= plant.threshold
+    assert (result.module, result.effect) == (None, "none")
