@@ -438,17 +438,19 @@ def _linear_bar(
 def nested_test(work: ModuleWork, split: Split, settings: GapSettings) -> str | None:
     """Return why a module within its noise threshold has a gap after all, or None.
 
-    The nested test (docs/gap.md §Where) for a module calibrated from data: every candidate is
-    fitted on the training part and compared on the choosing part with the linear twin, the
-    better of the calibrated one and the same one re-fitted by the candidates' own fit (so
-    that a candidate's gain is not a better fit of the linear part). Both errors are whitened by
-    the AR noise model of the candidate's training error (:func:`whitening_filter`): the
-    candidate nests the linear twin, so its error is the noise whether the effect is there or
-    not, whereas the linear twin's error holds a present effect, whose slow part its noise model
-    would take for coloured noise. Each model's error is that of its windows with their initial
-    states fitted to the whole window (:func:`~dtwin.gap.models.profiled_window_error`): the
-    states are nuisance parameters of both models, and the warm-up's estimate leaves a state
-    error in every window that a candidate force damps on clean data as well.
+    The nested test (docs/gap.md §Where) for a module calibrated from data, or whose floor holds
+    process noise read from the data (a twin file without noise levels,
+    :func:`~dtwin.gap.noise.process_noise_floor`: a faint effect may pass for that noise): every
+    candidate is fitted on the training part and compared on the choosing part with the linear twin,
+    the better of the calibrated one and the same one re-fitted by the candidates' own fit (so that
+    a candidate's gain is not a better fit of the linear part). Both errors are whitened by the AR
+    noise model of the candidate's training error (:func:`whitening_filter`): the candidate nests
+    the linear twin, so its error is the noise whether the effect is there or not, whereas the
+    linear twin's error holds a present effect, whose slow part its noise model would take for
+    coloured noise. Each model's error is that of its windows with their initial states fitted to
+    the whole window (:func:`~dtwin.gap.models.profiled_window_error`): the states are nuisance
+    parameters of both models, and the warm-up's estimate leaves a state error in every window that
+    a candidate force damps on clean data as well.
     ``T = n·ln(Σε_linear²/Σε_candidate²)`` over the ``n`` whitened choosing samples is then the
     likelihood ratio of the nested Gaussian models with coloured noise. The module has a gap
     when the best-scored candidate (:func:`score_candidates`, nested forms as in
