@@ -564,7 +564,7 @@ def held_noise_autocovariance(
     -------
     numpy.ndarray, shape (n_lags,), or None
         ``(A^l·P)_xx`` (m² per (m/s²)²), with ``s[k+1] = A·s[k] + b·ξ[k]`` the zero-order hold
-        of ``ẍ = ξ − (c/m)·ẋ − (k/m)·x`` (:func:`~dtwin.exact_plant.hold_matrices`: the
+        of ``ẍ = ξ − (c/m)·ẋ − (k/m)·x`` (:func:`~dtwin.twin.exact.hold_matrices`: the
         continuous asset holds its acceleration noise over each sample) and ``P = A·P·Aᵀ +
         b·bᵀ`` its stationary covariance; None for a plant without one (integrating or
         unstable: no stationary variance).

@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from dtwin.exact_plant import free_response_basis, hold_matrices
 from dtwin.gap.models import (
     held_noise_autocovariance,
     warmup_samples,
@@ -15,6 +14,7 @@ from dtwin.gap.models import (
     window_noise_gain,
 )
 from dtwin.gap.noise import process_noise_floor
+from dtwin.twin.exact import free_response_basis, hold_matrices
 
 LIN = {"m": 1.0, "c": 0.4, "k": 4.0}
 DT = 0.02
