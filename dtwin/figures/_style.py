@@ -25,9 +25,12 @@ from __future__ import annotations
 import io
 import os
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
+import matplotlib
 import matplotlib.pyplot as plt
+from matplotlib import font_manager
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
@@ -214,8 +217,33 @@ def unitless(ax: Axes, which: str = "y") -> None:
         getattr(ax, f"{name}axis").label.set_gid(UNITLESS_GID)
 
 
+def _bundled_fonts_first() -> None:
+    """Put the font files matplotlib ships first in its font list, so ties go to them.
+
+    A system copy of a family the set uses (DejaVu Sans and its faces, another version) ties
+    with matplotlib's own file on every property :func:`matplotlib.font_manager.findfont`
+    scores, and a tie goes to whichever comes first in the font list, which is read from the
+    user's font cache (``fontlist-*.json``, shared by every matplotlib of that version on the
+    machine and rewritten by whichever process rebuilt it last). The PNG does not show which
+    file was used (the same outlines); the PDF embeds it, so its bytes would change with the
+    machine's state. The sort is stable and skipped when the list is already in order.
+    """
+    bundled = Path(matplotlib.get_data_path(), "fonts")
+    fonts = font_manager.fontManager.ttflist
+    ordered = sorted(fonts, key=lambda font: not Path(font.fname).is_relative_to(bundled))
+    if ordered != fonts:
+        fonts[:] = ordered
+        # findfont's results are cached; matplotlib clears the cache itself when it adds a font
+        font_manager.fontManager._findfont_cached.cache_clear()
+
+
 def apply_style() -> None:
-    """Set the project's matplotlib defaults: one font, print-size text, 300-dpi PNG."""
+    """Set the project's matplotlib defaults: one font, print-size text, 300-dpi PNG.
+
+    The font is matplotlib's own DejaVu Sans file, whatever else is installed
+    (:func:`_bundled_fonts_first`), so a PDF's bytes do not depend on the machine.
+    """
+    _bundled_fonts_first()
     plt.rcParams.update(
         {
             "figure.dpi": 100,

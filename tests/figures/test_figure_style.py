@@ -7,8 +7,11 @@ The workflow test (tests/workflow/test_workflow.py) checks every produced artifa
 from __future__ import annotations
 
 import ast
+import os
+import shutil
 import struct
 import zlib
+from pathlib import Path
 
 import matplotlib
 
@@ -18,6 +21,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from matplotlib import pyplot as plt
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
@@ -89,6 +93,29 @@ def test_a_print_size_figure_with_set_fonts_passes(width):
     check = print_check(clean_figure(width))
     assert check.passed, check.observed
     assert check.observed["min_font_pt"] >= MIN_FONT_PT
+
+
+def test_the_set_draws_with_matplotlibs_own_font_file_when_a_copy_is_listed_first(tmp_path):
+    """A second file of DejaVu Sans (a system copy, another version) listed first in the font
+    cache ties with matplotlib's own file on every property; the set's figures still use
+    matplotlib's, so a PDF embeds the same font file on every machine."""
+    from matplotlib import font_manager
+
+    bundled = os.path.realpath(Path(matplotlib.get_data_path(), "fonts", "ttf", "DejaVuSans.ttf"))
+    copy = tmp_path / "DejaVuSans.ttf"
+    shutil.copyfile(bundled, copy)
+    manager = font_manager.fontManager
+    listed = manager.ttflist
+    manager.ttflist = [font_manager.ttfFontProperty(font_manager.get_font(str(copy))), *listed]
+    try:
+        manager._findfont_cached.cache_clear()
+        # without the set's style the tie goes to the copy, the first file listed
+        assert os.path.realpath(font_manager.findfont("DejaVu Sans")) == os.path.realpath(copy)
+        plt.close(clean_figure())
+        assert os.path.realpath(font_manager.findfont("DejaVu Sans")) == bundled
+    finally:
+        manager.ttflist = listed
+        manager._findfont_cached.cache_clear()
 
 
 def test_a_wide_figure_fails():
