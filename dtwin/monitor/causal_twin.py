@@ -387,18 +387,21 @@ class _UnitRunner:
         bounds = [0, *cuts] + ([n - 1] if not cuts or cuts[-1] != n - 1 else [])
         if n == 1:
             out[:] = self._simulate(u, t0)[0]
-        recorded = y[:, self.reset_outputs]
-        before = np.full_like(recorded, np.nan)  # the outputs before any move: residuals
+        moved = len(self.reset_states) > 0
+        if moved:
+            recorded = y[:, self.reset_outputs]
+            before = np.full_like(recorded, np.nan)  # the outputs before any move: residuals
         for a, b in itertools.pairwise(bounds):
             outputs, states = self._simulate(u[a : b + 1], t0 + a * self.dt)
             out[a : b + 1] = outputs
-            before[a + 1 : b + 1] = outputs[1:, self.reset_outputs]
+            if moved:
+                before[a + 1 : b + 1] = outputs[1:, self.reset_outputs]
             self.state = states[-1].copy()
             if b in cuts:
                 self._move(recorded, before, b)
                 if b == n - 1:
                     out[b] = self._simulate(u[b : b + 1], t0 + b * self.dt)[0][0]
-        if len(self.reset_states):
+        if moved:
             gaps = recorded[1:] - before[1:]
             self.recent = np.vstack([self.recent, gaps])[-self.span :]
         return out
