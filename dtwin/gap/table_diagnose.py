@@ -33,6 +33,7 @@ from threadpoolctl import threadpool_limits
 
 from dtwin._validation import DtwinValueError
 from dtwin.gap.confidence import calibrated_confidence
+from dtwin.gap.effects import find_lattice
 from dtwin.gap.noise import (
     NoiseFloor,
     effective_samples,
@@ -54,7 +55,7 @@ from dtwin.gap.table_fit import (
     rms_by_output,
     state_guess,
 )
-from dtwin.gap.which import _excess, shrink_pct
+from dtwin.gap.which import _excess, _whitened, shrink_pct, whitening_filter
 from dtwin.twin.fmu import model_for
 from dtwin.twin.simulate import UnitModel, UnitSpec, choose_substeps, units_of
 
@@ -711,17 +712,43 @@ def _diagnose_table(recording, table, calibrate, train_frac, settings, heldout) 
         works[spec.name] = work
         for signal, floor in zip(spec.outputs, work.floors, strict=True):
             levels[signal] = table.noise.get(signal, floor.rms)
+    _loop_floors(works, table, settings, n_tests, levels)
     flagged = [w for w in works.values() if w.flagged]
     notes = [note for w in works.values() for note in getattr(w.data.model, "notes", ())]
     units = {name: _unit_report(w) for name, w in works.items()}
     base = dict(units=units, n_samples=recording.n_samples, n_train=parts["train"][1],
                 n_choose=parts["choose"][1], dt=recording.dt)  # fmt: skip
     if not flagged:
-        return _none_answer(works, base, notes)
+        found = _nested_source(list(works.values()), table, calibrate, settings)
+        if found is None:
+            return _none_answer(works, base, notes)
+        source, candidates, chosen, nested_note = found
+        notes.append(nested_note)
+        return _answer(source, candidates, chosen, base, notes, (), table)
     source, candidates, chosen, choose_notes = _source(flagged, table, calibrate, settings)
     also = tuple(w.data.spec.name for w in flagged if w is not source)
     notes.extend(choose_notes)
     return _answer(source, candidates, chosen, base, notes, also, table)
+
+
+def _loop_floors(works, table, settings, n_tests: int, levels: Mapping[str, float]) -> None:
+    """Re-read the floors of units that read a signal a later unit produces (a feedback loop).
+
+    A unit is analysed before the units after it in the table, so the noise on a recorded
+    input produced later (a motor's speed read back through its back-EMF) was not yet known:
+    with every unit's noise now read, its floors and its flag are read again.
+    """
+    seen: set[str] = set()
+    for work in works.values():
+        spec = work.data.spec
+        late = [s for s in spec.inputs if s in levels and s not in seen]
+        seen.update(spec.outputs)
+        if not late:
+            continue
+        work.floors, work.thresholds = _floors(
+            work.data, work.nominal, table.noise, settings, n_tests, levels
+        )
+        work.flagged = bool(np.any(work.gaps > np.asarray(work.thresholds)))
 
 
 #: Most flagged units whose candidates are fitted (the first in the table's order).
@@ -746,6 +773,147 @@ def _source(flagged: list[_UnitWork], table, calibrate, settings) -> tuple:
     explained = [a for a in answers if a[2] is not None]
     best = max(explained, key=lambda a: a[4]) if explained else answers[0]
     return best[:4]
+
+
+#: Concentration of the recorded values on a lattice (:func:`~dtwin.gap.effects.find_lattice`)
+#: read as a quantizer after the noise: within about 7 % of the step.
+LATTICE_CONCENTRATION = 0.9
+#: Smallest step of such a lattice, in noise floors, read as an effect: a finer one (a logger's
+#: fixed decimals) adds less than 2 % to the noise's variance and is resolution, not a gap.
+LATTICE_MIN_STEP = 0.5
+
+
+def _nested_source(works: list[_UnitWork], table, calibrate, settings) -> tuple | None:
+    """Return ``(unit, candidates, chosen, note)`` of a gap within every unit's floor, or None.
+
+    The floor test asks whether a unit's error exceeds its noise; the nested test asks whether
+    one candidate explains the choosing part better than the twin, which finds an effect too
+    faint for the first (docs/gap.md §Twin file). Per unit, in the table's order (the first
+    with a gap is the source): recorded values on a lattice coarser than half the noise floor
+    are an ``output_quantization`` (:func:`_lattice_candidate`); else every candidate is fitted
+    as for a flagged unit and the best by BIC must pass :func:`_nested_test`.
+    """
+    for work in works:
+        lattice = _lattice_candidate(work, table, calibrate, settings)
+        if lattice is not None:
+            candidate, note = lattice
+            return work, [candidate], candidate, note
+        candidates = _fit_candidates(work, table, calibrate, settings)
+        if not candidates:
+            continue
+        chosen, note = _nested_test(work, candidates, settings, len(works))
+        if chosen is not None:
+            return work, candidates, chosen, note
+    return None
+
+
+def _lattice_candidate(work: _UnitWork, table, calibrate, settings) -> tuple | None:
+    """Return ``(candidate, note)`` for an output whose recorded values sit on a coarse lattice.
+
+    Values on a lattice of step ``q`` with concentration at least
+    :data:`LATTICE_CONCENTRATION` came through a quantizer after the noise; with ``q`` at least
+    :data:`LATTICE_MIN_STEP` of the output's noise floor the quantizer is the gap even where
+    the error it adds (``q²/12``) hides in the noise.
+    """
+    data = work.data
+    train = slice(*data.parts["train"])
+    for o, signal in enumerate(data.spec.outputs):
+        y = data.outputs[train, o]
+        spread = float(np.ptp(y))
+        if not spread > 0:
+            continue
+        step, _, concentration = find_lattice(y, 1e-4 * spread, 0.5 * spread)
+        floor = work.floors[o].rms
+        if concentration < LATTICE_CONCENTRATION or step < LATTICE_MIN_STEP * floor:
+            continue
+        blocks = {m.name: m.block for m in table.modules}
+        variants = candidate_variants(data, data.guess, blocks, calibrate=calibrate)
+        variant = next(
+            (v for v in variants if v.name == "output_quantization" and v.at == signal), None
+        )
+        if variant is None:
+            continue
+        fit = fit_variant(
+            data, variant, work.nominal.theta, mode="free" if calibrate else "band",
+            band=settings.calibration_tolerance, max_nfev=FULL_NFEV,
+        )  # fmt: skip
+        error, _ = part_error(data, fit, "choose")
+        gap = combined(rms_by_output(error, slice(*data.parts["choose"]), data.norm))
+        note = (
+            f"{signal}: recorded values on a lattice of step {step:.4g} (concentration "
+            f"{concentration:.3f} >= {LATTICE_CONCENTRATION}), {step / floor:.2f} noise floors "
+            f"(>= {LATTICE_MIN_STEP})"
+        )
+        candidate = _Candidate(fit, gap, len(variant.effect_params), weight=1.0)
+        return candidate, note
+    return None
+
+
+def _nested_test(work: _UnitWork, candidates, settings, n_units: int) -> tuple:
+    """Return ``(candidate, note)`` when the best candidate beats the twin, else ``(None, "")``.
+
+    The best candidate by BIC on the choosing part (:func:`_ranked`) is compared there with the
+    twin as fitted (params within the calibration tolerance) and, for an effect, with the twin
+    re-fitted (``parameter_mismatch``; the better of the two is the null, so an effect's gain
+    is not a better fit of the params). Each output's error is whitened by the AR noise model of
+    the candidate's training error (:func:`~dtwin.gap.which.whitening_filter`: the candidate
+    nests the twin, so its error is the noise whether the effect is there or not, whereas the
+    twin's error holds the effect, whose slow part its own noise model would take for coloured
+    noise); every window's states are fitted in both. ``T = Σ_o n_o·ln(S_null,o/S_cand,o)``
+    over the ``n_o`` whitened choosing samples of output ``o`` is the likelihood ratio of the
+    nested Gaussian models; the unit has a gap when ``T ≥ χ²_p(1 − significance/(K·U))``
+    (``p`` the candidate's params, ``K`` the candidates, ``U`` the units tested) and the
+    candidate removes at least ``min_gap`` of the outputs' spread
+    (``√(gap_null² − gap_cand²)``), the paper diagnoser's nested test (docs/gap.md §Where).
+    """
+    from scipy.stats import chi2
+
+    data = work.data
+    n_choose = data.parts["choose"][1] - data.parts["choose"][0]
+    n_eff = float(np.mean([effective_samples(f.acf, n_choose) for f in work.floors]))
+    _weights(candidates, n_eff)
+    best = _ranked(candidates, n_eff)[0]
+    nulls = [work.nominal]
+    refit = next((c.fit for c in candidates if c.fit.variant.refits_linear), None)
+    if refit is not None and not best.fit.variant.refits_linear:
+        nulls.append(refit)
+    train, choose = slice(*data.parts["train"]), slice(*data.parts["choose"])
+    own_train, _ = part_error(data, best.fit, "train")
+    own = part_error(data, best.fit, "choose")[0][choose]
+    null_errors = [part_error(data, fit, "choose")[0][choose] for fit in nulls]
+    statistics, scored_total = [], 0
+    for errors in null_errors:
+        total = 0.0
+        for o in range(len(data.spec.outputs)):
+            whiten = whitening_filter(own_train[train, o])
+            a, b = _whitened(own[:, o], whiten), _whitened(errors[:, o], whiten)
+            scored = np.isfinite(a) & np.isfinite(b)
+            sums = float(a[scored] @ a[scored]), float(b[scored] @ b[scored])
+            if not (sums[0] > 0 and sums[1] > 0):
+                return None, ""
+            total += int(np.count_nonzero(scored)) * math.log(sums[1] / sums[0])
+            scored_total = max(scored_total, int(np.count_nonzero(scored)))
+        statistics.append(total)
+    statistic = min(statistics)
+    gap_null = min(combined(rms_by_output(e, slice(0, len(e)), data.norm)) for e in null_errors)
+    removed = math.sqrt(max(gap_null**2 - best.gap_choose**2, 0.0))
+    n_params = max(best.n_params, 1)
+    critical = float(chi2.ppf(1.0 - settings.significance / (len(candidates) * n_units), n_params))
+    variant = best.fit.variant
+    progress.debug(
+        "%s nested test: %s at %s T %.2f (critical %.2f), removes %.4g",
+        data.spec.name, variant.name, variant.at, statistic, critical, removed,
+    )  # fmt: skip
+    if statistic < critical or removed < settings.min_gap:
+        return None, ""
+    note = (
+        f"{data.spec.name}: gap {combined(work.gaps):.3g} within the noise threshold, but "
+        f"{variant.name} at {variant.at} lowers the twin's choosing-part gap {gap_null:.3g} to "
+        f"{best.gap_choose:.3g}: likelihood ratio {statistic:.1f} over {scored_total} whitened "
+        f"samples >= chi2_{n_params} {critical:.1f} (size {settings.significance:g} over "
+        f"{len(candidates)} candidates and {n_units} units; removes {removed:.3g} >= min_gap)"
+    )
+    return best, note
 
 
 def _unit_report(work: _UnitWork) -> UnitReport:

@@ -279,6 +279,8 @@ def _free_layout(data, variant, mode, nominal, band):
     tolerance = {"band": band, "free": math.inf}.get(mode)
     if tolerance is not None:
         for name, value in nominal.items():
+            if name in data.spec.defaults:
+                continue  # a block's default the file does not write is structure, not a value
             centre = data.declared.get(name, value)
             declared = abs(centre)
             if mode == "band" and declared == 0.0:
@@ -329,8 +331,9 @@ def fit_variant(
     mode : {"fixed", "band", "free"}
         The twin's params held (``fixed``), re-fitted within 5 % of their declared value
         (``band``: ``band`` of their declared value, the calibration tolerance; a param
-        declared 0 stays 0) or re-fitted freely (``free``, sign kept for a
-        positive declared param).
+        declared 0 stays 0) or re-fitted freely (``free``, sign kept for a positive declared
+        param); a block's default that the file does not write
+        (:attr:`~dtwin.twin.simulate.UnitSpec.defaults`) is held in both.
     cap : int, optional
         Most training samples used (:data:`MAX_FIT_SAMPLES`).
     max_nfev : int

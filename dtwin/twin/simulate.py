@@ -89,6 +89,8 @@ class UnitSpec:
         Signals its modules produce that are not recorded.
     linear : bool
         Every module is a linear built-in block.
+    defaults : frozenset of str
+        Qualified params left at a block's default (:attr:`ModuleSpec.defaults`).
     """
 
     modules: tuple[str, ...]
@@ -101,6 +103,7 @@ class UnitSpec:
     initial: dict[str, float]
     internal: tuple[str, ...] = ()
     linear: bool = False
+    defaults: frozenset[str] = frozenset()
 
     @property
     def name(self) -> str:
@@ -231,6 +234,7 @@ def _unit_spec(modules: list, recorded: set[str]) -> UnitSpec:
         initial={f"{m.name}.{s}": float(v) for m in modules for s, v in m.initial.items()},
         internal=internal,
         linear=all(m.linear for m in modules),
+        defaults=frozenset(f"{m.name}.{p}" for m in modules for p in m.defaults),
     )
 
 

@@ -107,7 +107,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dtwin._validation import DtwinValueError
-from dtwin.twin.blocks import BlockError, Lowered, lower_block
+from dtwin.twin.blocks import BLOCKS, BlockError, Lowered, lower_block
 from dtwin.twin.expressions import FUNCTIONS, Expression, ExpressionError, parse_expression
 
 if TYPE_CHECKING:  # dtwin.twin.fmu is imported when a table has an FMU module (numba, fmpy)
@@ -189,6 +189,9 @@ class ModuleSpec:
     fmu : FmuInfo or None
         An FMU module's file and variables (:mod:`dtwin.twin.fmu`); its ``states`` are the
         FMU's settable continuous states, ``params`` FMU parameters, no texts.
+    defaults : frozenset of str
+        A block's params the file does not write (``gain`` = 1 and ``bias`` = 0 of a ``lag``):
+        structure, not a declared value with a calibration tolerance.
     """
 
     name: str
@@ -205,6 +208,7 @@ class ModuleSpec:
     source: str = ""
     candidates: tuple[str, ...] | None = None
     fmu: FmuInfo | None = None
+    defaults: frozenset[str] = frozenset()
 
     @property
     def symbols(self) -> frozenset[str]:
@@ -426,6 +430,17 @@ def _block_parts(module: str, entry: Mapping, inputs, outputs) -> Lowered:
                              token=error.token) from None  # fmt: skip
 
 
+def _defaults(entry: Mapping, params: Mapping[str, float]) -> frozenset[str]:
+    """Return a block module's scalar params the file leaves at the block's default."""
+    written = entry.get("params") or {}
+    block = BLOCKS[entry["block"]]
+    return frozenset(
+        p.name
+        for p in block.params
+        if p.default is not None and p.name in params and written.get(p.name) is None
+    )
+
+
 def _initial(module: str, raw: Any, states: tuple[str, ...]) -> dict[str, float]:
     given = _mapping(raw, module=module, key="initial", of="state names to numbers")
     _check_keys(module, "initial", given, states, "a state")
@@ -564,6 +579,7 @@ def _module_spec(name: Any, entry: Any, base_dir: Path | None = None) -> ModuleS
         linear=is_block,
         source=f"block {entry['block']}" if is_block else "equations",
         candidates=_candidates(name, entry.get("candidates")),
+        defaults=_defaults(entry, parts.params) if is_block else frozenset(),
     )
     _check_expressions(spec)
     return spec
