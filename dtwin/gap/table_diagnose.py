@@ -25,7 +25,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -725,7 +725,9 @@ def _diagnose_table(recording, table, calibrate, train_frac, settings, heldout) 
         source, candidates, chosen, nested_note = found
         notes.append(nested_note)
         return _answer(source, candidates, chosen, base, notes, (), table)
-    source, candidates, chosen, choose_notes = _source(flagged, table, calibrate, settings)
+    source, candidates, chosen, choose_notes = _source(
+        flagged, table, calibrate, settings, list(works.values())
+    )
     also = tuple(w.data.spec.name for w in flagged if w is not source)
     notes.extend(choose_notes)
     return _answer(source, candidates, chosen, base, notes, also, table)
@@ -755,7 +757,7 @@ def _loop_floors(works, table, settings, n_tests: int, levels: Mapping[str, floa
 MAX_SOURCES = 3
 
 
-def _source(flagged: list[_UnitWork], table, calibrate, settings) -> tuple:
+def _source(flagged: list[_UnitWork], table, calibrate, settings, works) -> tuple:
     """Return ``(unit, candidates, chosen, notes)`` of the source among the flagged units.
 
     Each flagged unit's candidates are fitted (at most :data:`MAX_SOURCES`, in the table's
@@ -768,6 +770,7 @@ def _source(flagged: list[_UnitWork], table, calibrate, settings) -> tuple:
     answers = []
     for work in flagged[:MAX_SOURCES]:
         candidates = _fit_candidates(work, table, calibrate, settings)
+        candidates = _producers_agree(work, candidates, works)
         chosen, notes, removed = _choose(work, candidates, settings)
         answers.append((work, candidates, chosen, notes, removed))
     explained = [a for a in answers if a[2] is not None]
@@ -798,7 +801,9 @@ def _nested_source(works: list[_UnitWork], table, calibrate, settings) -> tuple 
         if lattice is not None:
             candidate, note = lattice
             return work, [candidate], candidate, note
-        candidates = _fit_candidates(work, table, calibrate, settings)
+        candidates = _producers_agree(
+            work, _fit_candidates(work, table, calibrate, settings), works
+        )
         if not candidates:
             continue
         chosen, note = _nested_test(work, candidates, settings, len(works))
@@ -914,6 +919,56 @@ def _nested_test(work: _UnitWork, candidates, settings, n_units: int) -> tuple:
         f"{len(candidates)} candidates and {n_units} units; removes {removed:.3g} >= min_gap)"
     )
     return best, note
+
+
+#: Growth of a producer's choosing-part error, with its recorded output corrected as a
+#: reader's candidate says that output was read wrong, above which the candidate is dropped.
+PRODUCER_TOLERANCE = 0.05
+
+
+def _producers_agree(work: _UnitWork, candidates: list, works: list[_UnitWork]) -> list:
+    """Drop the candidates that blame a recorded input whose producer's own fit disagrees.
+
+    A reader's candidate that a recorded signal another unit produces was read wrong (a bias
+    drift or a gain, :func:`~dtwin.gap.table_effects.candidate_variants`) claims that the
+    producer's recording holds that error too. The producer's choosing-part error with its
+    recording corrected by the fitted error must then not grow (by more than
+    :data:`PRODUCER_TOLERANCE` of its RMS): a tank's level sensor drifting is otherwise read as a
+    drift of the recorded inflow that feeds it, which the valve producing the inflow rules out.
+    """
+    producers = {s: w for w in works if w is not work for s in w.data.spec.outputs}
+    kept = []
+    for candidate in candidates:
+        variant = candidate.fit.variant
+        producer = producers.get(variant.at)
+        if producer is None or variant.at not in work.data.spec.inputs:
+            kept.append(candidate)
+            continue
+        i = work.data.spec.inputs.index(variant.at)
+        corrected = variant.input_map(work.data.inputs, candidate.fit.theta, work.data)[:, i]
+        before, after = _producer_errors(producer, variant.at, corrected)
+        if after <= (1.0 + PRODUCER_TOLERANCE) * before:
+            kept.append(candidate)
+        else:
+            progress.debug(
+                "%s: %s at %s dropped: its producer's error %.4g -> %.4g when corrected",
+                work.data.spec.name, variant.name, variant.at, before, after,
+            )  # fmt: skip
+    return kept
+
+
+def _producer_errors(producer: _UnitWork, signal: str, corrected: np.ndarray):
+    """Return the producer's choosing-part RMS error on ``signal``, as recorded and corrected."""
+    data = producer.data
+    o = data.spec.outputs.index(signal)
+    outputs = data.outputs.copy()
+    outputs[:, o] = corrected
+    rows = slice(*data.parts["choose"])
+    out = []
+    for view in (data, replace(data, outputs=outputs)):
+        error, _ = part_error(view, producer.nominal, "choose")
+        out.append(float(np.sqrt(np.nanmean(error[rows, o] ** 2))))
+    return tuple(out)
 
 
 def _unit_report(work: _UnitWork) -> UnitReport:

@@ -85,6 +85,28 @@ def test_a_level_sensor_that_clips_is_an_output_saturation_of_the_tank():
     assert low <= result.params["high"] <= high
 
 
+@pytest.mark.parametrize(("step", "effect"), [(0.012, "output_quantization"), (0.002, "none")])
+def test_values_on_a_lattice_coarser_than_half_the_noise_read_quantization(step, effect):
+    frame = _asset(1500, 3)
+    frame["level"] = step * np.round(frame["level"] / step)  # noise 0.01: 1.2 and 0.2 of it
+    result = _diagnose(frame)
+    assert not result.units["tank"].flagged  # below the floor test: the lattice is the evidence
+    assert result.effect == effect
+    if effect != "none":
+        assert (result.module, result.at) == ("tank", "level")
+        assert result.params["q"] == pytest.approx(step, rel=1e-3)
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_a_drifting_level_is_not_blamed_on_the_recorded_inflow_feeding_the_tank(seed):
+    frame = _asset(1500, seed)
+    frame["level"] += 0.02 * np.arange(len(frame)) / len(frame)  # 2 noise std at the end
+    result = _diagnose(frame)
+    # a drift of q would show in the valve that records it, which fits q as well as before
+    assert (result.effect, result.at) != ("output_bias_drift", "q")
+    assert result.module in ("tank", None)
+
+
 @pytest.mark.slow
 def test_an_overflowing_tank_is_a_state_limit_when_the_flow_is_not_recorded():
     frame = _asset(2000, 3, overflow=2.2)
