@@ -33,7 +33,6 @@ from threadpoolctl import threadpool_limits
 
 from dtwin._validation import DtwinValueError
 from dtwin.gap.confidence import calibrated_confidence
-from dtwin.gap.effects import find_lattice
 from dtwin.gap.noise import (
     NoiseFloor,
     effective_samples,
@@ -44,7 +43,7 @@ from dtwin.gap.noise import (
 )
 from dtwin.gap.recording import Recording
 from dtwin.gap.results import GapSettings
-from dtwin.gap.table_effects import candidate_variants, twin_variant
+from dtwin.gap.table_effects import candidate_variants, lattice_of, twin_variant
 from dtwin.gap.table_fit import (
     UnitData,
     VariantFit,
@@ -348,7 +347,8 @@ def _floors(data, fit, noise, settings, n_tests=1, input_noise=None):
         floor = reconcile_noise_floor(twin, measured, settings.noise_tolerance)
         if propagated[o] > 0:
             total = math.hypot(floor.rms, propagated[o])
-            floor = NoiseFloor(total, f"{floor.source}+inputs", floor.acf, floor.measurement)
+            # the output's own noise kept as the measurement part (the lattice test reads it)
+            floor = NoiseFloor(total, f"{floor.source}+inputs", floor.acf, floor.rms)
         floors.append(floor)
         thresholds.append(
             gap_threshold(
@@ -778,7 +778,7 @@ def _source(flagged: list[_UnitWork], table, calibrate, settings, works) -> tupl
     return best[:4]
 
 
-#: Concentration of the recorded values on a lattice (:func:`~dtwin.gap.effects.find_lattice`)
+#: Concentration of the recorded values on a lattice (:func:`~dtwin.gap.table_effects.lattice_of`)
 #: read as a quantizer after the noise: within about 7 % of the step.
 LATTICE_CONCENTRATION = 0.9
 #: Smallest step of such a lattice, in noise floors, read as an effect: a finer one (a logger's
@@ -815,10 +815,11 @@ def _nested_source(works: list[_UnitWork], table, calibrate, settings) -> tuple 
 def _lattice_candidate(work: _UnitWork, table, calibrate, settings) -> tuple | None:
     """Return ``(candidate, note)`` for an output whose recorded values sit on a coarse lattice.
 
-    Values on a lattice of step ``q`` with concentration at least
-    :data:`LATTICE_CONCENTRATION` came through a quantizer after the noise; with ``q`` at least
-    :data:`LATTICE_MIN_STEP` of the output's noise floor the quantizer is the gap even where
-    the error it adds (``q²/12``) hides in the noise.
+    Values on a lattice of step ``q`` (:func:`~dtwin.gap.table_effects.lattice_of`) with
+    concentration at least :data:`LATTICE_CONCENTRATION` came through a quantizer after the
+    noise; with ``q`` at least :data:`LATTICE_MIN_STEP` of the output's own noise floor
+    (without the error its recorded inputs' noise causes through the unit) the quantizer is
+    the gap even where the error it adds (``q²/12``) hides in the noise.
     """
     data = work.data
     train = slice(*data.parts["train"])
@@ -827,8 +828,9 @@ def _lattice_candidate(work: _UnitWork, table, calibrate, settings) -> tuple | N
         spread = float(np.ptp(y))
         if not spread > 0:
             continue
-        step, _, concentration = find_lattice(y, 1e-4 * spread, 0.5 * spread)
-        floor = work.floors[o].rms
+        step, _, concentration = lattice_of(y)
+        own = work.floors[o]
+        floor = own.measurement if own.source.endswith("+inputs") else own.rms
         if concentration < LATTICE_CONCENTRATION or step < LATTICE_MIN_STEP * floor:
             continue
         blocks = {m.name: m.block for m in table.modules}
