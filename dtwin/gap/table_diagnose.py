@@ -508,12 +508,33 @@ def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, l
     _weights(candidates, n_eff)
     best = _ranked(candidates, n_eff)[0]
     variant = best.fit.variant
+    floor = max(floor, _candidate_floor(work, best, settings))
     removed = 1.0 - _excess(best.gap_choose, floor) ** 2 / max(_excess(gap, floor) ** 2, 1e-300)
     share = settings.min_linear_share if variant.linear_form else settings.min_share
     if removed >= share:
         return best, notes, removed
     notes.append(f"{variant.name} at {variant.at}: removes {removed:.0%} of the excess")
     return None, notes, removed
+
+
+def _candidate_floor(work: _UnitWork, candidate: _Candidate, settings) -> float:
+    """Return the noise floor the candidate's training error reads (normalised), else 0.
+
+    The candidate nests the twin, so with the right effect its error is the noise: where that
+    error is AR(1) noise with white innovations (:func:`~dtwin.gap.noise.residual_noise_floor`)
+    its level is the floor the effect's share is measured against. The twin's own error holds
+    the effect, so its floor falls back to the part of the noise above the unit's fastest mode,
+    which misses coloured noise (a speed's AR(1) noise, pole 0.67, read at half its level: a
+    scale error then removed "30 %" of an excess that was mostly noise).
+    """
+    data = work.data
+    error, _ = part_error(data, candidate.fit, "train")
+    train = slice(*data.parts["train"])
+    levels = []
+    for o in range(len(data.spec.outputs)):
+        floor = residual_noise_floor(error[train, o], settings.significance)
+        levels.append(floor.rms / data.norm[o] if floor is not None else 0.0)
+    return combined(levels)
 
 
 def _score_gap(data: UnitData, fit: VariantFit) -> float:
@@ -1021,9 +1042,9 @@ def _module_of(data: UnitData, fit: VariantFit | None, table) -> str:
     producer = table.producer(at)
     if producer is not None and at not in data.spec.outputs and at in data.spec.inputs:
         return producer.name  # a recorded input read wrong: its producer's sensor
-    for module in table.modules:
-        if module.name in data.spec.modules and (at in module.outputs or at in module.inputs):
-            return module.name
+    own = [m for m in table.modules if m.name in data.spec.modules]
+    for module in [m for m in own if at in m.outputs] + [m for m in own if at in m.inputs]:
+        return module.name  # an output's producer before a reader of it (a fed-back speed)
     return data.spec.modules[0]
 
 
