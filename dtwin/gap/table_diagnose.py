@@ -326,7 +326,9 @@ def _floors(data, fit, noise, settings, n_tests=1, input_noise=None):
     """Return each output's noise floor and its normalised threshold on the choosing part.
 
     The floor is the measurement noise's (declared, reconciled with the one read from the
-    training residual), with the error that the recorded inputs' noise causes through the
+    training residual; a declared level with a coarse lattice's ``q²/12`` added,
+    :func:`_coarse_lattice`: the quantizer's own noise, which no declared level holds),
+    with the error that the recorded inputs' noise causes through the
     unit (:func:`_input_noise_floor`) added in quadrature.
     """
     error, _ = part_error(data, fit, "train")
@@ -345,6 +347,10 @@ def _floors(data, fit, noise, settings, n_tests=1, input_noise=None):
             measured = whole
         twin = NoiseFloor(noise[signal], "twin", np.ones(1)) if signal in noise else None
         floor = reconcile_noise_floor(twin, measured, settings.noise_tolerance)
+        step = _coarse_lattice(data, o, floor.rms)
+        if step and floor.source == "twin":  # a data floor already holds the quantizer's noise
+            level = math.hypot(floor.rms, step / math.sqrt(12.0))
+            floor = NoiseFloor(level, "twin+lattice", floor.acf, floor.measurement)
         if propagated[o] > 0:
             total = math.hypot(floor.rms, propagated[o])
             # the output's own noise kept as the measurement part (the lattice test reads it)
@@ -812,16 +818,18 @@ def _nested_source(works: list[_UnitWork], table, calibrate, settings) -> tuple 
 
     The floor test asks whether a unit's error exceeds its noise; the nested test asks whether
     one candidate explains the choosing part better than the twin, which finds an effect too
-    faint for the first (docs/gap.md §Twin file). Per unit, in the table's order (the first
-    with a gap is the source): recorded values on a lattice coarser than half the noise floor
-    are an ``output_quantization`` (:func:`_lattice_candidate`); else every candidate is fitted
-    as for a flagged unit and the best by BIC must pass :func:`_nested_test`.
+    faint for the first (docs/gap.md §Twin file). Recorded values on a lattice coarser than
+    half the noise floor are an ``output_quantization`` (:func:`_lattice_candidate`, every unit
+    first); else per unit, in the table's order (the first with a gap is the source), every
+    candidate is fitted as for a flagged unit and the best by BIC must pass
+    :func:`_nested_test`.
     """
-    for work in works:
+    for work in works:  # a lattice is direct evidence: read before any candidate is fitted
         lattice = _lattice_candidate(work, table, calibrate, settings)
         if lattice is not None:
             candidate, note = lattice
             return work, [candidate], candidate, note
+    for work in works:
         candidates = _producers_agree(
             work, _fit_candidates(work, table, calibrate, settings), works
         )
@@ -843,16 +851,11 @@ def _lattice_candidate(work: _UnitWork, table, calibrate, settings) -> tuple | N
     the gap even where the error it adds (``q²/12``) hides in the noise.
     """
     data = work.data
-    train = slice(*data.parts["train"])
     for o, signal in enumerate(data.spec.outputs):
-        y = data.outputs[train, o]
-        spread = float(np.ptp(y))
-        if not spread > 0:
-            continue
-        step, _, concentration = lattice_of(y)
         own = work.floors[o]
         floor = own.measurement if own.source.endswith("+inputs") else own.rms
-        if concentration < LATTICE_CONCENTRATION or step < LATTICE_MIN_STEP * floor:
+        step = _coarse_lattice(data, o, floor)
+        if not step:
             continue
         blocks = {m.name: m.block for m in table.modules}
         variants = candidate_variants(data, data.guess, blocks, calibrate=calibrate)
@@ -868,13 +871,27 @@ def _lattice_candidate(work: _UnitWork, table, calibrate, settings) -> tuple | N
         error, _ = part_error(data, fit, "choose")
         gap = combined(rms_by_output(error, slice(*data.parts["choose"]), data.norm))
         note = (
-            f"{signal}: recorded values on a lattice of step {step:.4g} (concentration "
-            f"{concentration:.3f} >= {LATTICE_CONCENTRATION}), {step / floor:.2f} noise floors "
-            f"(>= {LATTICE_MIN_STEP})"
+            f"{signal}: recorded values on a lattice of step {step:.4g} (concentration >= "
+            f"{LATTICE_CONCENTRATION}), {step / floor:.2f} noise floors (>= {LATTICE_MIN_STEP})"
         )
         candidate = _Candidate(fit, gap, len(variant.effect_params), weight=1.0)
         return candidate, note
     return None
+
+
+def _coarse_lattice(data: UnitData, o: int, floor: float) -> float:
+    """Return the step of the lattice output ``o``'s training values sit on, if coarse, else 0.
+
+    Coarse: concentration at least :data:`LATTICE_CONCENTRATION` and a step at least
+    :data:`LATTICE_MIN_STEP` of ``floor`` (the output's own noise, output units).
+    """
+    y = data.outputs[slice(*data.parts["train"]), o]
+    if not np.ptp(y) > 0:
+        return 0.0
+    step, _, concentration = lattice_of(y)
+    if concentration < LATTICE_CONCENTRATION or step < LATTICE_MIN_STEP * floor:
+        return 0.0
+    return float(step)
 
 
 def _nested_test(work: _UnitWork, candidates, settings, n_units: int) -> tuple:
