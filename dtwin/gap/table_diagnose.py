@@ -421,6 +421,7 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
     blocks = {m.name: m.block for m in table.modules}
     produced = frozenset(signal for m in table.modules for signal in m.outputs)
     variants = candidate_variants(data, data.guess, blocks, calibrate=calibrate, produced=produced)
+    variants = [v for v in variants if _allowed(v, data, table)]
     screened = []
     mode = "free" if calibrate else "band"
     screen_x0 = _screening_states(work)
@@ -449,6 +450,25 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
         n_params = len([p for p in variant.effect_params if p not in variant.fixed])
         out.append(_Candidate(fit, gap, n_params or len(fit.free)))
     return out
+
+
+def _allowed(variant, data: UnitData, table) -> bool:
+    """Whether the modules where ``variant`` attaches let the diagnosis try it.
+
+    A module's ``candidates`` (the twin file) restricts the effects tried where it attaches: at
+    its state or param, at an output it produces, at an input it reads (a recorded input read
+    wrong: at its producer); a re-fit is tried when any of the unit's modules allows it.
+    """
+    at = variant.at
+    if variant.refits_linear or at is None:
+        owners = [table.module(m) for m in data.spec.modules]
+    elif "." in at:
+        owners = [table.module(at.split(".", 1)[0])]
+    elif variant.name.startswith("input_") or table.producer(at) is None:
+        owners = [table.module(m) for m in data.spec.modules if at in table.module(m).inputs]
+    else:  # an output's error, on the unit's own output or on a recorded input read wrong
+        owners = [table.producer(at)]
+    return any(m.candidates is None or variant.name in m.candidates for m in owners)
 
 
 def _screening_states(work: _UnitWork) -> np.ndarray:
@@ -860,7 +880,12 @@ def _lattice_candidate(work: _UnitWork, table, calibrate, settings) -> tuple | N
         blocks = {m.name: m.block for m in table.modules}
         variants = candidate_variants(data, data.guess, blocks, calibrate=calibrate)
         variant = next(
-            (v for v in variants if v.name == "output_quantization" and v.at == signal), None
+            (
+                v
+                for v in variants
+                if v.name == "output_quantization" and v.at == signal and _allowed(v, data, table)
+            ),
+            None,
         )
         if variant is None:
             continue

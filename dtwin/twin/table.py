@@ -447,10 +447,26 @@ def _initial(module: str, raw: Any, states: tuple[str, ...]) -> dict[str, float]
     return {s: _number(v, module=module, key=f"initial.{s}") for s, v in given.items()}
 
 
+#: The effects a module's ``candidates`` may name (docs/gap.md §Your own twin, Which).
+TABLE_EFFECTS = (
+    "input_saturation", "input_deadzone", "input_delay", "output_saturation",
+    "output_bias_drift", "output_scale_error", "output_delay", "output_quantization",
+    "state_limit", "state_cubic", "state_abs_square", "state_sign", "coulomb_friction",
+    "cubic_stiffness", "quadratic_damping", "parameter_mismatch",
+)  # fmt: skip
+
+
 def _candidates(module: str, raw: Any) -> tuple[str, ...] | None:
     if raw is None:
         return None
-    return _names(module, "candidates", raw)
+    names = _names(module, "candidates", raw)
+    unknown = next((n for n in names if n not in TABLE_EFFECTS), None)
+    if unknown is not None:
+        raise TwinTableError(
+            f"unknown effect '{unknown}' (the effects: {', '.join(TABLE_EFFECTS)})",
+            module=module, key="candidates", token=unknown,
+        )  # fmt: skip
+    return names
 
 
 def _parse(module: ModuleSpec, key: str, text: str) -> Expression:

@@ -97,6 +97,22 @@ def test_values_on_a_lattice_coarser_than_half_the_noise_read_quantization(step,
         assert result.params["q"] == pytest.approx(step, rel=1e-3)
 
 
+def test_a_module_s_candidates_restrict_the_effects_tried_where_it_attaches():
+    frame = _asset(1500, 2)
+    frame["level"] = np.minimum(frame["level"], float(np.quantile(frame["level"], 0.85)))
+    twin = {**TANK, "modules": {**TANK["modules"], "tank": {**TANK["modules"]["tank"],
+            "candidates": ["state_limit", "parameter_mismatch"]}}}  # fmt: skip
+    table = table_from_mapping(twin)
+    recording = recording_with_columns(frame, (*table.signals, *table.exogenous))
+    result = diagnose_table(recording, table)
+    tried = {(row["effect"], row["at"]) for row in result.candidates}
+    # at the tank's level, state and params only its own list (output_saturation unrestricted);
+    # the recorded inflow read wrong is the valve's, which lists nothing
+    restricted = {(effect, at) for effect, at in tried if at != "q"}
+    assert restricted and all(e in ("state_limit", "parameter_mismatch") for e, _ in restricted)
+    assert result.effect != "output_saturation"
+
+
 @pytest.mark.parametrize("seed", [3, 4])
 def test_a_drifting_level_is_not_blamed_on_the_recorded_inflow_feeding_the_tank(seed):
     frame = _asset(1500, seed)

@@ -154,6 +154,7 @@ BAD = [
     ("modules/tanks/equations/lvl", "h2", "module 'tanks': equations.lvl: 'lvl' is not an output"),
     ("modules/tanks/equations", None, "module 'tanks': outputs: 'level' is neither a state nor"),
     ("modules/tanks/candidates", "all", "module 'tanks': candidates: must be a list of names"),
+    ("modules/tanks/candidates", ["leak"], "module 'tanks': candidates: unknown effect 'leak'"),
     ("modules/u", {"block": "gain", "inputs": ["q"], "outputs": ["w"]}, "module 'pump': inputs: "
      "'u' is both a module and a signal"),
     ("modules/pump2", {"block": "gain", "inputs": ["u"], "outputs": ["q"]}, "module 'pump2': "
