@@ -413,6 +413,8 @@ class _Candidate:
     gap_choose: float
     n_params: int
     weight: float = 0.0
+    #: The choosing part's error, shape ``(n_samples, n_outputs)`` (NaN elsewhere).
+    choose_error: np.ndarray | None = field(default=None, repr=False)
 
 
 def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candidate]:
@@ -448,7 +450,7 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
         error, _ = part_error(data, fit, "choose")
         gap = combined(rms_by_output(error, slice(*data.parts["choose"]), data.norm))
         n_params = len([p for p in variant.effect_params if p not in variant.fixed])
-        out.append(_Candidate(fit, gap, n_params or len(fit.free)))
+        out.append(_Candidate(fit, gap, n_params or len(fit.free), choose_error=error))
     return out
 
 
@@ -949,13 +951,13 @@ def _nested_test(work: _UnitWork, candidates, settings, n_units: int) -> tuple:
         nulls.append(refit)
     train, choose = slice(*data.parts["train"]), slice(*data.parts["choose"])
     own_train, _ = part_error(data, best.fit, "train")
-    own = part_error(data, best.fit, "choose")[0][choose]
+    own = best.choose_error[choose]
     null_errors = [part_error(data, fit, "choose")[0][choose] for fit in nulls]
+    whitens = [whitening_filter(own_train[train, o]) for o in range(len(data.spec.outputs))]
     statistics, scored_total = [], 0
     for errors in null_errors:
         total = 0.0
-        for o in range(len(data.spec.outputs)):
-            whiten = whitening_filter(own_train[train, o])
+        for o, whiten in enumerate(whitens):
             a, b = _whitened(own[:, o], whiten), _whitened(errors[:, o], whiten)
             scored = np.isfinite(a) & np.isfinite(b)
             sums = float(a[scored] @ a[scored]), float(b[scored] @ b[scored])
