@@ -813,8 +813,10 @@ def _source(flagged: list[_UnitWork], table, calibrate, settings, works) -> tupl
     order); the source is the unit whose answer explains the largest share of its excess gap,
     the first in the table's order among equals. A sensor error on a signal that feeds another
     module shows in both units, but only its producer's candidates remove it (a bias on a
-    motor's recorded speed, read back through the back-EMF in a loop); with no unit explained,
-    the first flagged one is the source (``unexplained``).
+    motor's recorded speed, read back through the back-EMF in a loop); where a reader's own
+    candidates explain it too (a re-fit of the back-EMF constant for a speed sensor's gain
+    error), the producer's output effect is the source (:func:`_sensor_read_downstream`).
+    With no unit explained, the first flagged one is the source (``unexplained``).
     """
     answers = []
     for work in flagged[:MAX_SOURCES]:
@@ -823,8 +825,28 @@ def _source(flagged: list[_UnitWork], table, calibrate, settings, works) -> tupl
         chosen, notes, removed = _choose(work, candidates, settings)
         answers.append((work, candidates, chosen, notes, removed))
     explained = [a for a in answers if a[2] is not None]
+    explained = _sensor_read_downstream(explained) or explained
     best = max(explained, key=lambda a: a[4]) if explained else answers[0]
     return best[:4]
+
+
+def _sensor_read_downstream(explained: list[tuple]) -> list[tuple]:
+    """Return the explained answers that are an output effect another explained unit reads.
+
+    An error at a recorded output (a speed sensor's gain) puts a gap in its producer's unit and
+    in every unit reading that output as an input; one effect at the signal explains both, so
+    when the producer's answer is an ``output_*`` effect at a signal another explained unit
+    reads, that answer is the source whatever share the reader's own re-fit removed. Empty
+    when no such pair exists.
+    """
+    read = {s for work, *_ in explained for s in work.data.spec.inputs}
+    return [
+        a
+        for a in explained
+        if a[2].fit.variant.name.startswith("output_")
+        and a[2].fit.variant.at in read
+        and a[2].fit.variant.at in a[0].data.spec.outputs
+    ]
 
 
 #: Concentration of the recorded values on a lattice (:func:`~dtwin.gap.table_effects.lattice_of`)
