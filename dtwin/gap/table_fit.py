@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from dtwin._validation import DtwinValueError
-from dtwin.twin.simulate import MAX_SUBSTEPS, UnitModel, UnitSpec
+from dtwin.twin.simulate import MAX_SUBSTEPS, UnitModel, UnitSpec, window_rows
 
 __all__ = [
     "MAX_FIT_SAMPLES",
@@ -213,35 +213,87 @@ def substeps_for(data: UnitData, variant: Variant, theta: Mapping[str, float]) -
     return substeps
 
 
-def _simulate(data, variant, theta, starts, stops, x0):
-    """Return the variant's mapped outputs over the windows, shape ``(n_samples, n_outputs)``."""
-    inputs = variant.input_map(data.inputs, theta, data)
-    values = [theta[name] for name in variant.model.param_names]
-    limits = variant.limits(theta) if variant.limits is not None else None
+def _simulate_rows(data, variant, thetas, starts, stops, x0s) -> list[np.ndarray]:
+    """Return each param set's mapped outputs on the windows' rows, shape ``(n_rows, n_outputs)``.
+
+    ``thetas`` are param dicts, ``x0s`` their windows' start states ``(n_batch, n_windows,
+    n_states)``; rows as :func:`~dtwin.twin.simulate.window_rows`. The sets are simulated in
+    one compiled pass per number of Runge-Kutta sub-steps (:meth:`UnitModel.simulate_batch`),
+    each exactly as alone; an output map sees the whole recording's samples (NaN outside the
+    windows), as it would after a single simulation.
+    """
+    model = variant.model
+    rows = window_rows(starts, stops)
+    out: list[np.ndarray | None] = [None] * len(thetas)
+    groups: dict[int, list[int]] = {}
+    for b, theta in enumerate(thetas):
+        groups.setdefault(substeps_for(data, variant, theta), []).append(b)
     with np.errstate(all="ignore"):
-        y, _ = variant.model.simulate(
-            inputs,
-            values,
-            starts,
-            stops,
-            x0,
-            data.dt,
-            substeps=substeps_for(data, variant, theta),
-            linear=data.linear,
-            limits=limits,
-        )
-        return variant.output_map(y, theta, data)
+        for substeps, members in groups.items():
+            sets: list[np.ndarray] = []
+            input_of = []
+            for b in members:
+                inputs = variant.input_map(data.inputs, thetas[b], data)
+                same = (i for i, u in enumerate(sets) if u is inputs or np.array_equal(u, inputs))
+                index = next(same, len(sets))
+                if index == len(sets):
+                    sets.append(inputs)
+                input_of.append(index)
+            values = [[thetas[b][name] for name in model.param_names] for b in members]
+            limits = [variant.limits(thetas[b]) if variant.limits else None for b in members]
+            options = dict(substeps=substeps, linear=data.linear)
+            if hasattr(model, "simulate_batch"):
+                y, _ = model.simulate_batch(
+                    sets, input_of, values, starts, stops, x0s[members], data.dt,
+                    limits=limits, **options,
+                )  # fmt: skip
+            else:  # a model without a batch (an FMU): one simulation each
+                y = [
+                    model.simulate(sets[i], v, starts, stops, x0s[b], data.dt, limits=lim,
+                                   **options)[0][rows]
+                    for i, v, b, lim in zip(input_of, values, members, limits, strict=True)
+                ]  # fmt: skip
+            for yb, b in zip(y, members, strict=True):
+                if variant.output_map is not _identity:
+                    full = np.full((data.n_samples, yb.shape[1]), np.nan)
+                    full[rows] = yb
+                    yb = variant.output_map(full, thetas[b], data)[rows]
+                out[b] = yb
+    return out
 
 
-def _window_rows(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
-    return np.concatenate([np.arange(a, b) for a, b in zip(starts, stops, strict=False)])
+def _simulate(data, variant, theta, starts, stops, x0):
+    """Return the variant's mapped outputs over the windows, shape ``(n_samples, n_outputs)``.
+
+    NaN outside the windows.
+    """
+    (y,) = _simulate_rows(data, variant, [theta], starts, stops, np.asarray(x0)[None])
+    full = np.full((data.n_samples, y.shape[1]), np.nan)
+    full[window_rows(starts, stops)] = y
+    return full
 
 
-def _normalised(data, y, rows):
-    """Residual rows ``(simulated − recorded)/norm``, flattened; diverged values clipped."""
-    residual = (y[rows] - data.outputs[rows]) / data.norm
+def _normalised(data, y, recorded):
+    """Return the residual ``(simulated − recorded)/norm`` on the windows' rows, flattened.
+
+    Diverged values are clipped to ±:data:`_DIVERGED`.
+    """
+    residual = (y - recorded) / data.norm
     residual = np.where(np.isfinite(residual), residual, _DIVERGED)
     return np.clip(residual, -_DIVERGED, _DIVERGED).ravel()
+
+
+def _batch_map(residuals):
+    """Return a map-like for ``least_squares(workers=...)``: one batch per Jacobian.
+
+    Every point of one finite-difference Jacobian is simulated in one batch (``residuals`` maps
+    a list of points to their residuals): the same residuals as one call each.
+    """
+
+    def evaluate(_fun, points):
+        return residuals(list(points))
+
+    return evaluate
 
 
 def state_guess(data: UnitData, theta: Mapping[str, float], variant: Variant) -> np.ndarray:
@@ -259,7 +311,16 @@ def state_guess(data: UnitData, theta: Mapping[str, float], variant: Variant) ->
     recorded = {spec.states.index(s): spec.outputs.index(o) for o, s in spec.output_states.items()}
     values = [theta[name] for name in variant.model.param_names]
     inputs = variant.input_map(data.inputs, theta, data)
-    for a, b in zip(starts, stops, strict=False):
+    if hasattr(variant.model, "simulate_chained"):  # one compiled pass
+        reset = np.array(list(recorded), dtype=np.int64)
+        reset_values = data.outputs[starts][:, list(recorded.values())]
+        with np.errstate(all="ignore"):
+            guess[window_rows(starts, stops)] = variant.model.simulate_chained(
+                inputs, values, starts, stops, state, reset, reset_values, data.dt,
+                substeps=data.substeps, linear=data.linear,
+            )  # fmt: skip
+        return guess
+    for a, b in zip(starts, stops, strict=False):  # a model without it (an FMU): window by window
         for j, o in recorded.items():
             state[j] = data.outputs[a, o]
         with np.errstate(all="ignore"):
@@ -361,7 +422,7 @@ def fit_variant(
     theta = {**nominal, **variant.starts, **variant.fixed}
     guess = data.guess if data.guess is not None else state_guess(data, theta, variant)
     x0 = np.ascontiguousarray(guess[starts] if x0 is None else x0)
-    rows = _window_rows(starts, stops)
+    recorded = data.outputs[window_rows(starts, stops)]
     n_states = x0.shape[1] if fit_states else 0
     state_scale = _state_scales(guess, n_states)
 
@@ -371,9 +432,14 @@ def fit_variant(
         states = z[len(names) :].reshape(len(starts), n_states) if n_states else x0
         return values, states
 
+    def residuals(points):
+        unpacked = [unpack(z) for z in points]
+        x0s = np.stack([states for _, states in unpacked])
+        ys = _simulate_rows(data, variant, [v for v, _ in unpacked], starts, stops, x0s)
+        return [_normalised(data, y, recorded) for y in ys]
+
     def residual(z):
-        values, states = unpack(z)
-        return _normalised(data, _simulate(data, variant, values, starts, stops, states), rows)
+        return residuals([z])[0]
 
     z0 = np.concatenate([p0, x0.ravel() if n_states else []])
     lower = np.concatenate([low, np.full(len(starts) * n_states, -np.inf)])
@@ -389,7 +455,7 @@ def fit_variant(
         return VariantFit(variant, dict(theta), (), x0, float(r @ r), len(r), None, r)
     result = least_squares(
         residual, z0, bounds=(lower, upper), x_scale=scales, jac_sparsity=sparsity,
-        max_nfev=max_nfev, xtol=1e-5, ftol=1e-6,
+        max_nfev=max_nfev, xtol=1e-5, ftol=1e-6, workers=_batch_map(residuals),
     )  # fmt: skip
     values, states = unpack(result.x)
     jac = result.jac.toarray() if hasattr(result.jac, "toarray") else np.asarray(result.jac)
@@ -408,20 +474,23 @@ def _state_scales(guess: np.ndarray, n_states: int) -> np.ndarray:
 
 
 def _sparsity(data, starts, stops, n_params, n_states):
-    """Jacobian sparsity: params touch every row, a window's states its own rows."""
-    from scipy.sparse import lil_matrix
+    """Jacobian sparsity: params touch every row, a window's states its own rows.
+
+    A CSC matrix (scipy's finite differences read it column by column), int8 ones.
+    """
+    from scipy.sparse import csc_matrix
 
     n_out = data.outputs.shape[1]
-    n_rows = int(np.sum(stops - starts)) * n_out
-    sparsity = lil_matrix((n_rows, n_params + len(starts) * n_states), dtype=np.int8)
-    sparsity[:, :n_params] = 1
-    row = 0
-    for w, (a, b) in enumerate(zip(starts, stops, strict=False)):
-        height = (b - a) * n_out
-        first = n_params + w * n_states
-        sparsity[row : row + height, first : first + n_states] = 1
-        row += height
-    return sparsity
+    heights = (np.asarray(stops) - np.asarray(starts)) * n_out
+    n_rows = int(heights.sum())
+    first = np.concatenate([[0], np.cumsum(heights)[:-1]])
+    # column c holds rows [row_start[c], row_stop[c]): every row for a param, a window's own
+    row_start = np.concatenate([np.zeros(n_params, int), np.repeat(first, n_states)])
+    row_stop = np.concatenate([np.full(n_params, n_rows), np.repeat(first + heights, n_states)])
+    indptr = np.concatenate([[0], np.cumsum(row_stop - row_start)])
+    indices = np.concatenate([np.arange(a, b) for a, b in zip(row_start, row_stop, strict=True)])
+    shape = (n_rows, n_params + len(starts) * n_states)
+    return csc_matrix((np.ones(len(indices), dtype=np.int8), indices, indptr), shape=shape)
 
 
 def part_error(
@@ -448,21 +517,24 @@ def part_error(
     starts, stops = data.windows(part, cap)
     guess = data.guess if data.guess is not None else state_guess(data, theta, variant)
     x0 = np.ascontiguousarray(guess[starts])
-    rows = _window_rows(starts, stops)
+    recorded = data.outputs[window_rows(starts, stops)]
     n_states = x0.shape[1]
     if fit_states and n_states:
 
+        def residuals(points):
+            x0s = np.stack([z.reshape(len(starts), n_states) for z in points])
+            ys = _simulate_rows(data, variant, [theta] * len(points), starts, stops, x0s)
+            return [_normalised(data, y, recorded) for y in ys]
+
         def residual(z):
-            states = z.reshape(len(starts), n_states)
-            y = _simulate(data, variant, theta, starts, stops, states)
-            return _normalised(data, y, rows)
+            return residuals([z])[0]
 
         columns = len(starts) * n_states
         # scipy's sparse trust region fails on one or two columns; dense is as cheap there
         sparsity = _sparsity(data, starts, stops, 0, n_states) if columns > 2 else None
         result = least_squares(
             residual, x0.ravel(), x_scale=np.tile(_state_scales(guess, n_states), len(starts)),
-            jac_sparsity=sparsity, max_nfev=20, xtol=1e-5,
+            jac_sparsity=sparsity, max_nfev=20, xtol=1e-5, workers=_batch_map(residuals),
         )  # fmt: skip
         x0 = result.x.reshape(len(starts), n_states)
     simulated = _simulate(data, variant, theta, starts, stops, x0)

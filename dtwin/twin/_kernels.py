@@ -1,14 +1,18 @@
 """Compiled loops of the twin package: the postfix interpreter and the windowed RK4 integrator.
 
-:func:`run_program` executes one expression's postfix program (:mod:`dtwin.twin.expressions`:
-opcodes ``OP_CONST`` … ``OP_IPOW``) over a vector of named slots; :func:`simulate_windows`
-integrates a unit's states with the classical Runge-Kutta method over each window, every window
-restarted from given states, and records the unit's outputs at every sample. Without numba the
-same functions run in Python (:mod:`dtwin._jit`), with the same arithmetic.
+:func:`run_program` executes a unit's postfix program (:mod:`dtwin.twin.expressions`: opcodes
+``OP_CONST`` … ``OP_STORE``) over a matrix of named slots, one column per **lane**;
+:func:`simulate_lanes` integrates a unit's states with the classical Runge-Kutta method over
+windows, every window restarted from given states, for a batch of param vectors at once, and
+records the unit's outputs at every sample. A lane is one (param vector, window) pair: all
+lanes advance in lockstep, so each opcode is dispatched once per step for every lane and the
+loop over lanes is tight (the interpreter's dispatch is paid once for the whole batch). Each
+lane's arithmetic is the same, in the same order, as a lane run alone. Without numba the same
+functions run in Python (:mod:`dtwin._jit`), with the same arithmetic.
 
-Slots: one float64 vector per run holding ``t``, the unit's inputs, states, params, algebraic
-signals and state derivatives (:class:`dtwin.twin.simulate.UnitModel` lays it out). Arrays are
-time-first.
+Slots: one float64 row per named slot (``t``, the unit's inputs, states, params, algebraic
+signals and state derivatives; :class:`dtwin.twin.simulate.UnitModel` lays it out), one column
+per lane. Arrays are time-first.
 """
 
 from __future__ import annotations
@@ -19,10 +23,10 @@ import numpy as np
 
 from dtwin._jit import njit
 
-__all__ = ["run_program", "simulate_windows", "warm_up"]
+__all__ = ["run_program", "simulate_lanes", "chain_windows", "warm_up"]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _unary(code: int, x: float) -> float:  # pragma: no cover - compiled
     if code == 0:
         return math.sqrt(x) if x >= 0.0 else math.nan
@@ -61,166 +65,291 @@ def _power(base: float, exponent: float) -> float:  # pragma: no cover - compile
     return base**exponent
 
 
-@njit(cache=True, inline="always")
-def run_program(code, consts, start, stop, slots, stack) -> float:  # pragma: no cover - compiled
-    """Run ``code[start:stop]`` (postfix, slot-bound) over ``slots``; return the top of stack.
+@njit(cache=True)
+def _divide(left: float, right: float) -> float:  # pragma: no cover - compiled
+    if right != 0.0:
+        return left / right
+    if left == 0.0:
+        return math.nan
+    return math.copysign(math.inf, left) * math.copysign(1.0, right)
 
-    ``OP_STORE`` (11) pops the top into ``slots[arg]``: a unit's whole program of assignments
-    runs as one pass.
+
+@njit(cache=True, inline="always")
+def run_program(code, consts, slots, stack) -> None:  # pragma: no cover - compiled
+    """Run the postfix program ``code`` (slot-bound) over every lane (column) of ``slots``.
+
+    ``slots`` has shape ``(n_slots, n_lanes)``, ``stack`` ``(depth + 1, n_lanes)``. ``OP_STORE``
+    (11) pops the top into ``slots[arg]``: a unit's whole program of assignments runs as one
+    pass. Each opcode is dispatched once; the loop over lanes does the arithmetic.
     """
+    n_lanes = slots.shape[1]
     sp = 0
-    for pc in range(start, stop):
+    for pc in range(code.shape[0] // 2):
         op = code[2 * pc]
         arg = code[2 * pc + 1]
         if op == 1:
-            stack[sp] = slots[arg]
+            for lane in range(n_lanes):
+                stack[sp, lane] = slots[arg, lane]
             sp += 1
         elif op == 0:
-            stack[sp] = consts[arg]
+            value = consts[arg]
+            for lane in range(n_lanes):
+                stack[sp, lane] = value
             sp += 1
         elif op == 11:
             sp -= 1
-            slots[arg] = stack[sp]
+            for lane in range(n_lanes):
+                slots[arg, lane] = stack[sp, lane]
         elif op == 7:
-            stack[sp - 1] = -stack[sp - 1]
+            for lane in range(n_lanes):
+                stack[sp - 1, lane] = -stack[sp - 1, lane]
         elif op == 8:
-            stack[sp - 1] = _unary(arg, stack[sp - 1])
+            for lane in range(n_lanes):
+                stack[sp - 1, lane] = _unary(arg, stack[sp - 1, lane])
         elif op == 10:
-            base = stack[sp - 1]
-            value = base
-            for _ in range(arg - 1):
-                value = value * base
-            stack[sp - 1] = value
+            for lane in range(n_lanes):
+                base = stack[sp - 1, lane]
+                value = base
+                for _ in range(arg - 1):
+                    value = value * base
+                stack[sp - 1, lane] = value
         else:
             sp -= 1
-            left = stack[sp - 1]
-            right = stack[sp]
+            top = sp - 1
             if op == 2:
-                stack[sp - 1] = left + right
+                for lane in range(n_lanes):
+                    stack[top, lane] = stack[top, lane] + stack[sp, lane]
             elif op == 3:
-                stack[sp - 1] = left - right
+                for lane in range(n_lanes):
+                    stack[top, lane] = stack[top, lane] - stack[sp, lane]
             elif op == 4:
-                stack[sp - 1] = left * right
+                for lane in range(n_lanes):
+                    stack[top, lane] = stack[top, lane] * stack[sp, lane]
             elif op == 5:
-                stack[sp - 1] = (
-                    left / right
-                    if right != 0.0
-                    else (
-                        math.nan
-                        if left == 0.0
-                        else math.copysign(math.inf, left) * math.copysign(1.0, right)
-                    )
-                )
+                for lane in range(n_lanes):
+                    stack[top, lane] = _divide(stack[top, lane], stack[sp, lane])
             elif op == 6:
-                stack[sp - 1] = _power(left, right)
+                for lane in range(n_lanes):
+                    stack[top, lane] = _power(stack[top, lane], stack[sp, lane])
             elif arg == 0:
-                stack[sp - 1] = left if left < right else right
+                for lane in range(n_lanes):
+                    left, right = stack[top, lane], stack[sp, lane]
+                    stack[top, lane] = left if left < right else right
             else:
-                stack[sp - 1] = left if left > right else right
-    return stack[0]
+                for lane in range(n_lanes):
+                    left, right = stack[top, lane], stack[sp, lane]
+                    stack[top, lane] = left if left > right else right
 
 
 @njit(cache=True, inline="always")
-def _slope(code, consts, slots, stack, t, work, src, dst, layout, u, k, frac):  # pragma: no cover
-    """Write the derivatives at state ``work[src]`` (time ``t``) into ``work[dst]``.
+def _slope(code, consts, slots, stack, times, f, work, src, dst, layout, u, lane_set, k):
+    # pragma: no cover - compiled
+    """Write the derivatives at ``work[src]`` (each lane at sample ``k + f``) to ``work[dst]``.
 
-    Arrays are indexed, never sliced: a view in the loop costs a reference count each time.
+    Lane ``l`` reads the input set ``u[lane_set[l]]`` at its own sample ``k[l]``, linear to the
+    next sample by ``f`` where ``linear``, and the time ``times = (t0, dt, f_t, extra)`` as
+    ``t0 + (k + f_t)·dt + extra`` (a sub-step's start plus a part of the step, rounded as a
+    lane run alone). Arrays are indexed, never sliced: a view in the loop costs a reference
+    count each time.
     """
     state_slots, deriv_slots, in_slots, linear = layout
-    slots[0] = t
-    last = u.shape[0] - 1
+    n_lanes = slots.shape[1]
+    last = u.shape[1] - 1
+    t0, dt, f_t, extra = times
+    for lane in range(n_lanes):
+        slots[0, lane] = t0 + (k[lane] + f_t) * dt + extra
     for i in range(in_slots.shape[0]):
-        value = u[k, i]
-        if linear[i] and frac > 0.0 and k < last:
-            value = value + frac * (u[k + 1, i] - value)
-        slots[in_slots[i]] = value
+        row = in_slots[i]
+        for lane in range(n_lanes):
+            s = lane_set[lane]
+            kk = k[lane]
+            value = u[s, kk, i]
+            if linear[i] and f > 0.0 and kk < last:
+                value = value + f * (u[s, kk + 1, i] - value)
+            slots[row, lane] = value
     for j in range(state_slots.shape[0]):
-        slots[state_slots[j]] = work[src, j]
-    run_program(code, consts, 0, code.shape[0] // 2, slots, stack)
+        row = state_slots[j]
+        for lane in range(n_lanes):
+            slots[row, lane] = work[src, j, lane]
+    run_program(code, consts, slots, stack)
     for j in range(deriv_slots.shape[0]):
-        work[dst, j] = slots[deriv_slots[j]]
+        row = deriv_slots[j]
+        for lane in range(n_lanes):
+            work[dst, j, lane] = slots[row, lane]
 
 
 @njit(cache=True, inline="always")
-def _clamp(work, row, lo, hi):  # pragma: no cover - compiled
+def _clamp(work, lo, hi, lane_member):  # pragma: no cover - compiled
+    """Clamp each lane's state (``work[0]``) to its batch member's ``[lo, hi]``."""
     for j in range(work.shape[1]):
-        if work[row, j] < lo[j]:
-            work[row, j] = lo[j]
-        elif work[row, j] > hi[j]:
-            work[row, j] = hi[j]
-
-
-@njit(cache=True, inline="always")
-def _rk4_sample(code, consts, slots, stack, work, layout, u, k, dt, t0, substeps, lo, hi):
-    """Advance the state (``work[0]``) from sample ``k`` to ``k + 1`` in ``substeps`` steps.
-
-    ``work`` rows: 0 the state, 1–4 the four slopes, 5 the trial state. Clamped to
-    ``[lo, hi]`` after each step.
-    """
-    h = dt / substeps
-    n = work.shape[1]
-    for j in range(substeps):
-        f0 = j / substeps
-        fm = (j + 0.5) / substeps
-        f1 = (j + 1.0) / substeps
-        t_start = t0 + (k + f0) * dt
-        _slope(code, consts, slots, stack, t_start, work, 0, 1, layout, u, k, f0)
-        for i in range(n):
-            work[5, i] = work[0, i] + 0.5 * h * work[1, i]
-        _slope(code, consts, slots, stack, t_start + 0.5 * h, work, 5, 2, layout, u, k, fm)
-        for i in range(n):
-            work[5, i] = work[0, i] + 0.5 * h * work[2, i]
-        _slope(code, consts, slots, stack, t_start + 0.5 * h, work, 5, 3, layout, u, k, fm)
-        for i in range(n):
-            work[5, i] = work[0, i] + h * work[3, i]
-        _slope(code, consts, slots, stack, t_start + h, work, 5, 4, layout, u, k, f1)
-        for i in range(n):
-            work[0, i] += h / 6.0 * (work[1, i] + 2.0 * work[2, i] + 2.0 * work[3, i] + work[4, i])
-        _clamp(work, 0, lo, hi)
-
-
-@njit(cache=True, inline="always")
-def _record(code, consts, slots, stack, t, work, layout, u, k, out_slots, y, states):
-    """Write the outputs and the state at sample ``k`` (time ``t``)."""
-    _slope(code, consts, slots, stack, t, work, 0, 5, layout, u, k, 0.0)
-    for o in range(out_slots.shape[0]):
-        y[k, o] = slots[out_slots[o]]
-    for j in range(work.shape[1]):
-        states[k, j] = work[0, j]
+        for lane in range(work.shape[2]):
+            b = lane_member[lane]
+            if work[0, j, lane] < lo[b, j]:
+                work[0, j, lane] = lo[b, j]
+            elif work[0, j, lane] > hi[b, j]:
+                work[0, j, lane] = hi[b, j]
 
 
 @njit(cache=True)
-def simulate_windows(
-    program, base, layout, u, out_slots, lo, hi, starts, stops, x0, dt, t0, substeps, depth
-):  # pragma: no cover - compiled
-    """Integrate a unit over windows; return its outputs and states at every sample.
+def _integrate(code, consts, layout, u, lanes, out_slots, lo, hi, times, depth, slots, work, y,
+               states):  # fmt: skip
+    # pragma: no cover - compiled
+    """Advance every lane over its samples in lockstep, recording outputs and states.
 
-    Returns ``(outputs, states)``, shapes ``(n_samples, n_outputs)`` and ``(n_samples,
-    n_states)``.
+    ``lanes = (member, input_set, start, length, row)`` per lane: its batch member (row of
+    ``lo``, ``hi``, ``y``, ``states``), input set, first sample, number of samples and first
+    output row. ``slots`` ``(n_slots, n_lanes)`` holds each lane's params, ``work[0]``
+    ``(n_states, n_lanes)`` its start state; ``times = (t0, dt, substeps)``; ``depth`` the
+    program's deepest stack. Each sample
+    advances by ``substeps`` classical Runge-Kutta steps, the state clamped to ``[lo, hi]``
+    after each. A lane whose samples have ended repeats its last one (computed, not recorded).
+    """
+    member, lane_set, start, length, row = lanes
+    t0, dt, substeps = times
+    n_lanes = slots.shape[1]
+    n_states = work.shape[1]
+    stack = np.empty((depth + 1, n_lanes))
+    k = np.empty(n_lanes, dtype=np.int64)
+    longest = 0
+    for lane in range(n_lanes):
+        longest = max(longest, length[lane])
+    _clamp(work, lo, hi, member)
+    h = dt / substeps
+    for i in range(longest):
+        for lane in range(n_lanes):
+            k[lane] = start[lane] + min(i, length[lane] - 1)
+        _slope(code, consts, slots, stack, (t0, dt, 0.0, 0.0), 0.0, work, 0, 5, layout, u,
+               lane_set, k)  # fmt: skip
+        for lane in range(n_lanes):
+            if i < length[lane]:
+                b, r = member[lane], row[lane] + i
+                for o in range(out_slots.shape[0]):
+                    y[b, r, o] = slots[out_slots[o], lane]
+                for j in range(n_states):
+                    states[b, r, j] = work[0, j, lane]
+        if i == longest - 1:
+            break
+        for step in range(substeps):
+            f0 = step / substeps
+            fm = (step + 0.5) / substeps
+            f1 = (step + 1.0) / substeps
+            _slope(code, consts, slots, stack, (t0, dt, f0, 0.0), f0, work, 0, 1, layout, u,
+                   lane_set, k)  # fmt: skip
+            for j in range(n_states):
+                for lane in range(n_lanes):
+                    work[5, j, lane] = work[0, j, lane] + 0.5 * h * work[1, j, lane]
+            _slope(code, consts, slots, stack, (t0, dt, f0, 0.5 * h), fm, work, 5, 2, layout, u,
+                   lane_set, k)  # fmt: skip
+            for j in range(n_states):
+                for lane in range(n_lanes):
+                    work[5, j, lane] = work[0, j, lane] + 0.5 * h * work[2, j, lane]
+            _slope(code, consts, slots, stack, (t0, dt, f0, 0.5 * h), fm, work, 5, 3, layout, u,
+                   lane_set, k)  # fmt: skip
+            for j in range(n_states):
+                for lane in range(n_lanes):
+                    work[5, j, lane] = work[0, j, lane] + h * work[3, j, lane]
+            _slope(code, consts, slots, stack, (t0, dt, f0, h), f1, work, 5, 4, layout, u,
+                   lane_set, k)  # fmt: skip
+            for j in range(n_states):
+                for lane in range(n_lanes):
+                    work[0, j, lane] += (
+                        h / 6.0
+                        * (work[1, j, lane] + 2.0 * work[2, j, lane] + 2.0 * work[3, j, lane]
+                           + work[4, j, lane])
+                    )  # fmt: skip
+            _clamp(work, lo, hi, member)
+
+
+@njit(cache=True)
+def _rows(starts, stops):  # pragma: no cover - compiled
+    """First output row of each window, windows one after the other; and the total."""
+    offsets = np.zeros(starts.shape[0], dtype=np.int64)
+    total = 0
+    for w in range(starts.shape[0]):
+        offsets[w] = total
+        total += stops[w] - starts[w]
+    return offsets, total
+
+
+@njit(cache=True)
+def simulate_lanes(
+    program, bases, layout, u, u_of, out_slots, lo, hi, starts, stops, x0, dt, t0, substeps, depth
+):  # pragma: no cover - compiled
+    """Integrate a unit over windows for a batch of param vectors; return outputs and states.
+
+    Returns ``(outputs, states)``, shapes ``(n_batch, n_rows, n_outputs)`` and ``(n_batch,
+    n_rows, n_states)``: the windows' samples one after the other (window ``w`` at rows
+    ``Σ_{v<w} (stops[v] − starts[v])`` on).
 
     ``program`` is ``(code, consts, bounds, targets)``; ``layout`` is ``(state_slots,
-    deriv_slots, in_slots, linear)``; ``base`` the slot vector with params filled; ``u`` the
-    inputs at the samples ``(n_samples, n_inputs)``; window ``w`` runs from sample
-    ``starts[w]`` (state ``x0[w]``) to ``stops[w] - 1``; samples outside every window are NaN.
+    deriv_slots, in_slots, linear)``; ``bases`` ``(n_batch, n_slots)`` each member's slot vector
+    with its params filled; ``u`` ``(n_sets, n_samples, n_inputs)`` input sets at the samples,
+    member ``b`` reading set ``u_of[b]``; ``lo``, ``hi`` ``(n_batch, n_states)`` state bounds;
+    window ``w`` runs from sample ``starts[w]`` (state ``x0[b, w]``) to ``stops[w] - 1``. Each
+    (member, window) is one lane of :func:`_integrate`; the inputs are held over a sample, or
+    linear to the next one where ``linear``.
     """
-    code, consts = program[0], program[1]
-    n_samples = u.shape[0]
-    y = np.full((n_samples, out_slots.shape[0]), np.nan)
-    states = np.full((n_samples, x0.shape[1]), np.nan)
-    slots = base.copy()
-    stack = np.empty(depth + 1)
-    work = np.empty((6, x0.shape[1]))
-    for w in range(starts.shape[0]):
-        a = starts[w]
-        for j in range(x0.shape[1]):
-            work[0, j] = x0[w, j]
-        _clamp(work, 0, lo, hi)
-        _record(code, consts, slots, stack, t0 + a * dt, work, layout, u, a, out_slots, y, states)
-        for k in range(a, stops[w] - 1):
-            _rk4_sample(code, consts, slots, stack, work, layout, u, k, dt, t0, substeps, lo, hi)
-            t = t0 + (k + 1) * dt
-            _record(code, consts, slots, stack, t, work, layout, u, k + 1, out_slots, y, states)
+    n_batch, n_windows, n_states = x0.shape
+    n_lanes = n_batch * n_windows
+    offsets, n_rows = _rows(starts, stops)
+    member = np.empty(n_lanes, dtype=np.int64)
+    lane_set, start = np.empty_like(member), np.empty_like(member)
+    length, row = np.empty_like(member), np.empty_like(member)
+    slots = np.empty((bases.shape[1], n_lanes))
+    work = np.empty((6, n_states, n_lanes))
+    for b in range(n_batch):
+        for w in range(n_windows):
+            lane = b * n_windows + w
+            member[lane], lane_set[lane] = b, u_of[b]
+            start[lane], length[lane], row[lane] = starts[w], stops[w] - starts[w], offsets[w]
+            for s in range(bases.shape[1]):
+                slots[s, lane] = bases[b, s]
+            for j in range(n_states):
+                work[0, j, lane] = x0[b, w, j]
+    y = np.empty((n_batch, n_rows, out_slots.shape[0]))
+    states = np.empty((n_batch, n_rows, n_states))
+    _integrate(program[0], program[1], layout, u, (member, lane_set, start, length, row),
+               out_slots, lo, hi, (t0, dt, substeps), depth, slots, work, y, states)  # fmt: skip
     return y, states
+
+
+@njit(cache=True)
+def chain_windows(
+    program, base, layout, u, out_slots, starts, stops, x0, reset, values, dt, t0, substeps, depth
+):  # pragma: no cover - compiled
+    """Integrate windows one after the other, each from the end of the previous one.
+
+    Returns ``(outputs, states)`` as :func:`simulate_lanes` for one member (without the batch
+    axis). The first window starts from ``x0`` ``(n_states,)``; at each window's start the
+    states ``reset`` (indices) are set to ``values[w]``; a window whose end is not finite
+    passes on its own start instead (per state). ``u`` ``(n_samples, n_inputs)``; no bounds.
+    """
+    n_windows, n_states = starts.shape[0], x0.shape[0]
+    offsets, n_rows = _rows(starts, stops)
+    y = np.empty((1, n_rows, out_slots.shape[0]))
+    states = np.empty((1, n_rows, n_states))
+    zero = np.zeros(1, dtype=np.int64)
+    lo, hi = np.full((1, n_states), -np.inf), np.full((1, n_states), np.inf)
+    slots = np.empty((base.shape[0], 1))
+    work = np.empty((6, n_states, 1))
+    state = x0.copy()
+    sets = u.reshape((1, u.shape[0], u.shape[1]))
+    for w in range(n_windows):
+        for i in range(reset.shape[0]):
+            state[reset[i]] = values[w, i]
+        for s in range(base.shape[0]):
+            slots[s, 0] = base[s]
+        for j in range(n_states):
+            work[0, j, 0] = state[j]
+        lanes = (zero, zero, starts[w : w + 1], stops[w : w + 1] - starts[w : w + 1],
+                 offsets[w : w + 1])  # fmt: skip
+        _integrate(program[0], program[1], layout, sets, lanes, out_slots, lo, hi,
+                   (t0, dt, substeps), depth, slots, work, y, states)  # fmt: skip
+        end = offsets[w] + stops[w] - starts[w] - 1
+        for j in range(n_states):
+            if math.isfinite(states[0, end, j]):
+                state[j] = states[0, end, j]
+    return y[0], states[0]
 
 
 def warm_up() -> None:
@@ -238,10 +367,15 @@ def warm_up() -> None:
         np.array([1], dtype=np.int64),
         np.array([True]),
     )
-    u = np.ones((4, 1))
-    inf = np.full(1, np.inf)
+    u = np.ones((1, 4, 1))
+    inf = np.full((1, 1), np.inf)
     starts, stops = np.array([0], dtype=np.int64), np.array([4], dtype=np.int64)
-    simulate_windows(
-        program, np.zeros(4), layout, u, np.array([2], dtype=np.int64), -inf, inf,
-        starts, stops, np.zeros((1, 1)), 0.1, 0.0, 2, 3,
+    out = np.array([2], dtype=np.int64)
+    simulate_lanes(
+        program, np.zeros((1, 4)), layout, u, np.zeros(1, dtype=np.int64), out, -inf, inf,
+        starts, stops, np.zeros((1, 1, 1)), 0.1, 0.0, 2, 3,
+    )  # fmt: skip
+    chain_windows(
+        program, np.zeros(4), layout, u[0], out, starts, stops, np.zeros(1),
+        np.zeros(1, dtype=np.int64), np.zeros((1, 1)), 0.1, 0.0, 2, 3,
     )  # fmt: skip

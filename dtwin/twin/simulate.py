@@ -10,7 +10,7 @@ mechanical parts coupled through the back-EMF) is one system of equations.
 
 :class:`UnitModel` lays a unit out as one slot vector (``t``, inputs, states, params, algebraic
 signals, derivatives) and one postfix program of assignments (algebraic equations in dependency
-order, then each state's derivative), integrated by :func:`dtwin.twin._kernels.simulate_windows`
+order, then each state's derivative), integrated by :func:`dtwin.twin._kernels.simulate_lanes`
 with the classical Runge-Kutta method over ``substeps`` steps per sample. Recorded inputs are
 held over a sample (``zoh``) or linear between samples (``foh``, and always for a signal another
 module produces). A unit's variants (a candidate effect: an extra term in a derivative, a wrapped
@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from dtwin._validation import DtwinValueError
-from dtwin.twin._kernels import simulate_windows
+from dtwin.twin._kernels import chain_windows, simulate_lanes
 from dtwin.twin.expressions import OP_STORE, parse_expression
 
 __all__ = [
@@ -41,6 +41,7 @@ __all__ = [
     "UnitModel",
     "units_of",
     "choose_substeps",
+    "window_rows",
 ]
 
 #: Largest ``h·ρ`` of a Runge-Kutta step (``ρ`` the Jacobian's spectral radius).
@@ -333,7 +334,7 @@ class UnitModel:
         linear: Sequence[bool] | None = None,
         limits: tuple[np.ndarray, np.ndarray] | None = None,
         t0: float = 0.0,
-    ) -> np.ndarray:
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Simulate the unit over windows; return its outputs and its states.
 
         Returns ``(outputs, states)``, shapes ``(n_samples, n_outputs)`` and ``(n_samples,
@@ -360,6 +361,124 @@ class UnitModel:
         t0 : float
             Time of sample 0, s.
         """
+        starts = np.asarray(starts, dtype=np.int64)
+        stops = np.asarray(stops, dtype=np.int64)
+        n_states = len(self.spec.states)
+        x0 = np.asarray(x0, dtype=np.float64).reshape(1, len(starts), n_states)
+        y, states = self.simulate_batch(
+            [inputs], [0], [theta], starts, stops, x0, dt, substeps=substeps, linear=linear,
+            limits=None if limits is None else [limits], t0=t0,
+        )  # fmt: skip
+        n_samples = len(inputs)
+        rows = window_rows(starts, stops)
+        full_y = np.full((n_samples, y.shape[2]), np.nan)
+        full_states = np.full((n_samples, n_states), np.nan)
+        full_y[rows] = y[0]
+        full_states[rows] = states[0]
+        return full_y, full_states
+
+    def simulate_batch(
+        self,
+        input_sets: Sequence[np.ndarray],
+        input_of: Sequence[int],
+        thetas: Sequence[Sequence[float]],
+        starts: np.ndarray,
+        stops: np.ndarray,
+        x0: np.ndarray,
+        dt: float,
+        *,
+        substeps: int = 1,
+        linear: Sequence[bool] | None = None,
+        limits: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
+        t0: float = 0.0,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Simulate the unit over windows for several param vectors at once (one compiled pass).
+
+        Each member's outputs and states are those :meth:`simulate` returns for it, bit for bit,
+        on the windows' samples only.
+
+        Parameters
+        ----------
+        input_sets : sequence of numpy.ndarray, each shape (n_samples, n_inputs)
+            The distinct input series of the batch.
+        input_of : sequence of int, length n_batch
+            The input set each member reads.
+        thetas : sequence of sequences of float, shape (n_batch, len(param_names))
+            Each member's param values.
+        starts, stops : numpy.ndarray of int, shape (n_windows,)
+            The windows (as :meth:`simulate`).
+        x0 : numpy.ndarray, shape (n_batch, n_windows, n_states)
+            Each member's states at each window's first sample.
+        dt, substeps, linear, t0
+            As :meth:`simulate` (the same for every member).
+        limits : sequence of (lo, hi), optional
+            Each member's state bounds, shape ``(n_states,)`` each.
+
+        Returns
+        -------
+        (outputs, states) : numpy.ndarray, shapes (n_batch, n_rows, n_outputs) and
+            (n_batch, n_rows, n_states)
+            Rows are the windows' samples one after the other (:func:`window_rows`).
+        """
+        n_batch = len(thetas)
+        n_states = len(self.spec.states)
+        bases = np.zeros((n_batch, len(self.slots)))
+        index = np.array([self.slots[name] for name in self.param_names], dtype=np.int64)
+        if len(index):
+            bases[:, index] = np.asarray(thetas, dtype=np.float64).reshape(n_batch, len(index))
+        layout = self.layout
+        if linear is not None:
+            layout = (*layout[:3], np.asarray(linear, dtype=np.bool_))
+        lo = np.full((n_batch, n_states), -np.inf)
+        hi = np.full((n_batch, n_states), np.inf)
+        for b, bound in enumerate(limits or ()):
+            if bound is not None:
+                lo[b], hi[b] = bound
+        n_samples, n_inputs = len(input_sets[0]), len(self.spec.inputs)
+        sets = [np.ascontiguousarray(v, dtype=np.float64).reshape(n_samples, n_inputs)
+                for v in input_sets]  # fmt: skip
+        u = sets[0][None] if len(sets) == 1 else np.stack(sets)  # one set: no copy
+        starts = np.asarray(starts, dtype=np.int64)
+        return simulate_lanes(
+            self.program,
+            bases,
+            layout,
+            u,
+            np.asarray(input_of, dtype=np.int64),
+            self.out_slots,
+            lo,
+            hi,
+            starts,
+            np.asarray(stops, dtype=np.int64),
+            np.ascontiguousarray(x0, dtype=np.float64).reshape(n_batch, len(starts), n_states),
+            float(dt),
+            float(t0),
+            int(substeps),
+            int(self.depth),
+        )
+
+    def simulate_chained(
+        self,
+        inputs: np.ndarray,
+        theta: Sequence[float],
+        starts: np.ndarray,
+        stops: np.ndarray,
+        x0: np.ndarray,
+        reset: Sequence[int],
+        values: np.ndarray,
+        dt: float,
+        *,
+        substeps: int = 1,
+        linear: Sequence[bool] | None = None,
+    ) -> np.ndarray:
+        """Run windows one after the other, each from the end of the previous; return the states.
+
+        The first window starts from ``x0`` ``(n_states,)``; at each window's start the states
+        at indices ``reset`` are set to ``values[w]`` (shape ``(n_windows, len(reset))``: a
+        state recorded as an output, from the recording); a state whose window ends not finite
+        passes on its start instead. No state bounds. Returns the states at every sample of the
+        windows, shape ``(Σ (stops − starts), n_states)`` (:func:`window_rows`).
+        """
         base = np.zeros(len(self.slots))
         for name, value in zip(self.param_names, theta, strict=False):
             base[self.slots[name]] = value
@@ -367,24 +486,16 @@ class UnitModel:
         if linear is not None:
             layout = (*layout[:3], np.asarray(linear, dtype=np.bool_))
         n_states = len(self.spec.states)
-        if limits is None:
-            limits = (np.full(n_states, -np.inf), np.full(n_states, np.inf))
-        return simulate_windows(
-            self.program,
-            base,
-            layout,
+        _, states = chain_windows(
+            self.program, base, layout,
             np.ascontiguousarray(inputs, dtype=np.float64).reshape(len(inputs), -1),
-            self.out_slots,
-            np.asarray(limits[0], dtype=np.float64),
-            np.asarray(limits[1], dtype=np.float64),
-            np.asarray(starts, dtype=np.int64),
-            np.asarray(stops, dtype=np.int64),
-            np.ascontiguousarray(x0, dtype=np.float64).reshape(len(starts), n_states),
-            float(dt),
-            float(t0),
-            int(substeps),
-            int(self.depth),
-        )
+            self.out_slots, np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64),
+            np.asarray(x0, dtype=np.float64).reshape(n_states).copy(),
+            np.asarray(reset, dtype=np.int64),
+            np.ascontiguousarray(values, dtype=np.float64).reshape(len(starts), len(reset)),
+            float(dt), 0.0, int(substeps), int(self.depth),
+        )  # fmt: skip
+        return states
 
     def derivatives(self, state: np.ndarray, inputs: np.ndarray, theta, t: float = 0.0):
         """Return the state derivatives at one point, shape ``(n_states,)`` (for Jacobians)."""
@@ -405,6 +516,19 @@ def _with_symbols(assignment: Assignment, extra: Mapping[str, str]) -> Assignmen
     if not extra:
         return assignment
     return replace(assignment, symbols={**assignment.symbols, **extra})
+
+
+def window_rows(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    """Return the samples of windows ``starts[w] … stops[w] − 1``, one window after the other.
+
+    Returns
+    -------
+    numpy.ndarray of int64, shape (Σ (stops − starts),)
+    """
+    starts = np.asarray(starts, dtype=np.int64)
+    lengths = np.asarray(stops, dtype=np.int64) - starts
+    first = np.repeat(starts - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
+    return first + np.arange(int(lengths.sum()), dtype=np.int64)
 
 
 def choose_substeps(
