@@ -357,6 +357,9 @@ class _UnitRunner:
         self.state = np.zeros(len(spec.states))
         self.span = reset_span(unit.window)
         self.recent = np.zeros((0, len(pairs)))
+        n_states = len(spec.states)
+        self.limits = (np.full(n_states, -np.inf), np.full(n_states, np.inf))
+        self.linear = np.asarray(unit.linear, dtype=np.bool_)
 
     def start_state(self, rows: np.ndarray) -> None:
         """Fit the initial states on the first ``settle`` rows (params held)."""
@@ -390,12 +393,14 @@ class _UnitRunner:
         return fit.x
 
     def _simulate(self, u: np.ndarray, t0: float) -> tuple[np.ndarray, np.ndarray]:
-        """Return the outputs and states of rows ``u`` from the state at row 0 (one window)."""
-        with np.errstate(all="ignore"):
-            return self.model.simulate(
-                u, self.theta, _FIRST, np.array([len(u)]), self.state[None, :], self.dt,
-                substeps=self.unit.substeps, linear=self.unit.linear, t0=t0,
-            )  # fmt: skip
+        """Return the outputs and states of rows ``u`` from the state at row 0 (one window).
+
+        The caller holds floating-point warnings off (a diverging state is checked after).
+        """
+        return self.model.simulate(
+            u, self.theta, _FIRST, np.array([len(u)]), self.state[None, :], self.dt,
+            substeps=self.unit.substeps, linear=self.linear, limits=self.limits, t0=t0,
+        )  # fmt: skip
 
     def run(self, rows: np.ndarray, k0: int, t0: float) -> np.ndarray:
         """Return the outputs at ``rows`` (row 0: the state's sample); move the state on.
@@ -408,8 +413,15 @@ class _UnitRunner:
         """
         u, y = rows[:, self.in_cols], rows[:, self.out_cols]
         n, window = len(rows), self.unit.window
-        out = np.empty((n, len(self.out_cols)))
         first = (-k0) % window or window
+        if n == 2 and (first > 1 or not len(self.reset_states)):  # a live stream's one sample
+            out, states = self._simulate(u, t0)
+            self.state = states[-1].copy()
+            if len(self.reset_states):
+                gaps = y[1:, self.reset_outputs] - out[1:, self.reset_outputs]
+                self.recent = np.vstack([self.recent, gaps])[-self.span :]
+            return out
+        out = np.empty((n, len(self.out_cols)))
         cuts = list(range(first, n, window)) if len(self.reset_states) else []
         bounds = [0, *cuts] + ([n - 1] if not cuts or cuts[-1] != n - 1 else [])
         if n == 1:
@@ -479,6 +491,7 @@ class CausalTwin:
         if channels is not None:  # run only the units holding one of these channels
             units = [u for u in units if set(channel_names([u])) & set(channels)]
         self.runners = [_UnitRunner(u, specs[u.name], self.columns, dt) for u in units]
+        self.output_columns = np.array([i for r in self.runners for i in r.out_cols], dtype=int)
         self.channels = channel_names(units)
         self.dt = float(dt)
         self.restart(0.0)
@@ -498,7 +511,8 @@ class CausalTwin:
     @property
     def diverged(self) -> bool:
         """Whether a unit's state is no longer finite (the twin must restart)."""
-        return self.settled and not all(np.all(np.isfinite(r.state)) for r in self.runners)
+        states = [r.state for r in self.runners]
+        return self.settled and not np.isfinite(np.concatenate(states)).all()
 
     def feed(self, rows: np.ndarray) -> CausalRows:
         """Run the twin over the next samples; return their outputs and residuals.
@@ -518,17 +532,17 @@ class CausalTwin:
         simulated = np.full((n, len(self.channels)), np.nan)
         settling = np.zeros(n, dtype=bool)
         first = 0
-        if not self.settled:
-            first = min(n, self.settling - sum(len(b) for b in self.buffer))
-            self.buffer.append(rows[:first])
-            settling[:first] = True
-            if sum(len(b) for b in self.buffer) == self.settling:
-                self._settle(np.concatenate(self.buffer))
-        if first < n and self.settled:
-            simulated[first:] = self._continue(rows[first:])
-        residuals = np.full_like(simulated, np.nan)
-        columns = [i for r in self.runners for i in r.out_cols]
-        residuals[first:] = rows[first:, columns] - simulated[first:]
+        with np.errstate(all="ignore"):  # a diverging state is checked after (diverged)
+            if not self.settled:
+                first = min(n, self.settling - sum(len(b) for b in self.buffer))
+                self.buffer.append(rows[:first])
+                settling[:first] = True
+                if sum(len(b) for b in self.buffer) == self.settling:
+                    self._settle(np.concatenate(self.buffer))
+            if first < n and self.settled:
+                simulated[first:] = self._continue(rows[first:])
+            residuals = np.full_like(simulated, np.nan)
+            residuals[first:] = rows[first:, self.output_columns] - simulated[first:]
         return CausalRows(simulated, residuals, settling)
 
     def _settle(self, rows: np.ndarray) -> None:

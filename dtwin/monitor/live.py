@@ -105,7 +105,7 @@ class Monitor:
         self.tracker = RegimeTracker(model.model, model.actions, gap_hold=self.twin.settling)
         self.hold = HoldRule(settings.hold or model.hold)
         self.parser = RowParser(self.twin.columns, model.dt, settings.max_gap, header, model.ranges)
-        self.modelled = [self.twin.channels.index(c) for c in model.model.channels]
+        self.modelled = np.array([self.twin.channels.index(c) for c in model.model.channels])
         produced = {s for u in model.units for s in u.outputs}
         self.output_columns = np.array([c in produced for c in self.twin.columns])
         self.labels = list(model.model.labels)
@@ -254,26 +254,32 @@ class Monitor:
 
     def _process(self, block: np.ndarray, present: np.ndarray, times: np.ndarray) -> None:
         causal = self.twin.feed(block)
-        ks = self.k + 1 + np.arange(len(block))
-        self.k += len(block)
+        n, k0 = len(block), self.k + 1
+        self.k += n
         self.last_values = block[-1]
-        valid = ~causal.settling
+        settled = int(n - causal.settling.sum())  # the settling rows come first
+        first = k0 + n - settled  # index of the first settled row
         text = []
-        settling_rows = np.flatnonzero(causal.settling & present)
-        text += self._settling_lines(times, settling_rows)
+        if settled < n:
+            settling_rows = np.flatnonzero(causal.settling & present)
+            text += self._settling_lines(times, settling_rows)
         events: list[HoldEvent] = []
         tracked = None
-        if valid.any():
-            rows = np.flatnonzero(valid)
+        if settled:
             tracked = self.tracker.feed(
-                causal.residuals[np.ix_(rows, self.modelled)],
-                causal.simulated[np.ix_(rows, self.modelled)],
+                causal.residuals[n - settled :, self.modelled],
+                causal.simulated[n - settled :, self.modelled],
             )
-            events = self.hold.feed(tracked.nominal, int(ks[valid][0]))
-            text += self._sample_lines(times[valid], tracked, present[valid])
+            events = self.hold.feed(tracked.nominal, first)
+            text += self._sample_lines(times[n - settled :], tracked, present[n - settled :])
         self.out.write("".join(text))
-        changes = [self._hold_event(event, tracked, int(ks[valid][0])) for event in events]
-        self._remember(ks[present], times[present], block[present], [c for c in changes if c >= 0])
+        changes = [self._hold_event(event, tracked, first) for event in events]
+        opened = [c for c in changes if c >= 0]
+        ks = k0 + np.arange(n)
+        if present.all():
+            self._remember(ks, times, block, opened)
+        else:
+            self._remember(ks[present], times[present], block[present], opened)
 
     def _settling_lines(self, times: np.ndarray, rows: np.ndarray) -> list[str]:
         picked = rows[self._counted(len(rows))]

@@ -139,11 +139,15 @@ def test_the_regimes_of_a_recording_with_a_switch(seen):
 
 
 def test_replay_equals_batch(seen):
-    """Filtered posteriors and correction of a replay in random chunks equal the batch's."""
+    """Filtered posteriors and correction of a replay in random chunks equal the batch's.
+
+    The chunks include 600 single lines (a live stream's pace, across window cuts).
+    """
     frame, table, result = seen
     rng = np.random.default_rng(0)
     lines = _lines(frame)
-    chunks = rng.integers(1, 400, size=40).tolist()
+    chunks = [*rng.integers(1, 400, size=20).tolist(), *[1] * 600,
+              *rng.integers(1, 400, size=20).tolist()]  # fmt: skip
     output, _, summary = _monitor(result, table, lines, chunks)
     samples = [row for row in output if "p" in row]
     assert summary["rows_used"] == N and len(samples) == N - result.settling
