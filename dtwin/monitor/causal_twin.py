@@ -411,16 +411,16 @@ class _UnitRunner:
         :func:`reset_span` samples (finite ones), and the cut's output is the moved state's. A
         unit without such states runs in one piece.
         """
-        u, y = rows[:, self.in_cols], rows[:, self.out_cols]
         n, window = len(rows), self.unit.window
         first = (-k0) % window or window
         if n == 2 and (first > 1 or not len(self.reset_states)):  # a live stream's one sample
-            out, states = self._simulate(u, t0)
-            self.state = states[-1].copy()
+            out, states = self._simulate(rows[:, self.in_cols], t0)
+            self.state = states[-1]
             if len(self.reset_states):
-                gaps = y[1:, self.reset_outputs] - out[1:, self.reset_outputs]
+                gaps = rows[1:, self.out_cols[self.reset_outputs]] - out[1:, self.reset_outputs]
                 self.recent = np.vstack([self.recent, gaps])[-self.span :]
             return out
+        u, y = rows[:, self.in_cols], rows[:, self.out_cols]
         out = np.empty((n, len(self.out_cols)))
         cuts = list(range(first, n, window)) if len(self.reset_states) else []
         bounds = [0, *cuts] + ([n - 1] if not cuts or cuts[-1] != n - 1 else [])
@@ -529,6 +529,11 @@ class CausalTwin:
         """
         rows = np.asarray(rows, dtype=float).reshape(-1, len(self.columns))
         n = len(rows)
+        if self.settled:  # the common case: every row continues the run
+            with np.errstate(all="ignore"):  # a diverging state is checked after (diverged)
+                simulated = self._continue(rows)
+                residuals = rows[:, self.output_columns] - simulated
+            return CausalRows(simulated, residuals, np.zeros(n, dtype=bool))
         simulated = np.full((n, len(self.channels)), np.nan)
         settling = np.zeros(n, dtype=bool)
         first = 0

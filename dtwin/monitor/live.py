@@ -292,13 +292,18 @@ class Monitor:
         return counts % self.settings.every == 0
 
     def _sample_lines(self, times, tracked, present) -> list[str]:
-        rows = np.flatnonzero(present)
-        picked = rows[self._counted(len(rows))]
-        if not len(picked):
-            return []
+        if self.settings.every == 1 and present.all():  # a line for every sample
+            self.used += len(present)
+            picked = slice(None)
+        else:
+            rows = np.flatnonzero(present)
+            picked = rows[self._counted(len(rows))]
         p, corrected = tracked.posteriors[picked], tracked.corrected[picked]
-        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(corrected))):
-            return [self._json_line(times[i], tracked, i) for i in picked]
+        if not len(p):
+            return []
+        if not (np.isfinite(p).all() and np.isfinite(corrected).all()):
+            index = np.arange(len(present))[picked]
+            return [self._json_line(times[i], tracked, i) for i in index]
         labels = [self.labels[r] for r in tracked.regime[picked].tolist()]
         flags = ["true" if f else "false" for f in tracked.nominal[picked].tolist()]
         rows = zip(times[picked].tolist(), labels, flags, tracked.novelty[picked].tolist(),

@@ -78,6 +78,7 @@ class RegimeTracker:
         self.gap_hold = int(gap_hold)
         self.arrays = model.filter_arrays()
         self.mask = model.nominal_mask
+        self.nominal_index = np.flatnonzero(self.mask)
         self.variances = model.sds**2
         self.bias_z = np.vstack([model.state_means / model.scale, np.zeros(len(model.scale))])
         self.actions = actions
@@ -113,7 +114,8 @@ class RegimeTracker:
         model, arrays = self.model, self.arrays
         with np.errstate(invalid="ignore", over="ignore"):
             z = np.ascontiguousarray((residuals - model.center) / model.scale)
-        z[~np.isfinite(z)] = np.nan  # a diverged twin's row: a prediction step
+        if not np.isfinite(z).all():
+            z[~np.isfinite(z)] = np.nan  # a diverged twin's row: a prediction step
         before, fresh = self.alpha.copy(), self.fresh
         posteriors = filter_rows(
             z, arrays.means, arrays.precision, arrays.log_norm, arrays.transmat, self.alpha,
@@ -134,7 +136,7 @@ class RegimeTracker:
         return TrackedRows(
             posteriors=posteriors,
             regime=regime,
-            nominal=(posteriors[:, self.mask].sum(axis=1) >= 0.5) & ~novel,
+            nominal=(posteriors[:, self.nominal_index].sum(axis=1) >= 0.5) & ~novel,
             novelty=novelty,
             applied=applied,
             corrected=simulated + applied,

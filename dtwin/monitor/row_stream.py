@@ -254,10 +254,15 @@ class RowParser:
         if table is None:
             return None
         table = table[:, self.index]
-        steps = np.diff(table[:, 0], prepend=self.last_t) / self.dt
-        if not np.all(np.isfinite(table)) or np.any(np.abs(steps - 1.0) > GRID_TOLERANCE):
+        t = table[:, 0]
+        steps = np.empty(len(t))
+        steps[0] = t[0] - self.last_t
+        np.subtract(t[1:], t[:-1], out=steps[1:])
+        steps /= self.dt
+        if not np.isfinite(table).all() or (np.abs(steps - 1.0) > GRID_TOLERANCE).any():
             return None
-        if np.any(table[:, 1:] < self.low) or np.any(table[:, 1:] > self.high):
+        signals = table[:, 1:]
+        if (signals < self.low).any() or (signals > self.high).any():
             return None
         self.line_number += len(lines)
         self.rows_read += len(lines)
