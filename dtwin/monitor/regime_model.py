@@ -2,8 +2,9 @@
 
 Specification: docs/monitor.md §Regimes. The residual channels of the causal twin
 (:mod:`dtwin.monitor.causal_twin`) are z-scored and a K-state Gaussian HMM is fitted to them
-(paper §4.2, :func:`dtwin.hmm.fit_zscored_hmm`, the multi-start EM of the DAG's regime stage),
-K chosen by the BIC with its minimum bracketed (§5, :func:`dtwin.hmm.bic_by_k`) unless given.
+(paper §4.2, :func:`dtwin.hmm.fit_hmm`, the multi-start EM of the DAG's regime stage, its starts
+on at most :data:`MAX_SWEEP_SAMPLES` rows and the best one run on over every row), K chosen by
+the BIC with its minimum bracketed (§5, :func:`dtwin.hmm.bic_by_k`) unless given.
 A regime is **nominal** when it holds at least :data:`NOMINAL_SHARE` of the nominal stretch
 (smoothed occupancy; the regime holding most of it always is). A model fitted on a clean
 recording may hold nominal regimes only, so the filter has one more state, ``unknown``: a broad
@@ -64,7 +65,8 @@ UNKNOWN_HAZARD = 1e-9
 UNKNOWN_STAY = 0.99
 #: Smallest share of the nominal stretch (smoothed occupancy) a nominal regime holds.
 NOMINAL_SHARE = 0.02
-#: Most samples the BIC sweep over K fits (evenly spaced contiguous blocks beyond it).
+#: Most samples the BIC sweep over K and the final fit's starts use (evenly spaced contiguous
+#: blocks beyond it).
 MAX_SWEEP_SAMPLES = 20_000
 #: Contiguous blocks of the sweep's sample when it is capped.
 SWEEP_BLOCKS = 8

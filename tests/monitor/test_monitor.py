@@ -418,3 +418,29 @@ def test_the_compiled_filter_is_the_forward_recursion_of_the_dag():
     first = filter_rows(x[:250], *arrays, fit.transmat, alpha, True)
     rest = filter_rows(x[250:], *arrays, fit.transmat, alpha, False)
     np.testing.assert_array_equal(np.vstack([first, rest]), ours)
+
+
+def test_a_long_recording_is_fitted_from_starts_on_a_sample_of_its_rows():
+    """Beyond MAX_SWEEP_SAMPLES rows the starts run on the sweep's rows, the best on every row.
+
+    Its optimum on every row is as good as the best of the same starts run on every row, and
+    it finds the two levels the residuals switch between.
+    """
+    from dtwin.hmm import fit_hmm, zscore
+    from dtwin.monitor.regime_model import MAX_SWEEP_SAMPLES, REGIME_EM, fit_regime_model
+
+    rng = np.random.default_rng(5)
+    n = MAX_SWEEP_SAMPLES + 5000
+    state = (np.cumsum(rng.random(n) < 0.01) % 2).astype(bool)  # ~100-sample dwells
+    levels = np.where(state[:, None], [1.5, -0.5], [-1.0, 0.5])
+    residuals = pd.DataFrame(levels + 0.4 * rng.standard_normal((n, 2)), columns=["a:y", "b:y"])
+    settings = RegimeSettings(n_states=2)
+    fitted = fit_regime_model(residuals, np.ones(n, dtype=bool), settings).fit
+    every_row = fit_hmm(zscore(residuals).values, 2, seed=[settings.seed, 2],
+                        n_restarts=settings.n_restarts, **REGIME_EM.options())  # fmt: skip
+    assert len(fitted.restarts) == 1 and fitted.converged
+    assert fitted.log_likelihood >= every_row.log_likelihood - 1e-6 * abs(every_row.log_likelihood)
+    scaled = zscore(residuals)
+    means = fitted.means * np.asarray(scaled.sd) + np.asarray(scaled.mean)
+    np.testing.assert_allclose(means[np.argsort(means[:, 0])], [[-1.0, 0.5], [1.5, -0.5]],
+                               atol=0.02)  # fmt: skip
