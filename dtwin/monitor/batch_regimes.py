@@ -207,7 +207,7 @@ def false_alarms(
     hours = float(in_stretch.sum()) * dt / 3600.0
     z = simulate_regimes(model, SIMULATED_SAMPLES, [seed, _SIMULATION_STREAM])
     residuals = z * model.scale + model.center
-    simulated = RegimeTracker(model).feed(residuals, np.zeros_like(residuals))
+    simulated = RegimeTracker(model).feed(residuals, None)  # regimes only: no correction
     unknown = simulated.regime == model.n_states
     sim_events = _count_events(~unknown, hold)
     sim_hours = SIMULATED_SAMPLES * dt / 3600.0

@@ -44,9 +44,9 @@ class TrackedRows:
         alarm.
     novelty : ndarray, shape (n,)
         The novelty statistic in units of its threshold (alarm at 1; zeros without a test).
-    applied : ndarray, shape (n, C)
-        The shaped bias added to the twin's outputs, channel units.
-    corrected : ndarray, shape (n, C)
+    applied : ndarray, shape (n, C), or None
+        The shaped bias added to the twin's outputs, channel units (None: fed without them).
+    corrected : ndarray, shape (n, C), or None
         The twin's outputs plus ``applied``.
     action : ndarray of int, shape (n,), or None
         Index of the chosen alternative (None without an actions table).
@@ -56,8 +56,8 @@ class TrackedRows:
     regime: np.ndarray
     nominal: np.ndarray
     novelty: np.ndarray
-    applied: np.ndarray
-    corrected: np.ndarray
+    applied: np.ndarray | None
+    corrected: np.ndarray | None
     action: np.ndarray | None
 
 
@@ -96,7 +96,7 @@ class RegimeTracker:
         self.cusums = np.zeros((c, 3))
         self.since_gap = self.gap_hold  # rows since the last missing row
 
-    def feed(self, residuals: np.ndarray, simulated: np.ndarray) -> TrackedRows:
+    def feed(self, residuals: np.ndarray, simulated: np.ndarray | None) -> TrackedRows:
         """Track the next rows.
 
         Parameters
@@ -104,8 +104,9 @@ class RegimeTracker:
         residuals : ndarray, shape (n, C)
             ``recorded − twin`` per channel (NaN at a missing sample, or not finite: a
             prediction step).
-        simulated : ndarray, shape (n, C)
-            The twin's outputs.
+        simulated : ndarray, shape (n, C), or None
+            The twin's outputs; None: no correction (regimes and events only, as the
+            false-alarm simulation needs; a tracker fed so keeps no correction state).
 
         Returns
         -------
@@ -126,12 +127,15 @@ class RegimeTracker:
         novel = novelty >= 1.0
         regime = np.argmax(posteriors, axis=1)
         regime[novel & self.mask[regime]] = model.n_states  # unknown
-        shaped = shaped_bias(
-            posteriors @ self.bias_z, kappa=model.kappa, ema_alpha=model.ema_alpha,
-            rate_max=model.rate_max, initial=self.shaping,
-        )  # fmt: skip
-        self.shaping = (shaped.smoothed[-1], shaped.applied[-1])
-        applied = shaped.applied * model.scale
+        applied = corrected = None
+        if simulated is not None:
+            shaped = shaped_bias(
+                posteriors @ self.bias_z, kappa=model.kappa, ema_alpha=model.ema_alpha,
+                rate_max=model.rate_max, initial=self.shaping,
+            )  # fmt: skip
+            self.shaping = (shaped.smoothed[-1], shaped.applied[-1])
+            applied = shaped.applied * model.scale
+            corrected = simulated + applied
         action = None if self.actions is None else self.actions.decide(posteriors, self.stacked)
         return TrackedRows(
             posteriors=posteriors,
@@ -139,7 +143,7 @@ class RegimeTracker:
             nominal=(posteriors[:, self.nominal_index].sum(axis=1) >= 0.5) & ~novel,
             novelty=novelty,
             applied=applied,
-            corrected=simulated + applied,
+            corrected=corrected,
             action=action,
         )
 
