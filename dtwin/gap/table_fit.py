@@ -20,6 +20,8 @@ Arrays are time-first: ``(n_samples,)`` or ``(n_samples, n_channels)``.
 from __future__ import annotations
 
 import math
+import multiprocessing
+import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -37,6 +39,8 @@ __all__ = [
     "fit_variant",
     "part_error",
     "state_guess",
+    "map_fits",
+    "FIT_PROCESSES",
 ]
 
 #: Most training samples a fit uses (evenly spaced windows beyond it).
@@ -47,6 +51,8 @@ MAX_PART_SAMPLES = 10000
 TERM_RHO = 2.0
 #: Largest normalised residual of a diverged simulation (keeps least squares finite).
 _DIVERGED = 1e3
+#: Most processes that fit a unit's candidates side by side (:func:`map_fits`).
+FIT_PROCESSES = 2
 
 
 def windows_of(start: int, stop: int, length: int) -> tuple[np.ndarray, np.ndarray]:
@@ -561,3 +567,49 @@ def combined(gaps: Sequence[float]) -> float:
     """One gap for several outputs: the RMS of their normalised gaps."""
     values = np.asarray(gaps, dtype=float)
     return float(np.sqrt(np.mean(values**2)))
+
+
+#: The function and items of the :func:`map_fits` running now (read by its forked workers).
+_TASK: tuple | None = None
+#: This process is a :func:`map_fits` worker (its own fits run in turn).
+_IN_WORKER = False
+
+
+def _mark_worker() -> None:
+    global _IN_WORKER
+    _IN_WORKER = True
+
+
+def _run_task(index: int):
+    function, items = _TASK
+    return function(items[index])
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def map_fits(function: Callable, items: Sequence) -> list:
+    """Return ``[function(item) for item in items]``, the items shared among forked processes.
+
+    Up to :data:`FIT_PROCESSES` processes (no more than the cores this process may use), each
+    a fork of this one, so ``function`` may be a closure; results come back pickled, in
+    order, and are those of the calls made here (the same code on the same inputs). Where
+    fork is not available, inside a worker, or for one item, the calls run here in turn.
+    ``function``'s results must pickle (a :class:`VariantFit` without its ``variant``).
+    """
+    global _TASK
+    items = list(items)
+    processes = min(FIT_PROCESSES, len(items), _cores())
+    if processes < 2 or _IN_WORKER or "fork" not in multiprocessing.get_all_start_methods():
+        return [function(item) for item in items]
+    _TASK = (function, items)
+    try:
+        context = multiprocessing.get_context("fork")
+        with context.Pool(processes, initializer=_mark_worker) as pool:
+            return pool.map(_run_task, range(len(items)), chunksize=1)
+    finally:
+        _TASK = None
