@@ -49,6 +49,7 @@ from dtwin.gap.table_fit import (
     VariantFit,
     combined,
     fit_variant,
+    map_fits,
     part_error,
     require_finite_fit,
     rms_by_output,
@@ -424,30 +425,38 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
     produced = frozenset(signal for m in table.modules for signal in m.outputs)
     variants = candidate_variants(data, data.guess, blocks, calibrate=calibrate, produced=produced)
     variants = [v for v in variants if _allowed(v, data, table)]
-    screened = []
     mode = "free" if calibrate else "band"
     screen_x0 = _screening_states(work)
-    for variant in variants:
-        if variant.refits_linear:
-            continue
+
+    def screen(variant):
         fit = fit_variant(
             data, variant, work.nominal.theta, mode=mode, cap=SCREEN_SAMPLES, max_nfev=12,
             x0=screen_x0, band=settings.calibration_tolerance,
         )  # fmt: skip
-        screened.append((fit.cost, variant, {p: fit.theta[p] for p in variant.effect_params}))
+        return fit.cost, {p: fit.theta[p] for p in variant.effect_params}
+
+    plain = [v for v in variants if not v.refits_linear]
+    fits = map_fits(screen, plain)
+    screened = [(cost, v, start) for v, (cost, start) in zip(plain, fits, strict=True)]
     screened.sort(key=lambda item: item[0])
     for cost, variant, _ in screened:
         progress.debug("screened %s at %s: %.6g", variant.name, variant.at, cost)
     chosen = [(v, s) for _, v, s in screened[:SCREENED]]
     chosen += [(v, {}) for v in variants if v.refits_linear]
-    out = []
-    for variant, start in chosen:
+
+    def full(item):
+        variant, start = item
         progress.info("%s: fitting %s at %s", data.spec.name, variant.name, variant.at)
         fit = fit_variant(
             data, variant, work.nominal.theta, mode="free" if variant.refits_linear else mode,
             band=settings.calibration_tolerance, start=start, max_nfev=FULL_NFEV,
         )  # fmt: skip
         error, _ = part_error(data, fit, "choose")
+        return replace(fit, variant=None), error  # a variant's maps do not pickle
+
+    out = []
+    for (variant, _), (fit, error) in zip(chosen, map_fits(full, chosen), strict=True):
+        fit = replace(fit, variant=variant)
         gap = combined(rms_by_output(error, slice(*data.parts["choose"]), data.norm))
         n_params = len([p for p in variant.effect_params if p not in variant.fixed])
         out.append(_Candidate(fit, gap, n_params or len(fit.free), choose_error=error))
