@@ -1127,7 +1127,8 @@ def _answer(source: _UnitWork, candidates, chosen, base, notes, also, table) -> 
     data = source.data
     nominal = source.nominal
     refit = next((c.fit for c in candidates if c.fit.variant.refits_linear), nominal)
-    before, refit_gap = _score_gap(data, nominal), _score_gap(data, refit)
+    before = _score_gap(data, nominal)
+    refit_gap = before if refit is nominal else _score_gap(data, refit)  # no re-fit: the twin
     common = dict(
         module=_module_of(data, chosen.fit if chosen else None, table),
         modules=data.spec.modules, candidates=_candidate_rows(candidates, data.declared),
