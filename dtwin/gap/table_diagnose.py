@@ -426,12 +426,13 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
     variants = candidate_variants(data, data.guess, blocks, calibrate=calibrate, produced=produced)
     variants = [v for v in variants if _allowed(v, data, table)]
     mode = "free" if calibrate else "band"
-    screen_x0 = _screening_states(work)
+    windows = _screening_windows(work)
+    screen_x0 = _screening_states(work, windows)
 
     def screen(variant):
         fit = fit_variant(
-            data, variant, work.nominal.theta, mode=mode, cap=SCREEN_SAMPLES, max_nfev=12,
-            x0=screen_x0, band=settings.calibration_tolerance,
+            data, variant, work.nominal.theta, mode=mode, max_nfev=12, x0=screen_x0,
+            band=settings.calibration_tolerance, windows=windows,
         )  # fmt: skip
         return fit.cost, {p: fit.theta[p] for p in variant.effect_params}
 
@@ -482,12 +483,32 @@ def _allowed(variant, data: UnitData, table) -> bool:
     return any(m.candidates is None or variant.name in m.candidates for m in owners)
 
 
-def _screening_states(work: _UnitWork) -> np.ndarray:
+def _screening_windows(work: _UnitWork) -> tuple[np.ndarray, np.ndarray]:
+    """Return the training windows the screening fits use: where the twin is most wrong.
+
+    At most :data:`SCREEN_SAMPLES` samples: the windows whose error under the twin as fitted
+    has the most energy (in time order). Evenly spaced windows were one window of a motor's
+    training part (601 samples a window), which an input saturation at the largest inputs
+    never reached: its screening fit did not move and the right candidate was screened out.
+    """
+    data = work.data
+    starts, stops = data.windows("train")
+    keep = max(1, SCREEN_SAMPLES // data.window)
+    if len(starts) <= keep:
+        return starts, stops
+    error, _ = part_error(data, work.nominal, "train")
+    scaled = np.square(error / np.asarray(data.norm))
+    energy = np.array([np.nansum(scaled[a:b]) for a, b in zip(starts, stops, strict=True)])
+    chosen = np.sort(np.argsort(-energy, kind="stable")[:keep])
+    return starts[chosen], stops[chosen]
+
+
+def _screening_states(work: _UnitWork, windows) -> np.ndarray:
     """Return the twin's fitted states at the screening windows' starts (params as fitted)."""
     data = work.data
     fit = fit_variant(
-        data, work.nominal.variant, work.nominal.theta, mode="fixed", cap=SCREEN_SAMPLES,
-        max_nfev=20,
+        data, work.nominal.variant, work.nominal.theta, mode="fixed", max_nfev=20,
+        windows=windows,
     )  # fmt: skip
     return fit.x0
 

@@ -386,6 +386,7 @@ def fit_variant(
     band: float = 0.05,
     x0: np.ndarray | None = None,
     start: Mapping[str, float] | None = None,
+    windows: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> VariantFit:
     """Fit a variant's params and every training window's states on the training part.
 
@@ -414,6 +415,8 @@ def fit_variant(
     start : mapping of str to float, optional
         Start values of the effect's params (default ``variant.starts``: a screening fit's
         values make the full fit shorter).
+    windows : (starts, stops), optional
+        The training windows to fit on (default: ``data.windows("train", cap)``).
 
     Returns
     -------
@@ -421,7 +424,7 @@ def fit_variant(
     """
     from scipy.optimize import least_squares
 
-    starts, stops = data.windows("train", cap)
+    starts, stops = data.windows("train", cap) if windows is None else windows
     if start:
         variant = replace(variant, starts={**variant.starts, **start})
     names, p0, low, high, scale = _free_layout(data, variant, mode, nominal, band)
