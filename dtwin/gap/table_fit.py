@@ -601,13 +601,20 @@ def map_fits(function: Callable, items: Sequence) -> list:
     Up to :data:`FIT_PROCESSES` processes (no more than the cores this process may use), each
     a fork of this one, so ``function`` may be a closure; results come back pickled, in
     order, and are those of the calls made here (the same code on the same inputs). Where
-    fork is not available, inside a worker, or for one item, the calls run here in turn.
+    fork is not available, inside a worker (this one's, or any daemonic process such as a
+    user's ``multiprocessing.Pool`` worker), or for one item, the calls run here in turn.
     ``function``'s results must pickle (a :class:`VariantFit` without its ``variant``).
     """
     global _TASK
     items = list(items)
     processes = min(FIT_PROCESSES, len(items), _cores())
-    if processes < 2 or _IN_WORKER or "fork" not in multiprocessing.get_all_start_methods():
+    daemon = multiprocessing.current_process().daemon  # a Pool's worker may have no children
+    if (
+        processes < 2
+        or _IN_WORKER
+        or daemon
+        or "fork" not in multiprocessing.get_all_start_methods()
+    ):
         return [function(item) for item in items]
     _TASK = (function, items)
     try:

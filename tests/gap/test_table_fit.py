@@ -24,3 +24,16 @@ def test_map_fits_inside_a_worker_runs_its_calls_in_turn():
 
     for pids, worker in map_fits(inner, range(2)):
         assert pids == [worker]  # no pool of pools
+
+
+def _pids_in_a_user_pool(_item):
+    return sorted({pid for pid in map_fits(lambda _: os.getpid(), range(3))}), os.getpid()
+
+
+def test_map_fits_inside_a_user_s_pool_worker_runs_its_calls_in_turn():
+    """A user's multiprocessing.Pool worker is daemonic and may not start processes."""
+    if "fork" not in multiprocessing.get_all_start_methods():
+        return
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        ((pids, worker),) = pool.map(_pids_in_a_user_pool, [0])
+    assert pids == [worker]
