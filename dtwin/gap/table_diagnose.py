@@ -556,7 +556,11 @@ def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, l
 
     The best by BIC (:func:`_ranked`; the re-fitted twin, ``parameter_mismatch``, is one of
     the candidates with all its params counted) must remove ``min_share`` of the excess gap
-    (``min_linear_share`` for a linear form), else the gap is unexplained.
+    (``min_linear_share`` for a linear form) and bring the unit back under its flag: its
+    choosing gap at most the unit's threshold-to-floor ratio times the floor (the candidate's
+    own, :func:`_candidate_floor`, where higher). Else the gap is unexplained: a heat
+    transfer coefficient that switched mid-run was re-fitted to remove 81 % of the excess and
+    left 6.9 floors (flagged above 1.16).
     """
     notes = []
     gap = combined(work.gaps)
@@ -569,9 +573,12 @@ def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, l
     floor = max(floor, _candidate_floor(work, best, settings))
     removed = 1.0 - _excess(best.gap_choose, floor) ** 2 / max(_excess(gap, floor) ** 2, 1e-300)
     share = settings.min_linear_share if variant.linear_form else settings.min_share
-    if removed >= share:
+    left, bar = best.gap_choose / floor, combined(work.thresholds) / work.floor
+    if removed >= share and left <= bar:
         return best, notes, removed
     notes.append(f"{variant.name} at {variant.at}: removes {removed:.0%} of the excess")
+    if removed >= share:
+        notes[-1] += f" and leaves {left:.2f}× its floor (the unit is flagged above {bar:.2f}×)"
     return None, notes, removed
 
 
