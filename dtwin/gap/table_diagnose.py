@@ -323,16 +323,16 @@ def _input_noise_floor(data: UnitData, fit: VariantFit, input_noise: Mapping[str
     return np.where(np.isfinite(rms), rms, 0.0)
 
 
-def _floors(data, fit, noise, settings, n_tests=1, input_noise=None):
+def _floors(data, fit, error, noise, settings, n_tests=1, input_noise=None):
     """Return each output's noise floor and its normalised threshold on the choosing part.
 
     The floor is the measurement noise's (declared, reconciled with the one read from the
     training residual; a declared level with a coarse lattice's ``q²/12`` added,
     :func:`_coarse_lattice`: the quantizer's own noise, which no declared level holds),
     with the error that the recorded inputs' noise causes through the
-    unit (:func:`_input_noise_floor`) added in quadrature.
+    unit (:func:`_input_noise_floor`) added in quadrature. ``error`` is ``fit``'s training
+    error (:func:`~dtwin.gap.table_fit.part_error`), shape ``(n_samples, n_outputs)``.
     """
-    error, _ = part_error(data, fit, "train")
     propagated = _input_noise_floor(data, fit, input_noise or {})
     train = slice(*data.parts["train"])
     n_choose = data.parts["choose"][1] - data.parts["choose"][0]
@@ -376,6 +376,8 @@ class _UnitWork:
     thresholds: list[float]
     gaps: np.ndarray
     flagged: bool
+    #: The twin's training error, shape ``(n_samples, n_outputs)`` (NaN outside the part).
+    train_error: np.ndarray = field(repr=False)
 
     @property
     def excess(self) -> float:
@@ -401,11 +403,14 @@ def _analyse_unit(
     nominal = _nominal_fit(data, settings, calibrate)
     require_finite_fit(nominal, "+".join(spec.modules))
     data.guess = state_guess(data, nominal.theta, nominal.variant)
-    floors, thresholds = _floors(data, nominal, table.noise, settings, n_tests, input_noise)
+    train_error, _ = part_error(data, nominal, "train")
+    floors, thresholds = _floors(
+        data, nominal, train_error, table.noise, settings, n_tests, input_noise
+    )
     error, _ = part_error(data, nominal, "choose")
     gaps = rms_by_output(error, slice(*parts["choose"]), data.norm)
     flagged = bool(np.any(gaps > np.asarray(thresholds)))
-    return _UnitWork(data, nominal, floors, thresholds, gaps, flagged)
+    return _UnitWork(data, nominal, floors, thresholds, gaps, flagged, train_error)
 
 
 @dataclass
@@ -496,8 +501,7 @@ def _screening_windows(work: _UnitWork) -> tuple[np.ndarray, np.ndarray]:
     keep = max(1, SCREEN_SAMPLES // data.window)
     if len(starts) <= keep:
         return starts, stops
-    error, _ = part_error(data, work.nominal, "train")
-    scaled = np.square(error / np.asarray(data.norm))
+    scaled = np.square(work.train_error / np.asarray(data.norm))
     energy = np.array([np.nansum(scaled[a:b]) for a, b in zip(starts, stops, strict=True)])
     chosen = np.sort(np.argsort(-energy, kind="stable")[:keep])
     return starts[chosen], stops[chosen]
@@ -834,7 +838,7 @@ def _loop_floors(works, table, settings, n_tests: int, levels: Mapping[str, floa
         if not late:
             continue
         work.floors, work.thresholds = _floors(
-            work.data, work.nominal, table.noise, settings, n_tests, levels
+            work.data, work.nominal, work.train_error, table.noise, settings, n_tests, levels
         )
         work.flagged = bool(np.any(work.gaps > np.asarray(work.thresholds)))
 
