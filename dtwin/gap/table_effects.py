@@ -64,13 +64,23 @@ def _number(value: float) -> str:
 
 
 def _shift(values: np.ndarray, delay: float, dt: float) -> np.ndarray:
-    """``values`` delayed by ``delay`` s (linear interpolation; the first value held before)."""
+    """``values`` delayed by ``delay`` s (linear interpolation; each run's first value held before).
+
+    A run is a stretch of finite rows: a simulation over windows that are not adjacent (a
+    capped fit) is NaN between them, and each window's start is held as the recording's first
+    value is. Shifted across the gap, a window's first samples read NaN, which the fit counts
+    as a diverged run: every capped fit of an output delay lost to that penalty.
+    """
     n = len(values)
-    samples = np.clip(np.arange(n) - delay / dt, 0.0, n - 1)
+    finite = np.isfinite(values) if values.ndim == 1 else np.isfinite(values).all(axis=1)
+    first = np.maximum.accumulate(np.where(finite, -1, np.arange(n))) + 1  # each run's start
+    samples = np.clip(np.arange(n) - delay / dt, np.minimum(first, n - 1), n - 1)
     low = np.floor(samples).astype(int)
     high = np.minimum(low + 1, n - 1)
     frac = (samples - low)[:, None] if values.ndim == 2 else samples - low
-    return values[low] + frac * (values[high] - values[low])
+    step = np.where(frac > 0, frac * (values[high] - values[low]), 0.0)
+    gap = ~finite[:, None] if values.ndim == 2 else ~finite
+    return np.where(gap, np.nan, values[low] + step)
 
 
 def _input_variants(data: UnitData) -> list[Variant]:
