@@ -123,6 +123,19 @@ def test_a_drifting_level_is_not_blamed_on_the_recorded_inflow_feeding_the_tank(
     assert result.module in ("tank", None)
 
 
+def test_a_level_sensor_drifting_with_a_wander_is_a_drift_though_it_leaves_the_unit_flagged():
+    """A drift's shape beyond the training part is not known: its wander stays on the choosing
+    part, and the unit stays over its flag with the drift fitted (1.5 floors, flagged at 1.2)."""
+    frame = _asset(1500, 3)
+    n = len(frame)
+    walk = np.cumsum(np.random.default_rng(103).standard_normal(n))
+    walk -= np.linspace(0.0, 1.0, n) * walk[-1]
+    frame["level"] += 0.1 * (np.arange(n) / n + 0.15 * walk / np.max(np.abs(walk)))
+    result = _diagnose(frame)
+    assert (result.module, result.effect, result.at) == ("tank", "output_bias_drift", "level")
+    assert any("its shape beyond the training part" in note for note in result.notes)
+
+
 @pytest.mark.slow
 def test_an_overflowing_tank_is_a_state_limit_when_the_flow_is_not_recorded():
     frame = _asset(2000, 3, overflow=2.2)
