@@ -21,7 +21,16 @@ import math
 
 import numpy as np
 
-from dtwin._jit import njit
+from dtwin._jit import HAVE_NUMBA, njit
+
+if HAVE_NUMBA:  # njit has imported numba already
+    from numba import literally
+else:
+
+    def literally(value):
+        """Without numba: nothing to compile, the value as it is."""
+        return value
+
 
 __all__ = ["run_program", "simulate_lanes", "chain_windows", "warm_up"]
 
@@ -75,14 +84,13 @@ def _divide(left: float, right: float) -> float:  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always")
-def run_program(code, consts, slots, stack) -> None:  # pragma: no cover - compiled
-    """Run the postfix program ``code`` (slot-bound) over every lane (column) of ``slots``.
+def run_program(code, consts, slots, stack, n_lanes) -> None:  # pragma: no cover - compiled
+    """Run the postfix program ``code`` (slot-bound) over the first ``n_lanes`` lanes of ``slots``.
 
     ``slots`` has shape ``(n_slots, n_lanes)``, ``stack`` ``(depth + 1, n_lanes)``. ``OP_STORE``
     (11) pops the top into ``slots[arg]``: a unit's whole program of assignments runs as one
     pass. Each opcode is dispatched once; the loop over lanes does the arithmetic.
     """
-    n_lanes = slots.shape[1]
     sp = 0
     for pc in range(code.shape[0] // 2):
         op = code[2 * pc]
@@ -142,7 +150,7 @@ def run_program(code, consts, slots, stack) -> None:  # pragma: no cover - compi
 
 
 @njit(cache=True, inline="always")
-def _slope(code, consts, slots, stack, times, f, work, src, dst, layout, u, lane_set, k):
+def _slope(code, consts, slots, stack, times, f, work, src, dst, layout, u, lane_set, k, n_lanes):
     # pragma: no cover - compiled
     """Write the derivatives at ``work[src]`` (each lane at sample ``k + f``) to ``work[dst]``.
 
@@ -153,7 +161,6 @@ def _slope(code, consts, slots, stack, times, f, work, src, dst, layout, u, lane
     count each time.
     """
     state_slots, deriv_slots, in_slots, linear = layout
-    n_lanes = slots.shape[1]
     last = u.shape[1] - 1
     t0, dt, f_t, extra = times
     for lane in range(n_lanes):
@@ -171,7 +178,7 @@ def _slope(code, consts, slots, stack, times, f, work, src, dst, layout, u, lane
         row = state_slots[j]
         for lane in range(n_lanes):
             slots[row, lane] = work[src, j, lane]
-    run_program(code, consts, slots, stack)
+    run_program(code, consts, slots, stack, n_lanes)
     for j in range(deriv_slots.shape[0]):
         row = deriv_slots[j]
         for lane in range(n_lanes):
@@ -179,10 +186,10 @@ def _slope(code, consts, slots, stack, times, f, work, src, dst, layout, u, lane
 
 
 @njit(cache=True, inline="always")
-def _clamp(work, lo, hi, lane_member):  # pragma: no cover - compiled
+def _clamp(work, lo, hi, lane_member, n_lanes):  # pragma: no cover - compiled
     """Clamp each lane's state (``work[0]``) to its batch member's ``[lo, hi]``."""
     for j in range(work.shape[1]):
-        for lane in range(work.shape[2]):
+        for lane in range(n_lanes):
             b = lane_member[lane]
             if work[0, j, lane] < lo[b, j]:
                 work[0, j, lane] = lo[b, j]
@@ -192,7 +199,7 @@ def _clamp(work, lo, hi, lane_member):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _integrate(code, consts, layout, u, lanes, out_slots, lo, hi, times, depth, slots, work, y,
-               states):  # fmt: skip
+               states, one):  # fmt: skip
     # pragma: no cover - compiled
     """Advance every lane over its samples in lockstep, recording outputs and states.
 
@@ -203,23 +210,28 @@ def _integrate(code, consts, layout, u, lanes, out_slots, lo, hi, times, depth, 
     program's deepest stack. Each sample
     advances by ``substeps`` classical Runge-Kutta steps, the state clamped to ``[lo, hi]``
     after each. A lane whose samples have ended repeats its last one (computed, not recorded).
+
+    ``one`` (a compile-time constant: ``True`` or ``False`` written at the call) says there is
+    a single lane: its loops over lanes are then compiled away, which halves a lone window's
+    time (a live stream's step, a chain of windows); the arithmetic is the same.
     """
+    literally(one)
     member, lane_set, start, length, row = lanes
     t0, dt, substeps = times
-    n_lanes = slots.shape[1]
+    n_lanes = 1 if one else slots.shape[1]
     n_states = work.shape[1]
     stack = np.empty((depth + 1, n_lanes))
     k = np.empty(n_lanes, dtype=np.int64)
     longest = 0
     for lane in range(n_lanes):
         longest = max(longest, length[lane])
-    _clamp(work, lo, hi, member)
+    _clamp(work, lo, hi, member, n_lanes)
     h = dt / substeps
     for i in range(longest):
         for lane in range(n_lanes):
             k[lane] = start[lane] + min(i, length[lane] - 1)
         _slope(code, consts, slots, stack, (t0, dt, 0.0, 0.0), 0.0, work, 0, 5, layout, u,
-               lane_set, k)  # fmt: skip
+               lane_set, k, n_lanes)  # fmt: skip
         for lane in range(n_lanes):
             if i < length[lane]:
                 b, r = member[lane], row[lane] + i
@@ -234,22 +246,22 @@ def _integrate(code, consts, layout, u, lanes, out_slots, lo, hi, times, depth, 
             fm = (step + 0.5) / substeps
             f1 = (step + 1.0) / substeps
             _slope(code, consts, slots, stack, (t0, dt, f0, 0.0), f0, work, 0, 1, layout, u,
-                   lane_set, k)  # fmt: skip
+                   lane_set, k, n_lanes)  # fmt: skip
             for j in range(n_states):
                 for lane in range(n_lanes):
                     work[5, j, lane] = work[0, j, lane] + 0.5 * h * work[1, j, lane]
             _slope(code, consts, slots, stack, (t0, dt, f0, 0.5 * h), fm, work, 5, 2, layout, u,
-                   lane_set, k)  # fmt: skip
+                   lane_set, k, n_lanes)  # fmt: skip
             for j in range(n_states):
                 for lane in range(n_lanes):
                     work[5, j, lane] = work[0, j, lane] + 0.5 * h * work[2, j, lane]
             _slope(code, consts, slots, stack, (t0, dt, f0, 0.5 * h), fm, work, 5, 3, layout, u,
-                   lane_set, k)  # fmt: skip
+                   lane_set, k, n_lanes)  # fmt: skip
             for j in range(n_states):
                 for lane in range(n_lanes):
                     work[5, j, lane] = work[0, j, lane] + h * work[3, j, lane]
             _slope(code, consts, slots, stack, (t0, dt, f0, h), f1, work, 5, 4, layout, u,
-                   lane_set, k)  # fmt: skip
+                   lane_set, k, n_lanes)  # fmt: skip
             for j in range(n_states):
                 for lane in range(n_lanes):
                     work[0, j, lane] += (
@@ -257,7 +269,7 @@ def _integrate(code, consts, layout, u, lanes, out_slots, lo, hi, times, depth, 
                         * (work[1, j, lane] + 2.0 * work[2, j, lane] + 2.0 * work[3, j, lane]
                            + work[4, j, lane])
                     )  # fmt: skip
-            _clamp(work, lo, hi, member)
+            _clamp(work, lo, hi, member, n_lanes)
 
 
 @njit(cache=True)
@@ -308,8 +320,13 @@ def simulate_lanes(
                 work[0, j, lane] = x0[b, w, j]
     y = np.empty((n_batch, n_rows, out_slots.shape[0]))
     states = np.empty((n_batch, n_rows, n_states))
-    _integrate(program[0], program[1], layout, u, (member, lane_set, start, length, row),
-               out_slots, lo, hi, (t0, dt, substeps), depth, slots, work, y, states)  # fmt: skip
+    lanes = (member, lane_set, start, length, row)
+    if n_lanes == 1:
+        _integrate(program[0], program[1], layout, u, lanes, out_slots, lo, hi,
+                   (t0, dt, substeps), depth, slots, work, y, states, True)  # fmt: skip
+    else:
+        _integrate(program[0], program[1], layout, u, lanes, out_slots, lo, hi,
+                   (t0, dt, substeps), depth, slots, work, y, states, False)  # fmt: skip
     return y, states
 
 
@@ -344,7 +361,7 @@ def chain_windows(
         lanes = (zero, zero, starts[w : w + 1], stops[w : w + 1] - starts[w : w + 1],
                  offsets[w : w + 1])  # fmt: skip
         _integrate(program[0], program[1], layout, sets, lanes, out_slots, lo, hi,
-                   (t0, dt, substeps), depth, slots, work, y, states)  # fmt: skip
+                   (t0, dt, substeps), depth, slots, work, y, states, True)  # fmt: skip
         end = offsets[w] + stops[w] - starts[w] - 1
         for j in range(n_states):
             if math.isfinite(states[0, end, j]):
@@ -371,10 +388,12 @@ def warm_up() -> None:
     inf = np.full((1, 1), np.inf)
     starts, stops = np.array([0], dtype=np.int64), np.array([4], dtype=np.int64)
     out = np.array([2], dtype=np.int64)
-    simulate_lanes(
-        program, np.zeros((1, 4)), layout, u, np.zeros(1, dtype=np.int64), out, -inf, inf,
-        starts, stops, np.zeros((1, 1, 1)), 0.1, 0.0, 2, 3,
-    )  # fmt: skip
+    for n_batch in (1, 2):  # one lane, and several
+        simulate_lanes(
+            program, np.zeros((n_batch, 4)), layout, u, np.zeros(n_batch, dtype=np.int64), out,
+            np.repeat(-inf, n_batch, axis=0), np.repeat(inf, n_batch, axis=0), starts, stops,
+            np.zeros((n_batch, 1, 1)), 0.1, 0.0, 2, 3,
+        )  # fmt: skip
     chain_windows(
         program, np.zeros(4), layout, u[0], out, starts, stops, np.zeros(1),
         np.zeros(1, dtype=np.int64), np.zeros((1, 1)), 0.1, 0.0, 2, 3,
