@@ -40,6 +40,7 @@ from dtwin.monitor.causal_twin import CausalTwin
 from dtwin.monitor.model_file import MonitorModel
 from dtwin.monitor.regime_tracker import HoldEvent, HoldRule, RegimeTracker
 from dtwin.monitor.row_stream import REASONS, LineSource, ParsedRows, RowParser
+from dtwin.monitor.sample_lines import LineTemplate
 
 __all__ = ["MonitorSettings", "Monitor", "MIN_DIAGNOSE_SAMPLES", "MAX_LISTED"]
 
@@ -111,6 +112,7 @@ class Monitor:
         self.labels = list(model.model.labels)
         self.names = None if model.actions is None else list(model.actions.alternatives)
         self.line = self._line_format()
+        self.lines = LineTemplate(self.line, (*self.labels, "true", "false", *(self.names or ())))
         self.k, self.k_start, self.t_start = -1, 0, 0.0
         self.last_values: np.ndarray | None = None
         self.recent = (
@@ -304,15 +306,11 @@ class Monitor:
         if not (np.isfinite(p).all() and np.isfinite(corrected).all()):
             index = np.arange(len(present))[picked]
             return [self._json_line(times[i], tracked, i) for i in index]
-        labels = [self.labels[r] for r in tracked.regime[picked].tolist()]
-        flags = ["true" if f else "false" for f in tracked.nominal[picked].tolist()]
-        rows = zip(times[picked].tolist(), labels, flags, tracked.novelty[picked].tolist(),
-                   p.tolist(), corrected.tolist(), strict=True)  # fmt: skip
-        if self.names is None:
-            return [self.line % (t, lab, f, v, *pp, *cc) for t, lab, f, v, pp, cc in rows]
-        actions = [self.names[a] for a in tracked.action[picked].tolist()]
-        return [self.line % (t, lab, f, v, *pp, *cc, act)
-                for (t, lab, f, v, pp, cc), act in zip(rows, actions, strict=True)]  # fmt: skip
+        floats = np.column_stack([times[picked], tracked.novelty[picked], p, corrected])
+        texts = [tracked.regime[picked], len(self.labels) + ~tracked.nominal[picked]]
+        if self.names is not None:
+            texts.append(len(self.labels) + 2 + tracked.action[picked])
+        return [self.lines.render(floats, np.column_stack(texts))]
 
     def _json_line(self, t: float, tracked, i: int) -> str:
         payload = {"t": float(t), "regime": self.labels[int(tracked.regime[i])],
