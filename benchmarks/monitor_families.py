@@ -28,11 +28,14 @@ modules one unit, the twin file of the case):
 Rates come with their case counts and Wilson 95 % intervals, split by the effect's size in noise
 units (the case key's ``snr``: the effect's RMS over the noise standard deviation).
 
-``--diagnose N``: for the first N seeds, every detected case is diagnosed twice with
-``dtwin diagnose`` (a subprocess, as the monitor's background job): on the 1000 samples from the
-detected change (what the monitor runs) and on the 1000 samples from the switch (the window
-itself); each scored with the family's key. ``--cache DIR``: the generated cases are kept in DIR
-(``<family>_<seed>.pkl``: effect → recording, twin, key) and read back on a rerun.
+``--diagnose N``: for the first N seeds, the switch streams run with the monitor's background
+diagnoses on (:class:`dtwin.monitor.background.DiagnosisJobs`, ``dtwin diagnose`` on the 1000
+samples from each detected change); a detected case's **triggered** diagnosis is the one of its
+event's window (``window_as_recorded``: that window's file holds the stream's samples from the
+change, to the bit), and ``dtwin diagnose`` also runs on the 1000 samples from the switch (the
+effect's own window); each is scored with the family's key. ``--cache DIR``: the generated
+cases are kept in DIR (``<family>_<seed>.pkl``: effect → recording, twin, key) and read back on
+a rerun.
 """
 
 from __future__ import annotations
@@ -53,10 +56,12 @@ from dtwin.artifacts import to_jsonable
 from dtwin.gap.recording import recording_with_columns
 from dtwin.gap.twin_file import table_file
 from dtwin.gapbench.families import FAMILY_EFFECTS, generate_family_case, score_family_case
+from dtwin.monitor.background import DiagnosisJobs
 from dtwin.monitor.batch_regimes import regimes_of
 from dtwin.monitor.live import Monitor, MonitorSettings
 from dtwin.monitor.model_file import monitor_model_from_mapping, regimes_file_mapping
 from dtwin.monitor.regime_model import poisson_upper
+from dtwin.monitor.row_stream import LineSource
 from dtwin.proportions import wilson_interval
 
 PY = sys.executable
@@ -66,11 +71,27 @@ WINDOW = 200
 SNR_BANDS = ((0.0, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, float("inf")))
 
 
-def _events(model, table, frame: pd.DataFrame) -> list[dict]:
-    monitor = Monitor(model, table, MonitorSettings(), io.StringIO(), io.StringIO())
-    monitor.feed(frame.to_csv(index=False, float_format="%.17g").splitlines())
+def _events(model, table, frame: pd.DataFrame, jobs: DiagnosisJobs | None = None) -> list[dict]:
+    """The monitor's events over ``frame``: ``left_nominal``, and ``diagnosis`` with ``jobs``."""
+    monitor = Monitor(model, table, MonitorSettings(), io.StringIO(), io.StringIO(), jobs)
+    monitor.run(LineSource(stream=io.StringIO(frame.to_csv(index=False, float_format="%.17g"))))
     rows = [json.loads(x) for x in monitor.out.getvalue().splitlines()]
-    return [row for row in rows if row.get("event") == "left_nominal"]
+    return [row for row in rows if row.get("event") in ("left_nominal", "diagnosis")]
+
+
+def _triggered(events: list[dict], since: float, stream: pd.DataFrame, key) -> dict:
+    """The score of the monitor's own diagnosis of the window from ``since`` (s)."""
+    t = stream.t.to_numpy()
+    start = int(np.argmin(np.abs(t - since)))  # the event's time is t0 + k·dt, not read
+    found = [e for e in events if e["event"] == "diagnosis" and e["since"] == t[start]]
+    if not found or "report" not in found[0]:
+        return {"error": True}
+    answer = Path(found[0]["report"]).parent
+    window = pd.read_csv(answer.parent / "window.csv")
+    recorded = stream.iloc[start : start + len(window)][window.columns]
+    out = score_family_case(key, json.loads((answer / "diagnosis.json").read_text()))
+    out["window_as_recorded"] = bool(np.array_equal(window.to_numpy(), recorded.to_numpy()))
+    return out
 
 
 def _diagnose(frame, twin, since: int, key) -> dict:
@@ -145,20 +166,32 @@ def _family_seed(family: str, seed: int, n: int, diagnose: bool, cache: Path | N
     for effect in FAMILY_EFFECTS[family][1:]:
         case = cases[effect]
         stream = pd.concat([none.recording.iloc[:half], case.recording.iloc[half:]])
-        onset = _onset(none, case, half)
-        events = [e for e in _events(model, table, stream) if e["t"] / dt >= half - WINDOW]
-        delay = None
-        if events and onset is not None:
-            delay = round(events[0]["t"] / dt) - onset
-        entry = {"onset": None if onset is None else onset - half, "delay": delay,
-                 "regime": events[0]["regime"] if events else None,
-                 "snr": round(float(case.key["snr"]), 2)}  # fmt: skip
-        if diagnose and _detected(entry):
-            since = round(events[0]["since"] / dt)
-            entry["diagnosis"] = _diagnose(stream, none.twin, since, case.key)
-            entry["diagnosis_at_switch"] = _diagnose(stream, none.twin, half, case.key)
-        out["effects"][effect] = entry
+        with tempfile.TemporaryDirectory() as folder:
+            out["effects"][effect] = _switch(model, table, none, case, stream, diagnose, folder)
     return out
+
+
+def _switch(model, table, none, case, stream, diagnose: bool, folder: str) -> dict:
+    """The monitor over a switch stream: detection and, with ``diagnose``, the diagnoses."""
+    half, dt = len(none.recording) // 2, none.key["dt"]
+    onset = _onset(none, case, half)
+    jobs = None
+    if diagnose:
+        (Path(folder) / "twin.json").write_text(json.dumps(none.twin))
+        columns = dict.fromkeys(s for u in model.units for s in (*u.inputs, *u.outputs))
+        jobs = DiagnosisJobs(Path(folder) / "twin.json", columns, keep=Path(folder) / "jobs")
+    seen = _events(model, table, stream, jobs)
+    events = [e for e in seen if e["event"] == "left_nominal" and e["t"] / dt >= half - WINDOW]
+    delay = None
+    if events and onset is not None:
+        delay = round(events[0]["t"] / dt) - onset
+    entry = {"onset": None if onset is None else onset - half, "delay": delay,
+             "regime": events[0]["regime"] if events else None,
+             "snr": round(float(case.key["snr"]), 2)}  # fmt: skip
+    if diagnose and _detected(entry):
+        entry["diagnosis"] = _triggered(seen, events[0]["since"], stream, case.key)
+        entry["diagnosis_at_switch"] = _diagnose(stream, none.twin, half, case.key)
+    return entry
 
 
 def _rate(flags: list[bool]) -> dict:
