@@ -7,7 +7,8 @@ into literal pieces and fields, and :meth:`LineTemplate.render` writes many rows
 Python does (correctly rounded digits from double-double arithmetic, Python's layout rules). A
 row holding a number that loop leaves undecided (a rounding tie or too close to one, a
 magnitude beyond 1e±250, a non-finite value; rare) is written by ``template % values``
-itself, as is every row without numba. So the text is always ``template % values``.
+itself, as are fewer than :data:`FEWEST_COMPILED` rows and every row without numba. So the
+text is always ``template % values``.
 """
 
 from __future__ import annotations
@@ -23,12 +24,15 @@ from dtwin._jit import HAVE_NUMBA
 from dtwin._validation import DtwinValueError
 from dtwin.monitor._stream_kernels import FIELD_G, FIELD_REPR, FIELD_TEXT, write_lines
 
-__all__ = ["LineTemplate", "powers_of_ten"]
+__all__ = ["LineTemplate", "powers_of_ten", "FEWEST_COMPILED", "POWER_RANGE"]
 
 #: A field of a template: ``%r``, ``%s`` or ``%.<p>g``.
 _FIELD = re.compile(r"%(?:(r)|(s)|\.(\d+)g)")
 #: Powers of ten held as double-doubles: ``10^k`` for ``|k| ≤`` this.
 POWER_RANGE = 300
+#: Fewest rows written by the compiled loop: calling it costs about 10 µs, Python's ``%`` 10 µs a
+#: row (a live stream's one line is Python's).
+FEWEST_COMPILED = 4
 
 
 @functools.cache
@@ -108,7 +112,7 @@ class LineTemplate:
         """
         floats = np.ascontiguousarray(floats, dtype=np.float64)
         choices = np.ascontiguousarray(choices, dtype=np.int64).reshape(len(floats), -1)
-        if not HAVE_NUMBA:
+        if not HAVE_NUMBA or len(floats) < FEWEST_COMPILED:
             return "".join(self._python(floats, choices, range(len(floats))))
         text, ends, written = write_lines(
             floats, choices, self._kinds, self._precisions, self._literals, self._literal_ends,

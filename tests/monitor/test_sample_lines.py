@@ -14,7 +14,7 @@ import pytest
 from dtwin._jit import HAVE_NUMBA
 from dtwin._validation import DtwinValueError
 from dtwin.monitor._stream_kernels import write_lines
-from dtwin.monitor.sample_lines import LineTemplate, powers_of_ten
+from dtwin.monitor.sample_lines import FEWEST_COMPILED, LineTemplate, powers_of_ten
 
 TEMPLATE = '{"t": %r, "regime": "%s", "p": [%.12g, %.4g], "x": %.17g, "a": "%s", "y": %.1g}\n'
 TEXTS = ("S1", "unknown", "Ünïcode", "")
@@ -65,6 +65,7 @@ def test_the_compiled_loop_writes_almost_every_row_and_leaves_the_undecided_to_p
     assert written.tolist() == [True, False, False, False]
     assert text.tobytes().decode() == "0.3 0.5\n" and ends.tolist() == [8, 8, 8, 8]
     expected = "".join(f"{t!r} {x:.12g}\n" for t, x in hard.tolist())
+    assert len(hard) >= FEWEST_COMPILED  # the compiled loop's rows and Python's, spliced
     assert template.render(hard, np.zeros((4, 0))) == expected
 
 
