@@ -189,3 +189,24 @@ def test_a_family_case_is_located_and_named(case_type, seed):
     answer = table_diagnosis_to_dict(diagnose_table(recording, table))
     scored = score_family_case(case.key, answer)
     assert scored["located"] and scored["named"], (case.key["at"], answer["effect"], answer["at"])
+
+
+def test_screening_fits_hold_the_twin_s_params_as_fitted(monkeypatch):
+    """Screening has 12 evaluations: with the twin's params free within their band, a thermal
+    network's six params took them all and a missing state term was screened out."""
+    import dtwin.gap.table_diagnose as table_diagnose
+
+    modes = []
+    fit_variant = table_diagnose.fit_variant
+
+    def recording_fit(data, variant, nominal, **kwargs):
+        if kwargs.get("windows") is not None and variant.effect_params:
+            modes.append(kwargs.get("mode"))
+        return fit_variant(data, variant, nominal, **kwargs)
+
+    monkeypatch.setattr(table_diagnose, "fit_variant", recording_fit)
+    monkeypatch.setattr(table_diagnose, "map_fits", lambda call, items: [call(i) for i in items])
+    frame = _asset(1500, 2)
+    frame["level"] = np.minimum(frame["level"], float(np.quantile(frame["level"], 0.85)))
+    _diagnose(frame)
+    assert modes and set(modes) == {"fixed"}
