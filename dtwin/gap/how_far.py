@@ -24,10 +24,11 @@ from dtwin.gap.effects import NONE, UNEXPLAINED, effect_by_name
 from dtwin.gap.intervals import parameter_intervals, smoothed_fit
 from dtwin.gap.localise import ModuleModel, normalised_rms, run_chain, upstream_modules
 from dtwin.gap.models import simulate_module
+from dtwin.gap.noise import shrink_pct
 from dtwin.gap.recording import DERIVED_INPUTS, Recording
 from dtwin.gap.results import ModuleReport
 from dtwin.gap.where import ModuleWork, Split, nominal_lin
-from dtwin.gap.which import linear_refit_gap, shrink_pct
+from dtwin.gap.which import linear_refit_gap
 from dtwin.twin.wiring import MODULES, PLANT, only_module
 
 __all__ = [

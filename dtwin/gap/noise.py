@@ -60,6 +60,11 @@ __all__ = [
     "reconcile_noise_floor",
     "effective_samples",
     "gap_threshold",
+    "excess_gap",
+    "shrink_pct",
+    "WHITENING_MAX_ORDER",
+    "whitening_filter",
+    "whitened",
 ]
 
 _MAD_TO_STD = 1.482602218505602
@@ -722,3 +727,77 @@ def gap_threshold(
     sampling = math.sqrt(chi2.ppf(1.0 - significance, n_eff) / n_eff)
     # the part of the gap noise does not explain must itself reach min_gap (docs/gap.md §Where)
     return max(math.hypot(floor_rms, min_gap), floor_rms * (1.0 + noise_tolerance) * sampling)
+
+
+def excess_gap(gap: float, floor: float) -> float:
+    """Return ``√(gap² − floor²)``: the part of a gap its noise floor does not explain (≥ 0)."""
+    return math.sqrt(max(gap * gap - floor * floor, 0.0))
+
+
+def shrink_pct(before: float, after: float) -> float:
+    """Return ``100·(1 − after/before)``, the percentage a gap shrank (0 when ``before ≤ 0``)."""
+    if before <= 0:
+        return 0.0
+    return 100.0 * (1.0 - after / before)
+
+
+#: Highest order of the autoregressive noise model that whitens an error series
+#: (:func:`whitening_filter`).
+WHITENING_MAX_ORDER = 8
+
+
+def _lagged(residual: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(rows, lags)``: the samples whose ``order`` predecessors are all finite.
+
+    ``rows`` are sample indices, ``lags`` shape ``(len(rows), order)`` their values at lags
+    1 … ``order``.
+    """
+    finite = np.isfinite(residual)
+    run = np.convolve(finite.astype(float), np.ones(order + 1))[: len(residual)]
+    rows = np.flatnonzero(run >= order + 1 - 0.5)
+    lags = np.zeros((len(rows), order))
+    for lag in range(1, order + 1):
+        lags[:, lag - 1] = residual[rows - lag]
+    return rows, lags
+
+
+def whitening_filter(residual: np.ndarray, max_order: int = WHITENING_MAX_ORDER) -> np.ndarray:
+    """Return the monic whitening filter ``[1, a₁, …, a_p]`` of an AR(p) model of a residual.
+
+    Parameters
+    ----------
+    residual : array, shape (n,)
+        An error series, NaN where unscored (a window's warm-up): only stretches of finite
+        samples are used.
+    max_order : int
+        Highest order tried.
+
+    Returns
+    -------
+    numpy.ndarray, shape (p + 1,)
+        ``e[k] + a₁·e[k−1] + … + a_p·e[k−p]`` is the model's innovation; ``p`` minimises BIC
+        ``n·ln σ̂²_p + p·ln n`` over the same samples for every order (least squares,
+        ``p = 0``: white).
+    """
+    residual = np.asarray(residual, dtype=float)
+    rows, lags = _lagged(residual, max_order)
+    if len(rows) <= 10 * (max_order + 1):
+        return np.array([1.0])
+    target = residual[rows]
+    best, best_bic = np.array([1.0]), len(rows) * math.log(max(float(target @ target), 1e-300))
+    for order in range(1, max_order + 1):
+        coeffs, *_ = np.linalg.lstsq(lags[:, :order], target, rcond=None)
+        error = target - lags[:, :order] @ coeffs
+        bic = len(rows) * math.log(max(float(error @ error), 1e-300)) + order * math.log(len(rows))
+        if bic < best_bic:
+            best, best_bic = np.concatenate([[1.0], -coeffs]), bic
+    return best
+
+
+def whitened(residual: np.ndarray, whiten: np.ndarray) -> np.ndarray:
+    """Return the innovations ``Σ a_i·e[k−i]`` of ``residual`` (NaN without ``p`` finite lags)."""
+    order = len(whiten) - 1
+    rows, lags = _lagged(np.asarray(residual, dtype=float), order)
+    out = np.full(len(residual), np.nan)
+    out[rows] = residual[rows] + lags @ whiten[1:]
+    return out

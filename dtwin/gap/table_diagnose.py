@@ -36,10 +36,14 @@ from dtwin.gap.confidence import calibrated_confidence
 from dtwin.gap.noise import (
     NoiseFloor,
     effective_samples,
+    excess_gap,
     gap_threshold,
     reconcile_noise_floor,
     residual_noise_floor,
+    shrink_pct,
     spectral_noise_floor,
+    whitened,
+    whitening_filter,
 )
 from dtwin.gap.recording import Recording
 from dtwin.gap.results import GapSettings
@@ -55,7 +59,6 @@ from dtwin.gap.table_fit import (
     rms_by_output,
     state_guess,
 )
-from dtwin.gap.which import _excess, _whitened, shrink_pct, whitening_filter
 from dtwin.twin.fmu import model_for
 from dtwin.twin.simulate import UnitModel, UnitSpec, choose_substeps, units_of
 
@@ -582,7 +585,8 @@ def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, l
     best = _ranked(candidates, n_eff)[0]
     variant = best.fit.variant
     floor = max(floor, _candidate_floor(work, best, settings))
-    removed = 1.0 - _excess(best.gap_choose, floor) ** 2 / max(_excess(gap, floor) ** 2, 1e-300)
+    excess_before = max(excess_gap(gap, floor) ** 2, 1e-300)
+    removed = 1.0 - excess_gap(best.gap_choose, floor) ** 2 / excess_before
     share = settings.min_linear_share if variant.linear_form else settings.min_share
     left, bar = best.gap_choose / floor, combined(work.thresholds) / work.floor
     if removed >= share and left <= bar:
@@ -1005,7 +1009,7 @@ def _nested_test(work: _UnitWork, candidates, settings, n_units: int) -> tuple:
     twin as fitted (params within the calibration tolerance) and, for an effect, with the twin
     re-fitted (``parameter_mismatch``; the better of the two is the null, so an effect's gain
     is not a better fit of the params). Each output's error is whitened by the AR noise model of
-    the candidate's training error (:func:`~dtwin.gap.which.whitening_filter`: the candidate
+    the candidate's training error (:func:`~dtwin.gap.noise.whitening_filter`: the candidate
     nests the twin, so its error is the noise whether the effect is there or not, whereas the
     twin's error holds the effect, whose slow part its own noise model would take for coloured
     noise); every window's states are fitted in both. ``T = Σ_o n_o·ln(S_null,o/S_cand,o)``
@@ -1035,7 +1039,7 @@ def _nested_test(work: _UnitWork, candidates, settings, n_units: int) -> tuple:
     for errors in null_errors:
         total = 0.0
         for o, whiten in enumerate(whitens):
-            a, b = _whitened(own[:, o], whiten), _whitened(errors[:, o], whiten)
+            a, b = whitened(own[:, o], whiten), whitened(errors[:, o], whiten)
             scored = np.isfinite(a) & np.isfinite(b)
             sums = float(a[scored] @ a[scored]), float(b[scored] @ b[scored])
             if not (sums[0] > 0 and sums[1] > 0):
@@ -1201,7 +1205,7 @@ def _answer(source: _UnitWork, candidates, chosen, base, notes, also, table) -> 
         param_intervals=_reported_intervals(fit, intervals), fixed_combinations=fixed,
         confidence=calibrated_confidence(chosen.weight), bic_weight=chosen.weight, gap_after=after,
         raw_shrink_pct=shrink_pct(before, after),
-        own_shrink_pct=shrink_pct(_excess(reference, floor), _excess(after, floor)),
-        excess_shrink_pct=shrink_pct(_excess(before, floor), _excess(after, floor)),
+        own_shrink_pct=shrink_pct(excess_gap(reference, floor), excess_gap(after, floor)),
+        excess_shrink_pct=shrink_pct(excess_gap(before, floor), excess_gap(after, floor)),
         free_run_rms_after=_free_run(data, fit), notes=tuple(notes), **common,
     )  # fmt: skip

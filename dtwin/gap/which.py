@@ -32,6 +32,7 @@ from dtwin.gap.effects import (
 from dtwin.gap.fit import CandidateFit, fit_candidate, refit_delay, training_view
 from dtwin.gap.localise import normalised_rms
 from dtwin.gap.models import module_part, profiled_window_error, simulate_module
+from dtwin.gap.noise import excess_gap, shrink_pct, whitened, whitening_filter
 from dtwin.gap.oe_reference import plain_linear_error
 from dtwin.gap.results import CandidateReport, GapSettings
 from dtwin.gap.where import ModuleWork, Split
@@ -43,12 +44,9 @@ __all__ = [
     "NEST_MARGIN_PCT",
     "NEST_DEPARTURE",
     "NEST_EVIDENCE",
-    "shrink_pct",
     "fit_candidates",
     "NESTED_PART_SAMPLES",
-    "NESTED_MAX_ORDER",
     "LINEAR_ALTERNATIVE_ORDER",
-    "whitening_filter",
     "nested_test",
     "score_candidates",
     "linear_refit_gap",
@@ -69,17 +67,6 @@ class FittedCandidate:
     predicted: np.ndarray
     gap_choose: float
     gap_score: float
-
-
-def _excess(gap: float, floor: float) -> float:
-    return math.sqrt(max(gap * gap - floor * floor, 0.0))
-
-
-def shrink_pct(before: float, after: float) -> float:
-    """Return ``100·(1 − after/before)``, the percentage a gap shrank (0 when ``before ≤ 0``)."""
-    if before <= 0:
-        return 0.0
-    return 100.0 * (1.0 - after / before)
 
 
 def _finite(gap: float) -> float:
@@ -243,11 +230,11 @@ def _three_shrinks(work: ModuleWork, effect: Effect, gap_after: float, refit: fl
     floor = work.floor.rms / work.norm
     before = work.gap_scored
     reference = before if effect.refits_linear else refit
-    excess_after = _excess(gap_after, floor)
+    excess_after = excess_gap(gap_after, floor)
     return (
         shrink_pct(before, gap_after),
-        shrink_pct(_excess(reference, floor), excess_after),
-        shrink_pct(_excess(before, floor), excess_after),
+        shrink_pct(excess_gap(reference, floor), excess_after),
+        shrink_pct(excess_gap(before, floor), excess_after),
         bool(gap_after <= floor),
     )
 
@@ -278,7 +265,7 @@ def score_candidates(work: ModuleWork, split: Split, settings: GapSettings):
     n_eff = work.n_eff
     floor = work.floor.rms / work.norm
     share_part = _share_part(work, split)
-    excess_choose = _excess(
+    excess_choose = excess_gap(
         normalised_rms(work.data.output, work.sim_before, share_part, work.norm), floor
     )
     refit = linear_refit_gap(work)
@@ -305,7 +292,7 @@ def score_candidates(work: ModuleWork, split: Split, settings: GapSettings):
                 lin=dict(fit.lin),
                 n_params=fit.n_free,
                 choosing_gap=gap,
-                choosing_share_pct=shrink_pct(excess_choose, _excess(gap_share, floor_c)),
+                choosing_share_pct=shrink_pct(excess_choose, excess_gap(gap_share, floor_c)),
                 scoring_gap_after=fitted.gap_score,
                 raw_shrink_pct=raw,
                 own_shrink_pct=own,
@@ -331,69 +318,10 @@ def score_candidates(work: ModuleWork, split: Split, settings: GapSettings):
 #: longer recording it fits and compares over the contiguous stretch of at most twice this many
 #: samples around their boundary, so its memory and CPU do not grow with the recording.
 NESTED_PART_SAMPLES = 10_000
-#: Highest order of the autoregressive noise model that whitens the nested test's errors.
-NESTED_MAX_ORDER = 8
 #: Order of the plain linear model OE(n, n) an effect must beat in the nested test: the twin's
 #: second-order plant and two more second-order stages (an actuator's and a sensor's or
 #: filter's dynamics, the linear parts a measured chain has and a plant twin lacks).
 LINEAR_ALTERNATIVE_ORDER = 6
-
-
-def _lagged(residual: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return ``(rows, lags)``: the samples whose ``order`` predecessors are all finite.
-
-    ``rows`` are sample indices, ``lags`` shape ``(len(rows), order)`` their values at lags
-    1 … ``order``.
-    """
-    finite = np.isfinite(residual)
-    run = np.convolve(finite.astype(float), np.ones(order + 1))[: len(residual)]
-    rows = np.flatnonzero(run >= order + 1 - 0.5)
-    lags = np.zeros((len(rows), order))
-    for lag in range(1, order + 1):
-        lags[:, lag - 1] = residual[rows - lag]
-    return rows, lags
-
-
-def whitening_filter(residual: np.ndarray, max_order: int = NESTED_MAX_ORDER) -> np.ndarray:
-    """Return the monic whitening filter ``[1, a₁, …, a_p]`` of an AR(p) model of a residual.
-
-    Parameters
-    ----------
-    residual : array, shape (n,)
-        An error series, NaN where unscored (a window's warm-up): only stretches of finite
-        samples are used.
-    max_order : int
-        Highest order tried.
-
-    Returns
-    -------
-    numpy.ndarray, shape (p + 1,)
-        ``e[k] + a₁·e[k−1] + … + a_p·e[k−p]`` is the model's innovation; ``p`` minimises BIC
-        ``n·ln σ̂²_p + p·ln n`` over the same samples for every order (least squares,
-        ``p = 0``: white).
-    """
-    residual = np.asarray(residual, dtype=float)
-    rows, lags = _lagged(residual, max_order)
-    if len(rows) <= 10 * (max_order + 1):
-        return np.array([1.0])
-    target = residual[rows]
-    best, best_bic = np.array([1.0]), len(rows) * math.log(max(float(target @ target), 1e-300))
-    for order in range(1, max_order + 1):
-        coeffs, *_ = np.linalg.lstsq(lags[:, :order], target, rcond=None)
-        error = target - lags[:, :order] @ coeffs
-        bic = len(rows) * math.log(max(float(error @ error), 1e-300)) + order * math.log(len(rows))
-        if bic < best_bic:
-            best, best_bic = np.concatenate([[1.0], -coeffs]), bic
-    return best
-
-
-def _whitened(residual: np.ndarray, whiten: np.ndarray) -> np.ndarray:
-    """Return the innovations ``Σ a_i·e[k−i]`` of ``residual`` (NaN without ``p`` finite lags)."""
-    order = len(whiten) - 1
-    rows, lags = _lagged(np.asarray(residual, dtype=float), order)
-    out = np.full(len(residual), np.nan)
-    out[rows] = residual[rows] + lags @ whiten[1:]
-    return out
 
 
 def _linear_alternative(part: ModuleWork, split: Split, whiten, scored) -> float | None:
@@ -410,7 +338,7 @@ def _linear_alternative(part: ModuleWork, split: Split, whiten, scored) -> float
     first = 0 if data.discretisation in (FOH, BANDLIMITED) else 1  # does u[k] act on x[k]?
     delay = int(part.lin_base.get("delay_samples", 0))
     error = plain_linear_error(data, delay, split.n_train, LINEAR_ALTERNATIVE_ORDER, first)
-    innovations = _whitened(error[split.choose], whiten)[scored]
+    innovations = whitened(error[split.choose], whiten)[scored]
     if not np.all(np.isfinite(innovations)):
         return None
     return float(innovations @ innovations)
@@ -507,7 +435,7 @@ def nested_test(work: ModuleWork, split: Split, settings: GapSettings) -> str | 
     profiled = [profiled_window_error(part.data, lin, eff, theta) for lin, eff, theta in models]
     # the noise model of the model that nests the other: its error is noise under both
     whiten = whitening_filter(profiled[0][: part_split.n_train])
-    innovations = np.stack([_whitened(error[choose], whiten) for error in profiled])
+    innovations = np.stack([whitened(error[choose], whiten) for error in profiled])
     scored = np.all(np.isfinite(innovations), axis=0)
     n_scored = int(np.count_nonzero(scored))
     if n_scored < 2 * len(whiten):

@@ -10,7 +10,8 @@ from scipy.signal import lfilter
 from scipy.stats import chi2
 
 from dtwin.gap import diagnose, recording_from_frame, twin_from_mapping, which
-from dtwin.gap.which import module_part, whitening_filter
+from dtwin.gap.noise import whitening_filter
+from dtwin.gap.which import module_part
 from tests.gap.test_gap_diagnose import _rig
 
 
