@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import importlib
 import sys
-from collections.abc import Callable, Mapping
+import types
+from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
-__all__ = ["lazy_exports"]
+__all__ = ["lazy_exports", "keep_exports"]
 
 
 def lazy_exports(
@@ -50,3 +51,36 @@ def lazy_exports(
         return sorted([*vars(sys.modules[package]), *exports])
 
     return get_export, names
+
+
+def keep_exports(package: str, names: Collection[str]) -> None:
+    """Keep ``package.NAME`` the re-exported object when the submodule ``package.NAME`` loads.
+
+    Importing a submodule binds it on its package (``import dtwin.gap.diagnose`` sets
+    ``dtwin.gap.diagnose`` to the module). A package that re-exported a function of that name
+    eagerly rebound it at once; a lazy one would keep the module, and ``from dtwin.gap import
+    diagnose`` would return it. For ``names``, that binding is skipped, so the attribute stays
+    unset until its first use resolves it through the package's ``__getattr__`` (the
+    function), as before. The submodule stays importable by name (``sys.modules``,
+    :func:`importlib.import_module`).
+
+    Parameters
+    ----------
+    package : str
+        The package's ``__name__``.
+    names : collection of str
+        Exported names that are also the names of the package's submodules.
+    """
+    shadowed = frozenset(names)
+
+    class _Package(types.ModuleType):
+        def __setattr__(self, name: str, value: Any) -> None:
+            if (
+                name in shadowed
+                and isinstance(value, types.ModuleType)
+                and value.__name__ == f"{package}.{name}"
+            ):
+                return
+            super().__setattr__(name, value)
+
+    sys.modules[package].__class__ = _Package

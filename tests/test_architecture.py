@@ -198,7 +198,8 @@ def module_files(name: str) -> list[Path]:
                 found.append(candidate)
     package = REPO.joinpath(*parts[:-1]) / "__init__.py"
     exported = lazy_exports(package).get(parts[-1]) if package.is_file() else None
-    return found + module_files(exported) if exported else found
+    # dtwin.gap re-exports the function diagnose of its module dtwin.gap.diagnose
+    return found + module_files(exported) if exported not in (None, name) else found
 
 
 @cache

@@ -17,25 +17,29 @@ figure).
 Arrays are time-first: every signal has shape ``(n_samples,)``.
 """
 
-from dtwin.gap.diagnose import diagnose
-from dtwin.gap.effects import EFFECT_NAMES, EFFECTS, Effect
-from dtwin.gap.recording import Recording, read_recording, recording_from_frame
-from dtwin.gap.report import diagnosis_to_dict, write_report
-from dtwin.gap.results import Diagnosis, GapSettings
-from dtwin.gap.twin_file import twin_discretisation, twin_from_mapping
+from __future__ import annotations
 
-__all__ = [
-    "Diagnosis",
-    "GapSettings",
-    "diagnose",
-    "twin_from_mapping",
-    "twin_discretisation",
-    "EFFECT_NAMES",
-    "EFFECTS",
-    "Effect",
-    "Recording",
-    "read_recording",
-    "recording_from_frame",
-    "diagnosis_to_dict",
-    "write_report",
-]
+from dtwin._lazy import keep_exports, lazy_exports
+
+#: Public names → their modules, imported on first use (PEP 562): the table diagnoser and the
+#: command line load only what they use, not the paper's diagnoser and scipy.signal.
+_EXPORTS: dict[str, str] = {
+    "Diagnosis": "dtwin.gap.results",
+    "GapSettings": "dtwin.gap.results",
+    "diagnose": "dtwin.gap.diagnose",
+    "twin_from_mapping": "dtwin.gap.twin_file",
+    "twin_discretisation": "dtwin.gap.twin_file",
+    "EFFECT_NAMES": "dtwin.gap.effects",
+    "EFFECTS": "dtwin.gap.effects",
+    "Effect": "dtwin.gap.effects",
+    "Recording": "dtwin.gap.recording",
+    "read_recording": "dtwin.gap.recording",
+    "recording_from_frame": "dtwin.gap.recording",
+    "diagnosis_to_dict": "dtwin.gap.report",
+    "write_report": "dtwin.gap.report",
+}
+
+__all__ = list(_EXPORTS)
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+keep_exports(__name__, ["diagnose"])  # the function, not the module dtwin.gap.diagnose
