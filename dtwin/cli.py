@@ -114,15 +114,17 @@ def _with_warning_notes(result, caught: Sequence[warnings.WarningMessage]):
 
 
 def _diagnose(args: argparse.Namespace) -> int:
-    from dtwin.artifacts import atomic_write_folder
-    from dtwin.gap.diagnose import diagnose
-    from dtwin.gap.recording import read_recording
-    from dtwin.gap.report import write_report
-    from dtwin.gap.twin_file import is_table, twin_discretisation, twin_from_mapping
+    from dtwin.gap.twin_file import is_table
 
     twin_content = load_twin_file(args.twin)
     if is_table(twin_content):
         return _diagnose_table(args, twin_content)
+    from dtwin.artifacts import atomic_write_folder  # the paper's diagnoser: not for a table
+    from dtwin.gap.diagnose import diagnose
+    from dtwin.gap.recording import read_recording
+    from dtwin.gap.report import write_report
+    from dtwin.gap.twin_file import twin_discretisation, twin_from_mapping
+
     recording = read_recording(args.recording)
     heldout = None
     if args.heldout is not None:
@@ -306,7 +308,12 @@ def build_parser() -> argparse.ArgumentParser:
         "generate",
         help="generate a recording with a withheld effect (recording.csv, twin.yaml, key.json)",
     )
-    gen.add_argument("effect", choices=_CaseTypes())
+    gen.add_argument(
+        "effect",
+        choices=_CaseTypes(),
+        metavar="EFFECT",  # argparse lists choices for a metavar: only when help is shown
+        help="the case type, one of: %(choices)s",
+    )
     gen.add_argument("--seed", type=int, required=True)
     gen.add_argument("--out", required=True)
     gen.add_argument("--magnitude", type=float, default=None, help="0 (faint) to 1 (strong)")
