@@ -39,7 +39,7 @@ _EXPORTS: dict[str, str] = {
     "write_report": "dtwin.gap.report",
 }
 
-__all__ = list(_EXPORTS)
+__all__ = sorted(_EXPORTS)
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 keep_exports(__name__, ["diagnose"])  # the function, not the module dtwin.gap.diagnose
