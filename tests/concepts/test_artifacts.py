@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 import pytest
 
 from dtwin._validation import DtwinValueError
-from dtwin.artifacts import atomic_write, atomic_write_folder, write_csv, write_json
+from dtwin.artifacts import (
+    COMPILED_ROWS,
+    atomic_write,
+    atomic_write_folder,
+    write_csv,
+    write_json,
+)
 
 
 class _DiskFullError(OSError):
@@ -61,6 +68,22 @@ def test_a_folder_holding_other_files_is_never_replaced(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
+def _long_table() -> pd.DataFrame:
+    """posteriors.csv's shape: settling rows of NaN, text and int columns, 12,000 rows."""
+    from dtwin.monitor import sample_lines  # noqa: F401 - numba loaded: write_csv's compiled path
+
+    rng = np.random.default_rng(5)
+    n = COMPILED_ROWS + 2000
+    p = rng.dirichlet(np.ones(3), n)
+    p[:40] = np.nan
+    p[5000, 1] = np.nan
+    return pd.DataFrame({"t": np.arange(n) * 0.02, "settling": (np.arange(n) < 40).astype(int),
+                         "regime": np.array(["settling", "S1", "unknown"], dtype=object)[
+                             rng.integers(0, 3, n)],
+                         "filtered_S1": p[:, 0], "M1:x|filtered": p[:, 1] * 1e-200,
+                         "z": rng.normal(size=n) * 1e5})  # fmt: skip
+
+
 @pytest.mark.parametrize(
     "table",
     [
@@ -75,6 +98,11 @@ def test_a_folder_holding_other_files_is_never_replaced(tmp_path):
         pd.DataFrame({"n": [1, 2], "x": [0.5, 1.5]}),  # an int column
         pd.DataFrame({"a b": [0.5], "c": [1.0]}),  # a name to quote
         pd.DataFrame({"x": pd.Series([], dtype=float)}),  # no rows
+        pd.DataFrame({"x": [1.5, float("inf")], "y": [1.0, 2.0]}),  # an infinity: to_csv's
+        pd.DataFrame(
+            {"t": [0.0, 0.5], "regime": ["settling", ""], "M0:u|twin": [np.nan, -0.0], "n": [0, 1]}
+        ),  # text, int, NaN and a name with : and |
+        _long_table(),  # the compiled writer's rows, NaN rows among them
     ],
 )
 def test_write_csv_gives_the_bytes_of_to_csv(tmp_path, table):
