@@ -23,7 +23,6 @@ import math
 import os
 import re
 import shutil
-import sys
 import tempfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -227,22 +226,15 @@ def write_csv(table: pd.DataFrame, path: str | os.PathLike, float_format: str = 
     """Write ``table`` as CSV atomically, without index, floats with 12 significant digits.
 
     A table of plain cells (float64 columns, NaN an empty field; int64 columns; text columns of
-    plain words; plain column names) is formatted row by row, one ``%`` per row, or, from
-    :data:`COMPILED_ROWS` rows on in a process that has loaded numba, by the monitor's compiled
-    line writer (:class:`dtwin.monitor.sample_lines.LineTemplate`): the bytes of
-    ``DataFrame.to_csv`` at a quarter (a sixth) of its time
-    (``tests/concepts/test_artifacts.py``); any other table goes through ``to_csv``.
+    plain words; plain column names) is formatted row by row, one ``%`` per row: the bytes of
+    ``DataFrame.to_csv`` at a quarter of its time (``tests/concepts/test_artifacts.py``); any
+    other table goes through ``to_csv``.
     """
     text = _plain_table_csv(table, float_format)
     if text is not None:
         atomic_write(path, lambda tmp: Path(tmp).write_text(text))
         return
     atomic_write(path, lambda tmp: table.to_csv(tmp, index=False, float_format=float_format))
-
-
-#: Rows from which :func:`write_csv` formats through the compiled line writer, where numba is
-#: loaded already (loading it costs what Python's ``%`` takes for about 100,000 cells).
-COMPILED_ROWS = 10_000
 
 
 def _plain_table_csv(table: pd.DataFrame, float_format: str) -> str | None:
@@ -282,20 +274,8 @@ def _plain_table_csv(table: pd.DataFrame, float_format: str) -> str | None:
     if np.isinf(values).any():
         return None
     choices = np.column_stack(codes) if codes else np.zeros((n, 0), dtype=np.int64)
-    header = ",".join(names) + "\n"
     line = ",".join(fields) + "\n"
-    if n < COMPILED_ROWS or "numba" not in sys.modules:
-        return header + "".join(_row_texts(line, values, choices, texts, range(n)))
-    from dtwin.monitor.sample_lines import LineTemplate
-
-    gaps = np.isnan(values).any(axis=1)
-    body = LineTemplate(line, tuple(texts)).render(values[~gaps], choices[~gaps])
-    if not gaps.any():
-        return header + body
-    rows = np.empty(n, dtype=object)
-    rows[~gaps] = body.splitlines(keepends=True)
-    rows[gaps] = _row_texts(line, values, choices, texts, np.flatnonzero(gaps).tolist())
-    return header + "".join(rows.tolist())
+    return ",".join(names) + "\n" + "".join(_row_texts(line, values, choices, texts, range(n)))
 
 
 def _row_texts(line: str, values, choices, texts, rows) -> list[str]:

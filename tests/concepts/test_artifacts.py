@@ -7,13 +7,7 @@ import pandas as pd
 import pytest
 
 from dtwin._validation import DtwinValueError
-from dtwin.artifacts import (
-    COMPILED_ROWS,
-    atomic_write,
-    atomic_write_folder,
-    write_csv,
-    write_json,
-)
+from dtwin.artifacts import atomic_write, atomic_write_folder, write_csv, write_json
 
 
 class _DiskFullError(OSError):
@@ -69,14 +63,12 @@ def test_a_folder_holding_other_files_is_never_replaced(tmp_path):
 
 
 def _long_table() -> pd.DataFrame:
-    """posteriors.csv's shape: settling rows of NaN, text and int columns, 12,000 rows."""
-    from dtwin.monitor import sample_lines  # noqa: F401 - numba loaded: write_csv's compiled path
-
+    """posteriors.csv's shape: settling rows of NaN, text and int columns, 2,000 rows."""
     rng = np.random.default_rng(5)
-    n = COMPILED_ROWS + 2000
+    n = 2000
     p = rng.dirichlet(np.ones(3), n)
     p[:40] = np.nan
-    p[5000, 1] = np.nan
+    p[1000, 1] = np.nan
     return pd.DataFrame({"t": np.arange(n) * 0.02, "settling": (np.arange(n) < 40).astype(int),
                          "regime": np.array(["settling", "S1", "unknown"], dtype=object)[
                              rng.integers(0, 3, n)],
@@ -102,7 +94,7 @@ def _long_table() -> pd.DataFrame:
         pd.DataFrame(
             {"t": [0.0, 0.5], "regime": ["settling", ""], "M0:u|twin": [np.nan, -0.0], "n": [0, 1]}
         ),  # text, int, NaN and a name with : and |
-        _long_table(),  # the compiled writer's rows, NaN rows among them
+        _long_table(),  # NaN rows among full ones
     ],
 )
 def test_write_csv_gives_the_bytes_of_to_csv(tmp_path, table):
