@@ -397,6 +397,7 @@ def fit_hmm(
     var_floor: float = 1e-3,
     start: str = "dirichlet",
     engine: str = "compiled",
+    start_from: HmmFit | None = None,
 ) -> HmmFit:
     """Fit a diagonal Gaussian HMM by EM from several random starts and return the best.
 
@@ -425,6 +426,11 @@ def fit_hmm(
         EM engine: the compiled kernels of :mod:`dtwin._em_kernels` (hmmlearn's equations and
         recursions, scaled and log-space; imports neither hmmlearn nor scikit-learn) or
         hmmlearn itself (the reference; config ``hmm.engine``).
+    start_from : HmmFit, optional
+        Instead of random starts, one EM run from this fit's emissions (means and variances,
+        K × D as ``X``'s) and state occupancy (its smoothed posteriors' mean share × T): a fit
+        on a sample of the rows continued to convergence on all of them. ``n_restarts`` and
+        ``start`` are then unused and ``seed`` (an int) is the run's.
 
     Returns
     -------
@@ -464,10 +470,34 @@ def fit_hmm(
     options = _em_options(
         X, n_states, max_iter=max_iter, tol=tol, var_floor=var_floor, start=start, engine=engine
     )
+    if start_from is not None:
+        _require_start_from(start_from, n_states, X, seed)
     with one_blas_thread():
-        seeds = restart_seeds(seed, n_restarts)
-        restarts, runs = _gaussian_starts(X, n_states, seeds, 1, options)
+        if start_from is None:
+            seeds = restart_seeds(seed, n_restarts)
+            restarts, runs = _gaussian_starts(X, n_states, seeds, 1, options)
+        else:
+            em = {key: options[key] for key in ("max_iter", "tol", "var_floor")}
+            point = np.stack([start_from.means, start_from.sds**2])
+            occupancy = start_from.smoothed.mean(axis=0) * len(X)
+            restarts, runs = fit_starts(
+                _em_data(X), [int(seed)], lambda rng: (point, occupancy), options["engine"], em,
+                label=f"fit_hmm K={n_states} from a fit",
+            )  # fmt: skip
         return _assemble_fit(X, n_states, restarts, runs, options["engine"])
+
+
+def _require_start_from(fit: Any, n_states: int, X: np.ndarray, seed: Any) -> None:
+    """Check ``fit_hmm``'s ``start_from`` against ``X`` and ``n_states``, and its int seed."""
+    if not isinstance(fit, HmmFit):
+        raise DtwinTypeError(f"start_from must be an HmmFit (got {type(fit).__name__})")
+    if fit.means.shape != (n_states, X.shape[1]):
+        raise DtwinValueError(
+            f"start_from must have {n_states} states of {X.shape[1]} features "
+            f"(got means of shape {fit.means.shape})"
+        )
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise DtwinTypeError(f"seed must be an int with start_from (got {seed!r})")
 
 
 class ScaledHmmFit(NamedTuple):

@@ -309,23 +309,12 @@ def _fitted_hmm(z: np.ndarray, k: int, settings: RegimeSettings) -> HmmFit:
     emissions). The starts only have to find the optimum's basin, which a sample of the
     recording shows; at 100,000 rows this takes a fifth of the time of every start on every row.
     """
-    from dtwin._multistart import fit_starts, one_blas_thread
-    from dtwin.hmm import _assemble_fit, _em_data, _em_options
-
     hmm = HmmSettings(n_states=k, n_restarts=settings.n_restarts, em=settings.em)
     rows = sweep_rows(len(z))
     best = fit_hmm(z[rows], k, seed=[settings.seed, k], **hmm.fit_options())
     if len(rows) == len(z):
         return best
-    options = _em_options(z, k, **settings.em.options())
-    start = np.stack([best.means, best.sds**2]), best.smoothed.mean(axis=0) * len(z)
-    em = {key: options[key] for key in ("max_iter", "tol", "var_floor")}
-    with one_blas_thread():
-        table, runs = fit_starts(
-            _em_data(z), [settings.seed], lambda rng: start, options["engine"], em,
-            label=f"dtwin regimes K={k} on every row",
-        )  # fmt: skip
-        return _assemble_fit(z, k, table, runs, options["engine"])
+    return fit_hmm(z, k, seed=settings.seed, start_from=best, **settings.em.options())
 
 
 def _nominal(fit: HmmFit, nominal_rows: np.ndarray) -> tuple[bool, ...]:
