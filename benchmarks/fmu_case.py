@@ -9,14 +9,19 @@ dead zone the twin does not.
 ``python benchmarks/fmu_case.py N_SAMPLES FOLDER [INTERFACE]`` writes ``recording.csv``,
 ``twin.yaml``, ``models/motor.fmu`` and ``key.json`` (the truth) into FOLDER
 (tests/twin/fmu/twins.py::write_fmu_case); with ``--profile`` after them it also diagnoses the
-case in this process with ``calibrate`` and prints a JSON line: seconds in the FMU's model
-(``simulate`` and ``derivatives``: the FMU's C functions and the RK4 around them, and the
-FMU's re-initialisation through fmpy) against the whole diagnosis, and the answer.
+case in this process with ``calibrate`` and prints a JSON line: the CPU seconds spent in the
+FMU's model (``simulate`` and ``derivatives``: the FMU's C functions and the RK4 around them;
+``start``: its re-initialisation through fmpy), summed over this process and the forked
+processes that fit candidates (:func:`dtwin.gap.table_fit.map_fits`), against the CPU seconds
+of the whole diagnosis (this process and those; the rest is ``fitting_s``), its wall seconds
+(``total_s``), and the answer.
 """
 
 from __future__ import annotations
 
 import json
+import multiprocessing
+import resource
 import sys
 import time
 from pathlib import Path
@@ -45,16 +50,20 @@ def profile(folder: Path) -> dict:
     from dtwin.gap.twin_file import load_twin_text, table_file
     from dtwin.twin import fmu
 
-    spent = {"simulate": 0.0, "start": 0.0, "calls": 0}
+    # shared with the forked fitting processes, which inherit them
+    spent = {key: multiprocessing.Value("d", 0.0) for key in ("simulate", "start", "calls")}
 
     def timed(function, key):
         def wrapper(*args, **kwargs):
-            begin = time.perf_counter()
+            begin = time.process_time()
             try:
                 return function(*args, **kwargs)
             finally:
-                spent[key] += time.perf_counter() - begin
-                spent["calls"] += key == "simulate"
+                with spent[key].get_lock():
+                    spent[key].value += time.process_time() - begin
+                if key == "simulate":
+                    with spent["calls"].get_lock():
+                        spent["calls"].value += 1
 
         return wrapper
 
@@ -62,19 +71,28 @@ def profile(folder: Path) -> dict:
         kind.simulate = timed(kind.simulate, "simulate")
     fmu.FmuModelExchange.derivatives = timed(fmu.FmuModelExchange.derivatives, "simulate")
     fmu._Instance.start = timed(fmu._Instance.start, "start")
-    begin = time.perf_counter()
+    begin, cpu_begin = time.perf_counter(), _cpu()
     table = table_file(load_twin_text((folder / "twin.yaml").read_text()), base_dir=folder)
     recording = read_recording(folder / "recording.csv", columns=("V", "w"))
     result = diagnose_table(recording, table, calibrate=True)
-    total = time.perf_counter() - begin
+    total, cpu = time.perf_counter() - begin, _cpu() - cpu_begin
     return {
         "total_s": round(total, 2),
-        "fmu_model_s": round(spent["simulate"], 2),
-        "fmu_initialise_s": round(spent["start"], 2),
-        "fitting_s": round(total - spent["simulate"], 2),
-        "simulations": spent["calls"],
+        "cpu_s": round(cpu, 2),
+        "fmu_model_s": round(spent["simulate"].value, 2),
+        "fmu_initialise_s": round(spent["start"].value, 2),
+        "fitting_s": round(cpu - spent["simulate"].value, 2),
+        "simulations": int(spent["calls"].value),
         "answer": f"{result.effect} at {result.at} {result.params}",
     }
+
+
+def _cpu() -> float:
+    """CPU seconds of this process and its finished children."""
+    own, children = (
+        resource.getrusage(who) for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
+    )
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 if __name__ == "__main__":
