@@ -83,6 +83,19 @@ def _shift(values: np.ndarray, delay: float, dt: float) -> np.ndarray:
     return np.where(gap, np.nan, values[low] + step)
 
 
+#: Fewest samples a delay candidate may reach, and the share of a window it may reach beyond.
+DELAY_SAMPLES, DELAY_WINDOW_SHARE = 30, 0.25
+
+
+def _max_delay(data: UnitData) -> float:
+    """Return the longest delay a candidate is fitted to (s): a quarter of a window, at least 30.
+
+    A window is 10 of the unit's slowest time constants; a thermal sensor's 42-sample delay (a
+    tenth of its time constant) stopped at 30 samples and read as a slower sensor.
+    """
+    return max(DELAY_SAMPLES, DELAY_WINDOW_SHARE * data.window) * data.dt
+
+
 def _input_variants(data: UnitData) -> list[Variant]:
     out = []
     for i, signal in enumerate(data.spec.inputs):
@@ -113,7 +126,7 @@ def _input_variants(data: UnitData) -> list[Variant]:
             Variant("input_deadzone", signal, model, (d_name,), {d_name: 0.1 * spread},
                     {d_name: (0.0, reach)}, {d_name: spread}, input_map=deadzone),
             Variant("input_delay", signal, model, (delay_name,), {delay_name: data.dt},
-                    {delay_name: (0.0, 30 * data.dt)}, {delay_name: data.dt}, input_map=delay),
+                    {delay_name: (0.0, _max_delay(data))}, {delay_name: data.dt}, input_map=delay),
         ]  # fmt: skip
     return out
 
@@ -202,7 +215,7 @@ def _output_variants(data: UnitData) -> list[Variant]:
             Variant("output_scale_error", signal, model, (gain,), {gain: 1.0}, {gain: (0.0, 10.0)},
                     {gain: 0.1}, output_map=scale, linear_form=True),
             Variant("output_delay", signal, model, (delay,), {delay: data.dt},
-                    {delay: (0.0, 30 * data.dt)}, {delay: data.dt}, output_map=lag),
+                    {delay: (0.0, _max_delay(data))}, {delay: data.dt}, output_map=lag),
         ]  # fmt: skip
         out += _quantization_variant(data, o, signal, y, spread)
     return out

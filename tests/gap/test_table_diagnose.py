@@ -136,6 +136,16 @@ def test_a_level_sensor_drifting_with_a_wander_is_a_drift_though_it_leaves_the_u
     assert any("its shape beyond the training part" in note for note in result.notes)
 
 
+def test_a_level_read_45_samples_late_is_an_output_delay():
+    """A delay is fitted up to a quarter of a window (here 375 samples), not 30 samples."""
+    frame = _asset(3000, 2)
+    level = frame["level"].to_numpy()
+    frame["level"] = np.concatenate([np.full(45, level[0]), level[:-45]])
+    result = _diagnose(frame)
+    assert (result.effect, result.at) == ("output_delay", "level")
+    assert result.params["delay"] == pytest.approx(4.5, abs=0.05)
+
+
 @pytest.mark.slow
 def test_an_overflowing_tank_is_a_state_limit_when_the_flow_is_not_recorded():
     frame = _asset(2000, 3, overflow=2.2)
