@@ -17,6 +17,7 @@ Arrays are time-first, shape ``(T,)`` or ``(T, n_channels)``.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -200,8 +201,62 @@ def shaped_bias(
     ([0.0, 0.3, 0.6, 0.875], [0.6, 0.875])
     """
     smoothed_before, applied_before = (None, None) if initial is None else initial
-    smoothed = exponential_moving_average(kappa * bias, ema_alpha, initial=smoothed_before)
+    x = kappa * bias
+    loop = None if initial is None or np.ndim(x) != 2 else _compiled_shaping()
+    if loop is not None:  # a continued series of rows (a live stream's chunk)
+        alpha = require_in_range("ema_alpha", ema_alpha, 0.0, 1.0)
+        if alpha == 0.0:
+            raise DtwinValueError("ema_alpha must be > 0 (got 0.0)")
+        r_max = require_nonnegative("rate_max", rate_max)
+        x = require_finite_array("x", x, ndim=2)
+        if len(x) == 0:
+            raise DtwinValueError(f"x must be (T, n_channels) with T >= 1 (got {x.shape})")
+        smoothed, applied = np.empty_like(x), np.empty_like(x)
+        loop(np.ascontiguousarray(x), alpha, r_max, _continued("initial", smoothed_before, x)[0],
+             _continued("initial", applied_before, x)[0], smoothed, applied)  # fmt: skip
+        return BiasShaping(applied, smoothed)
+    smoothed = exponential_moving_average(x, ema_alpha, initial=smoothed_before)
     return BiasShaping(rate_limit(smoothed, rate_max, initial=applied_before), smoothed)
+
+
+def _shaping_rows(x, alpha, r_max, smoothed_before, applied_before, smoothed, applied) -> None:
+    """Write the EMA of ``x`` (T, C) and its rate-limited series, continued from the rows before.
+
+    The arithmetic of :func:`exponential_moving_average` (scipy's ``lfilter`` recursion with
+    ``b = [α]``, ``a = [1, −(1−α)]``: ``y = z + α·x``, ``z = x·0 − y·a₁``, from ``z = (1−α)·``
+    the row before) and of :func:`rate_limit`, in the same order: the same bits. Compiled
+    (:func:`_compiled_shaping`) it takes microseconds where those two take 0.1 ms a call.
+    """
+    a1 = -(1.0 - alpha)
+    for j in range(x.shape[1]):
+        z = (1.0 - alpha) * smoothed_before[j]
+        previous = applied_before[j]
+        for k in range(x.shape[0]):
+            value = x[k, j]
+            y = z + alpha * value
+            z = value * 0.0 - y * a1
+            smoothed[k, j] = y
+            step = y - previous
+            previous = previous + (-r_max if step < -r_max else (r_max if step > r_max else step))
+            applied[k, j] = previous
+
+
+_COMPILED_SHAPING: list = []
+
+
+def _compiled_shaping():
+    """Return :func:`_shaping_rows` compiled where numba is loaded already, else None.
+
+    Importing numba costs more than the short series of the DAG's jobs take; the monitor has
+    it loaded.
+    """
+    if "numba" not in sys.modules:
+        return None
+    if not _COMPILED_SHAPING:
+        from dtwin._jit import njit
+
+        _COMPILED_SHAPING.append(njit(cache=True)(_shaping_rows))
+    return _COMPILED_SHAPING[0]
 
 
 def _require_posteriors(posteriors: Any, n_steps: int) -> np.ndarray:

@@ -196,3 +196,28 @@ def test_plant_variant_reproduces_r_sensitivity_row_on_the_same_local_optimum(r_
     assert l2_before == pytest.approx(row.L2_orig, rel=1e-9)
     assert l2_after == pytest.approx(row.L2_corr, rel=1e-6)
     assert np.abs(np.diff(match.applied)).max() <= 5e-4 * (1 + 1e-12)
+
+
+def test_a_continued_shaping_compiled_gives_the_bits_of_the_ema_and_the_rate_limiter():
+    """shaped_bias continued from a previous chunk runs one compiled loop where numba is loaded:
+    the EMA's lfilter arithmetic and the rate limiter's, bit for bit (signed zeros included)."""
+    from dtwin import bias_correction
+    from dtwin._jit import HAVE_NUMBA
+
+    if HAVE_NUMBA:
+        import numba  # noqa: F401 - loaded, as in the monitor
+    rng = np.random.default_rng(8)
+    bias = rng.normal(0, 1, (500, 3))
+    bias[10:20] = 0.0
+    bias[20:25] = -0.0
+    first = bias_correction.shaped_bias(bias[:7], kappa=0.9, ema_alpha=0.3, rate_max=0.05)
+    start = (first.smoothed[-1], first.applied[-1])
+    shaped = bias_correction.shaped_bias(bias[7:], kappa=0.9, ema_alpha=0.3, rate_max=0.05,
+                                         initial=start)  # fmt: skip
+    assert bool(bias_correction._COMPILED_SHAPING) == HAVE_NUMBA  # compiled and used
+    smoothed = bias_correction.exponential_moving_average(0.9 * bias[7:], 0.3, initial=start[0])
+    applied = bias_correction.rate_limit(smoothed, 0.05, initial=start[1])
+    assert shaped.smoothed.tobytes() == smoothed.tobytes()
+    assert shaped.applied.tobytes() == applied.tobytes()
+    with pytest.raises(ValueError, match="ema_alpha must be > 0"):
+        bias_correction.shaped_bias(bias, kappa=1.0, ema_alpha=0.0, rate_max=0.1, initial=start)
