@@ -440,7 +440,7 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
     def screen(variant):
         fit = fit_variant(
             data, variant, work.nominal.theta, mode="fixed", max_nfev=12, x0=screen_x0,
-            band=settings.calibration_tolerance, windows=windows,
+            windows=windows,
         )  # fmt: skip
         return fit.cost, {p: fit.theta[p] for p in variant.effect_params}
 
