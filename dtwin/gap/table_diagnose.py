@@ -326,17 +326,101 @@ def _input_noise_floor(data: UnitData, fit: VariantFit, input_noise: Mapping[str
     return np.where(np.isfinite(rms), rms, 0.0)
 
 
-def _floors(data, fit, error, noise, settings, n_tests=1, input_noise=None):
+#: Seed of the process noise drawn through a unit's twin (:func:`_process_noise_floor`).
+PROCESS_NOISE_SEED = 0
+#: Realisations of that noise; their pooled error gives the floor's level and autocorrelation.
+PROCESS_NOISE_DRAWS = 8
+#: Most lags of the process noise floor's autocorrelation.
+PROCESS_NOISE_LAGS = 400
+
+
+def _process_noise_floor(data: UnitData, fit: VariantFit, process_noise: Mapping[str, float]):
+    """Return, per output, the floor of the error that the twin's process noise causes, or None.
+
+    The table's process noise (:attr:`~dtwin.twin.table.TwinTable.process_noise`: a white
+    increment of a state per sample, state units) disturbs the asset, not its recording: the
+    twin, restarted from the recording at each window, drifts from it by what the noise moves
+    the states since the window's start. It is measured as :func:`_input_noise_floor` measures
+    an input's noise: the twin (``fit``'s params) is run on the choosing part's windows from
+    the same states with the noise (:meth:`~dtwin.twin.simulate.UnitModel.disturbed`: ``w_k/dt``
+    held over sample ``k`` in the state's derivative) and without, over
+    :data:`PROCESS_NOISE_DRAWS` draws (seed :data:`PROCESS_NOISE_SEED`). Each output's floor is
+    the difference's RMS (output units) with its autocorrelation pooled over the windows' pairs
+    and the draws (lags 0 to :data:`PROCESS_NOISE_LAGS`, at most a window: coloured noise has
+    fewer effective samples, :func:`~dtwin.gap.noise.effective_samples`). A list of
+    ``n_outputs`` :class:`~dtwin.gap.noise.NoiseFloor` (``process`` = ``rms``) or None each;
+    all None for a unit without process noise (or a closed model, an FMU).
+    """
+    states = [s for s in data.spec.states if process_noise.get(s, 0.0) > 0]
+    n_outputs = len(data.spec.outputs)
+    if not states or not hasattr(data.model, "disturbed"):
+        return [None] * n_outputs
+    model = data.model.disturbed(states)
+    starts, stops = data.windows("choose")
+    x0 = np.ascontiguousarray(data.guess[starts])
+    values = [fit.theta[name] for name in model.param_names]
+    rng = np.random.default_rng(PROCESS_NOISE_SEED)
+    scale = np.array([process_noise[s] for s in states]) / data.dt
+    shape = (data.n_samples, len(states))
+    inputs = [np.hstack([data.inputs, np.zeros(shape)])]
+    inputs += [
+        np.hstack([data.inputs, rng.standard_normal(shape) * scale])
+        for _ in range(PROCESS_NOISE_DRAWS)
+    ]
+    with np.errstate(all="ignore"):
+        y, _ = model.simulate_batch(
+            inputs, range(len(inputs)), [values] * len(inputs), starts, stops,
+            np.broadcast_to(x0, (len(inputs), *x0.shape)), data.dt, substeps=data.substeps,
+            linear=(*data.linear, *[False] * len(states)),
+        )  # fmt: skip
+    difference = y[1:] - y[:1]  # (draws, rows, outputs): rows are the windows' samples
+    difference = np.where(np.isfinite(difference), difference, 0.0)
+    window = np.repeat(np.arange(len(starts)), stops - starts)
+    n_lags = int(min(PROCESS_NOISE_LAGS, np.max(stops - starts)))
+    floors = []
+    for o in range(n_outputs):
+        d = difference[:, :, o]
+        power = float(np.sum(d * d))
+        if not power > 0:
+            floors.append(None)
+            continue
+        acf = np.array([1.0] + [
+            float(np.sum((d[:, lag:] * d[:, :-lag])[:, window[lag:] == window[:-lag]])) / power
+            for lag in range(1, n_lags)
+        ])  # fmt: skip
+        rms = math.sqrt(power / d.size)
+        floors.append(NoiseFloor(rms, "process", acf, process=rms))
+    return floors
+
+
+def _with_process(twin: NoiseFloor | None, process: NoiseFloor | None) -> NoiseFloor | None:
+    """Return the twin's floor with its process noise's added in quadrature (``twin+process``).
+
+    The declared measurement noise is white; the autocorrelation is the two's, weighted by
+    their variances.
+    """
+    if process is None:
+        return twin
+    level = 0.0 if twin is None else twin.rms
+    total = level**2 + process.rms**2
+    white = np.r_[1.0, np.zeros(len(process.acf) - 1)]
+    acf = (level**2 * white + process.rms**2 * process.acf) / total
+    return NoiseFloor(math.sqrt(total), "twin+process", acf, process=process.rms)
+
+
+def _floors(data, fit, error, noise, settings, n_tests=1, input_noise=None, process_noise=None):
     """Return each output's noise floor and its normalised threshold on the choosing part.
 
-    The floor is the measurement noise's (declared, reconciled with the one read from the
-    training residual; a declared level with a coarse lattice's ``q²/12`` added,
+    The floor is the measurement noise's (declared, with the error the declared process noise
+    causes, :func:`_process_noise_floor`, added in quadrature; reconciled with the one read
+    from the training residual; a declared level with a coarse lattice's ``q²/12`` added,
     :func:`_coarse_lattice`: the quantizer's own noise, which no declared level holds),
     with the error that the recorded inputs' noise causes through the
     unit (:func:`_input_noise_floor`) added in quadrature. ``error`` is ``fit``'s training
     error (:func:`~dtwin.gap.table_fit.part_error`), shape ``(n_samples, n_outputs)``.
     """
     propagated = _input_noise_floor(data, fit, input_noise or {})
+    process = _process_noise_floor(data, fit, process_noise or {})
     train = slice(*data.parts["train"])
     n_choose = data.parts["choose"][1] - data.parts["choose"][0]
     floors, thresholds = [], []
@@ -350,15 +434,19 @@ def _floors(data, fit, error, noise, settings, n_tests=1, input_noise=None):
         if whole is not None and whole.rms > measured.rms:
             measured = whole
         twin = NoiseFloor(noise[signal], "twin", np.ones(1)) if signal in noise else None
+        twin = _with_process(twin, process[o])
         floor = reconcile_noise_floor(twin, measured, settings.noise_tolerance)
         step = _coarse_lattice(data, o, floor.rms)
-        if step and floor.source == "twin":  # a data floor already holds the quantizer's noise
+        # a data floor already holds the quantizer's noise
+        if step and floor.source in ("twin", "twin+process"):
             level = math.hypot(floor.rms, step / math.sqrt(12.0))
-            floor = NoiseFloor(level, "twin+lattice", floor.acf, floor.measurement)
+            floor = NoiseFloor(level, f"{floor.source}+lattice", floor.acf, floor.measurement,
+                               process=floor.process)  # fmt: skip
         if propagated[o] > 0:
             total = math.hypot(floor.rms, propagated[o])
             # the output's own noise kept as the measurement part (the lattice test reads it)
-            floor = NoiseFloor(total, f"{floor.source}+inputs", floor.acf, floor.rms)
+            floor = NoiseFloor(total, f"{floor.source}+inputs", floor.acf, floor.rms,
+                               process=floor.process)  # fmt: skip
         floors.append(floor)
         thresholds.append(
             gap_threshold(
@@ -408,8 +496,9 @@ def _analyse_unit(
     data.guess = state_guess(data, nominal.theta, nominal.variant)
     train_error, _ = part_error(data, nominal, "train")
     floors, thresholds = _floors(
-        data, nominal, train_error, table.noise, settings, n_tests, input_noise
-    )
+        data, nominal, train_error, table.noise, settings, n_tests, input_noise,
+        table.process_noise,
+    )  # fmt: skip
     error, _ = part_error(data, nominal, "choose")
     gaps = rms_by_output(error, slice(*parts["choose"]), data.norm)
     flagged = bool(np.any(gaps > np.asarray(thresholds)))
@@ -537,9 +626,9 @@ EXTRAPOLATED = frozenset({"output_bias_drift"})
 
 def _bic(candidate: _Candidate, n_eff: float) -> float:
     """``n_eff·ln(gap²) + k·ln(n_eff)`` on the choosing part (``k`` the candidate's params)."""
-    return n_eff * math.log(max(candidate.gap_choose, 1e-300) ** 2) + candidate.n_params * math.log(
-        n_eff
-    )
+    # a unit its recording satisfies exactly (a weighted sum) has gap 0: its square floored
+    square = max(candidate.gap_choose**2, 1e-300)
+    return n_eff * math.log(square) + candidate.n_params * math.log(n_eff)
 
 
 def _weights(candidates: list[_Candidate], n_eff: float) -> None:
@@ -821,7 +910,9 @@ def _diagnose_table(recording, table, calibrate, train_frac, settings, heldout) 
         work = _analyse_unit(spec, recording, table, parts, settings, calibrate, n_tests, levels)
         works[spec.name] = work
         for signal, floor in zip(spec.outputs, work.floors, strict=True):
-            levels[signal] = table.noise.get(signal, floor.rms)
+            # what the recording holds beyond the asset: the declared process noise moved it
+            own = math.sqrt(max(floor.rms**2 - floor.process**2, 0.0))
+            levels[signal] = table.noise.get(signal, own)
     _loop_floors(works, table, settings, n_tests, levels)
     flagged = [w for w in works.values() if w.flagged]
     notes = [note for w in works.values() for note in getattr(w.data.model, "notes", ())]
@@ -858,8 +949,9 @@ def _loop_floors(works, table, settings, n_tests: int, levels: Mapping[str, floa
         if not late:
             continue
         work.floors, work.thresholds = _floors(
-            work.data, work.nominal, work.train_error, table.noise, settings, n_tests, levels
-        )
+            work.data, work.nominal, work.train_error, table.noise, settings, n_tests, levels,
+            table.process_noise,
+        )  # fmt: skip
         work.flagged = bool(np.any(work.gaps > np.asarray(work.thresholds)))
 
 

@@ -16,8 +16,11 @@ M3      ``weighted_sum``         ``y_A, y_B``        ``y_fused``     ``w1 = alph
 M4      ``weighted_sum``         ``x, v``            ``z``           ``w1, w2``
 ======  =======================  ==================  ==============  ====================
 
-with noise ``actuator → u_act``, ``plant → x``, ``sensor_A → y_A``, ``sensor_B → y_B``. The
-table's modules are continuous-time (the lags' and the plant's derivatives); the paper's
+with measurement noise ``sensor_A → y_A``, ``sensor_B → y_B`` (``noise``: white noise on the
+sensors' readings, as the paper's simulator adds it) and process noise ``actuator → M0.y``,
+``plant → M1.v`` (``process_noise``: the paper adds ``w_k`` to the lag's recursion and ``ξ_k``
+(m/s²) to the plant's acceleration; levels converted to the table's in :func:`_process_noise`).
+The table's modules are continuous-time (the lags' and the plant's derivatives); the paper's
 simulator is their explicit Euler discretisation. So a ``discretisation`` of ``zoh`` or
 ``foh`` is kept and ``euler`` or ``bandlimited`` (the plant's, for the ``twin:`` shape) becomes
 None. M3's two weights are separate params of the table (a re-fit does not keep them summing
@@ -27,18 +30,19 @@ mappings, or any object with those attributes (a :class:`dtwin.params.TwinParams
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
 from dtwin.twin.table import TwinTable, TwinTableError, table_from_mapping
 
-__all__ = ["PAPER_NOISE_SIGNALS", "paper_table"]
+__all__ = ["PAPER_NOISE_SIGNALS", "PAPER_PROCESS_NOISE_STATES", "paper_table"]
 
-#: The ``noise`` section's channels → the signal each applies to (a map of names, not a twin:
-#: the values are signals, never parameters).
-PAPER_NOISE_SIGNALS: dict[str, str] = dict(
-    zip(("actuator", "plant", "sensor_A", "sensor_B"), ("u_act", "x", "y_A", "y_B"), strict=True)
-)
+#: The ``noise`` section's sensor channels → the signal their measurement noise is added to (a
+#: map of names, not a twin: the values are signals, never parameters).
+PAPER_NOISE_SIGNALS: dict[str, str] = {"sensor_A": "y_A", "sensor_B": "y_B"}
+#: Its process channels → the qualified state each disturbs (:func:`paper_table`).
+PAPER_PROCESS_NOISE_STATES: dict[str, str] = {"actuator": "M0.y", "plant": "M1.v"}
 
 
 def _get(owner: Any, name: str) -> Any:
@@ -82,6 +86,39 @@ def _paper_modules(sections: Any) -> dict[str, dict[str, Any]]:
     }  # fmt: skip
 
 
+def _positive(value: Any, key: str, why: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+        raise TwinTableError(f"must be a number > 0 (got {value!r}; {why})", key=key,
+                             token=str(value))  # fmt: skip
+    return float(value)
+
+
+def _process_noise(sections: Any, noise: Any) -> dict[str, Any]:
+    """Return the ``noise`` section's process channels as the table's ``process_noise``.
+
+    The table's level is the standard deviation of a disturbance's integral over a sample, held
+    over the sample in the state's derivative (docs/gap.md §Twin file). The paper adds ``ξ_k``
+    (m/s²) to the plant's acceleration over an Euler step: held over the step, level ``ξ·dt``
+    (m/s) on ``M1.v``. It adds ``w_k`` to the actuator lag's state after the lag's exact update,
+    whereas a disturbance ``d`` held over a sample moves the lag by ``d·(1 − a)·τ/dt``
+    (``a = exp(−dt/τ)``): level ``w·(dt/τ)/(1 − a)`` on ``M0.y``, the same per-sample increment.
+    """
+    levels = {c: _get(noise, c) for c in PAPER_PROCESS_NOISE_STATES if _get(noise, c) is not None}
+    if not levels:
+        return {}
+    why = "the actuator's and the plant's noise are per sample"
+    dt = _positive(_get(sections, "dt"), "dt", why)
+    factors = {"plant": dt}
+    if "actuator" in levels:
+        steps = dt / _positive(_value(sections, "actuator", "tau"), "actuator.tau", why)
+        factors["actuator"] = steps / -math.expm1(-steps)
+    return {
+        PAPER_PROCESS_NOISE_STATES[c]: _positive(v, f"noise.{c}", "a standard deviation")
+        * factors[c]
+        for c, v in levels.items()
+    }
+
+
 def paper_table(sections: Any) -> TwinTable:
     """Return the paper's six-module twin as a :class:`~dtwin.twin.table.TwinTable`.
 
@@ -90,7 +127,9 @@ def paper_table(sections: Any) -> TwinTable:
     sections : mapping or object
         The ``twin:`` sections (module docstring): ``actuator.tau``, ``plant.m/c/k``,
         ``sensor_A.tau/bias``, ``sensor_B.tau/bias``, ``fusion.alpha``, ``kpi.w1/w2``;
-        optional ``noise`` (std devs by channel), ``dt`` (s) and ``discretisation``.
+        optional ``noise`` (std devs by channel: ``actuator`` per sample, ``plant`` m/s²,
+        ``sensor_A``/``sensor_B`` in the reading's units), ``dt`` (s, needed with
+        ``noise.plant``) and ``discretisation``.
 
     Returns
     -------
@@ -118,6 +157,7 @@ def paper_table(sections: Any) -> TwinTable:
             for channel, signal in PAPER_NOISE_SIGNALS.items()
             if _get(noise, channel) is not None
         }
+        mapping["process_noise"] = _process_noise(sections, noise)
     discretisation = _get(sections, "discretisation")
     if discretisation in ("zoh", "foh"):
         mapping["discretisation"] = discretisation

@@ -321,6 +321,37 @@ class UnitModel:
             self.spec, out, (*self.param_names[len(self.spec.params) :], *extra)
         )
 
+    def disturbed(self, states: Sequence[str]) -> UnitModel:
+        """Return a copy whose derivatives of ``states`` each gain one extra input.
+
+        The copy's inputs are the unit's followed by one disturbance per named state
+        (``_w_0, _w_1, …``, in the order given, units of the state per second), added to that
+        state's derivative: driven with ``w_k/dt`` held over sample ``k`` (``zoh``), the
+        disturbance alone moves the state by ``w_k`` over the sample (process noise, docs/gap.md
+        §Twin file). Driven with zeros it simulates as the unit does. ``param_names`` are
+        unchanged.
+
+        Parameters
+        ----------
+        states : sequence of str
+            Qualified states (``<module>.<state>``) of :attr:`spec`.
+        """
+        unknown = [s for s in states if s not in self.spec.states]
+        if unknown:
+            raise DtwinValueError(
+                f"states {', '.join(unknown)} are not the unit's (states: "
+                f"{', '.join(self.spec.states) or 'none'})"
+            )
+        names = {_derivative_slot(s): f"_w_{i}" for i, s in enumerate(states)}
+        assignments = [
+            replace(a, text=f"({a.text}) + {names[a.target]}",
+                    symbols={**a.symbols, names[a.target]: names[a.target]})
+            if a.target in names else a
+            for a in self.assignments
+        ]  # fmt: skip
+        spec = replace(self.spec, inputs=(*self.spec.inputs, *names.values()))
+        return UnitModel.from_spec(spec, assignments, self.param_names[len(self.spec.params) :])
+
     def simulate(
         self,
         inputs: np.ndarray,

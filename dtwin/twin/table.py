@@ -22,6 +22,7 @@ Specification: docs/gap.md §Twin file. A twin file with a ``modules:`` key is a
         equations:                 # algebraic outputs; an output named like a state is that state
           level: "h2 + offset"
     noise: {level: 0.02}           # optional std devs: by output signal or by module name
+    process_noise: {tanks.h1: 0.01}  # optional, per sample: by module.state or by module name
 
 A module may also be an FMU (FMI 2.0, :mod:`dtwin.twin.fmu`)::
 
@@ -43,7 +44,8 @@ module, the key and the token::
     twin file: module 'tanks': derivatives.h1: unknown name 'q2'
     twin file: noise.levl: 'levl' is neither an output signal nor a module (...)
 
-- *Top level*: a key other than ``dt``, ``discretisation``, ``modules`` and ``noise`` (a
+- *Top level*: a key other than ``dt``, ``discretisation``, ``modules``, ``noise`` and
+  ``process_noise`` (a
   section of the paper's ``twin:`` shape — ``actuator``, ``plant``, ``sensor_A``,
   ``sensor_B``, ``fusion``, ``kpi`` — gets its own message: one shape or the other; the whole
   table may sit under ``twin:``); ``modules`` missing, not a mapping or empty; ``dt`` not a
@@ -87,6 +89,14 @@ module, the key and the token::
 - *Noise*: not a mapping; a key that is neither an output signal nor a module; a value not a
   finite number > 0. A module's entry applies to each of its outputs; a signal's own entry
   wins over its module's.
+- *Process noise* (a disturbance of the asset's states, not of its recording: each state
+  with level ``σ`` gains ``w_k/dt`` in its derivative, held over sample ``k``, ``w_k ~ N(0,
+  σ²)`` white; ``σ`` is the std of the disturbance's integral over a sample, in the state's
+  units: its increment per sample were the state's own dynamics frozen, ``√(q·dt)`` for a
+  white disturbance of intensity ``q``, state units²/s): not a mapping; a key that is neither
+  ``<module>.<state>`` nor a module with states; an FMU module (its equations are inside the
+  FMU); a value not a finite number >= 0. A module's entry applies to each of its states; a
+  state's own entry wins over its module's (0: no noise on that state).
 - *Against a recording* (:func:`check_recorded`): an input that is neither a recording column
   nor produced by a module.
 
@@ -100,7 +110,7 @@ from __future__ import annotations
 import keyword
 import re
 from collections.abc import Collection, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -131,7 +141,7 @@ RESERVED_NAMES = frozenset({"t", *FUNCTIONS, *keyword.kwlist})
 #: Values of the undeclared states and of the inputs at which the start is evaluated.
 START_PROBES = (0.0, 1.0, 10.0)
 
-_TOP_KEYS = ("dt", "discretisation", "modules", "noise")
+_TOP_KEYS = ("dt", "discretisation", "modules", "noise", "process_noise")
 _LEGACY_KEYS = ("actuator", "plant", "sensor_A", "sensor_B", "fusion", "kpi", "twin")
 _MODULE_KEYS = ("block", "inputs", "outputs", "states", "initial", "params", "derivatives",
                 "equations", "candidates", "fmu", "interface")  # fmt: skip
@@ -229,13 +239,19 @@ class TwinTable:
     discretisation : str or None
         ``"zoh"``, ``"foh"`` or None (chosen from data).
     noise : dict of str to float
-        Noise standard deviation by output signal (signal units).
+        Measurement noise standard deviation by output signal (signal units): white noise
+        added to the recorded values.
+    process_noise : dict of str to float
+        Process noise standard deviation by qualified state ``<module>.<state>`` (state units,
+        per sample; module docstring, Process noise), only states with a level > 0; empty for
+        a table without ``process_noise``.
     """
 
     modules: tuple[ModuleSpec, ...]
     dt: float | None
     discretisation: str | None
     noise: dict[str, float]
+    process_noise: dict[str, float] = field(default_factory=dict)
 
     def producer(self, signal: str) -> ModuleSpec | None:
         """Return the module producing ``signal``, or None (an exogenous signal)."""
@@ -712,6 +728,39 @@ def _noise(raw: Any, modules: tuple[ModuleSpec, ...]) -> dict[str, float]:
     return {s: merged[s] for s in signals if s in merged}
 
 
+def _process_noise(raw: Any, modules: tuple[ModuleSpec, ...]) -> dict[str, float]:
+    """Process noise std devs by qualified state (a module's entry expanded to its states)."""
+    given = _mapping(raw, module=None, key="process_noise",
+                     of="<module>.<state> or modules to numbers")  # fmt: skip
+    by_name = {m.name: m for m in modules}
+    states = [f"{m.name}.{s}" for m in modules for s in m.states if m.fmu is None]
+    by_module: dict[str, float] = {}
+    by_state: dict[str, float] = {}
+    for key, value in given.items():
+        place = f"process_noise.{key}"
+        owner = by_name.get(str(key).split(".", 1)[0])
+        if owner is not None and owner.fmu is not None:
+            raise TwinTableError(
+                f"module '{owner.name}' is an FMU: its states take no process noise (its "
+                "equations are inside the FMU)", key=place, token=str(key),
+            )  # fmt: skip
+        if key not in states and not (key in by_name and by_name[key].states):
+            raise TwinTableError(
+                f"'{key}' is neither <module>.<state> nor a module with states (states: "
+                f"{', '.join(states) or 'none'})", key=place, token=str(key),
+            )  # fmt: skip
+        number = _number(value, module=None, key=place)
+        if number < 0:
+            raise TwinTableError(f"must be a finite number >= 0 (got {_shown(value)})",
+                                 key=place, token=_token(value))  # fmt: skip
+        if key in states:
+            by_state[key] = number
+        else:
+            by_module.update(dict.fromkeys((f"{key}.{s}" for s in by_name[key].states), number))
+    merged = {**by_module, **by_state}
+    return {s: merged[s] for s in states if merged.get(s, 0.0) > 0}
+
+
 def _top_level(mapping: Any) -> Mapping:
     """Return the table's mapping (unwrapped from ``twin:``), its top-level keys checked."""
     if isinstance(mapping, Mapping) and "modules" not in mapping:
@@ -754,8 +803,8 @@ def table_from_mapping(
     Parameters
     ----------
     mapping : mapping
-        The file's content: ``dt``, ``discretisation``, ``modules``, ``noise`` at the top
-        level or all under ``twin:``.
+        The file's content: ``dt``, ``discretisation``, ``modules``, ``noise`` and
+        ``process_noise`` at the top level or all under ``twin:``.
     dt : float, optional
         Sample period, s, when the file gives none (the recording's).
     base_dir : str or Path, optional
@@ -795,7 +844,10 @@ def table_from_mapping(
     _check_wiring(modules)
     _check_algebraic_loops(modules)
     ordered = _order(modules)
-    return TwinTable(ordered, period, discretisation, _noise(raw.get("noise"), ordered))
+    return TwinTable(
+        ordered, period, discretisation, _noise(raw.get("noise"), ordered),
+        _process_noise(raw.get("process_noise"), ordered),
+    )  # fmt: skip
 
 
 def check_recorded(table: TwinTable, columns: Collection[str]) -> None:

@@ -84,3 +84,27 @@ def test_a_chain_runs_each_window_from_the_end_of_the_previous():
 
 def test_window_rows_lists_each_window_s_samples_in_turn():
     assert window_rows(np.array([3, 10]), np.array([5, 13])).tolist() == [3, 4, 10, 11, 12]
+
+
+def test_a_disturbed_unit_adds_each_disturbance_to_its_state_s_derivative():
+    """Driven with zeros it runs as the unit, bit for bit; ``w/dt`` held over one sample moves
+    the disturbed state by about ``w`` (exactly for a pure integrator)."""
+    model, u, rng = _model_and_inputs(600, 1)
+    disturbed = model.disturbed(["m.q", "m.x"])
+    assert disturbed.spec.inputs == ("u", "v", "_w_0", "_w_1")
+    assert disturbed.param_names == model.param_names
+    starts, stops = np.array([0, 300]), np.array([250, 600])
+    x0 = rng.uniform(0, 1, (2, 3))
+    theta = [4.0, 0.6, 0.3]
+    kwargs = dict(substeps=2, linear=[False, True, False, False])
+    y, states = model.simulate(u, theta, starts, stops, x0, 0.05, substeps=2, linear=[False, True])
+    zeros = np.hstack([u, np.zeros((600, 2))])
+    y0, states0 = disturbed.simulate(zeros, theta, starts, stops, x0, 0.05, **kwargs)
+    assert np.array_equal(y, y0, equal_nan=True) and np.array_equal(states, states0, equal_nan=True)
+    kick = zeros.copy()
+    kick[100, 3] = 1e-3 / 0.05  # x moves by 1e-3 over sample 100 (its derivative is w)
+    _, kicked = disturbed.simulate(kick, theta, starts, stops, x0, 0.05, **kwargs)
+    assert kicked[101, 0] - states0[101, 0] == pytest.approx(1e-3, rel=0.02)
+    assert np.array_equal(kicked[:101], states0[:101], equal_nan=True)
+    with pytest.raises(ValueError, match=r"states m\.h are not the unit's"):
+        model.disturbed(["m.h"])

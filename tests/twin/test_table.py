@@ -164,6 +164,17 @@ BAD = [
     ("noise/level", 0.0, "noise.level: must be a finite number > 0 (got 0.0)"),
     ("noise/pump", "big", "noise.pump: must be a number (got 'big')"),
     ("noise", [0.1], "noise: must be a mapping of output signals or modules to numbers"),
+    ("process_noise", {"tanks.h3": 0.1}, "process_noise.tanks.h3: 'tanks.h3' is neither "
+     "<module>.<state> nor a module with states (states: pump.y, tanks.h1, tanks.h2)"),
+    ("process_noise", {"level": 0.1}, "process_noise.level: 'level' is neither "
+     "<module>.<state>"),
+    ("process_noise", {"tanks.h1": -0.1}, "process_noise.tanks.h1: must be a finite number >= 0 "
+     "(got -0.1)"),
+    ("process_noise", {"tanks.h1": float("nan")}, "process_noise.tanks.h1: must be finite "
+     "(got nan)"),
+    ("process_noise", {"pump": True}, "process_noise.pump: must be a number (got true)"),
+    ("process_noise", {"pump.y": "big"}, "process_noise.pump.y: must be a number (got 'big')"),
+    ("process_noise", [0.1], "process_noise: must be a mapping of <module>.<state> or modules"),
 ]  # fmt: skip
 
 
@@ -211,6 +222,24 @@ def test_an_input_neither_recorded_nor_produced_is_refused_against_the_recording
 def test_noise_by_module_expands_to_its_outputs_and_a_signal_entry_wins():
     table = table_from_mapping(_with("noise", {"tanks": 0.5, "pump": 0.1, "level": 0.02}))
     assert table.noise == {"q": 0.1, "level": 0.02}
+
+
+def test_process_noise_by_module_expands_to_its_states_and_a_state_entry_wins():
+    table = table_from_mapping(_with("process_noise", {"tanks": 0.5, "tanks.h2": 0.02}))
+    assert table.process_noise == {"tanks.h1": 0.5, "tanks.h2": 0.02}
+    # 0 takes a state out of its module's entry; the measurement noise is left as declared
+    table = table_from_mapping(_with("process_noise", {"tanks": 0.5, "tanks.h1": 0, "pump": 1}))
+    assert table.process_noise == {"pump.y": 1.0, "tanks.h2": 0.5}
+    assert table.noise == {"level": 0.02}
+    assert table_from_mapping(two_tanks()).process_noise == {}  # a table without the key
+
+
+def test_process_noise_on_a_module_without_states_is_refused():
+    content = two_tanks()
+    content["modules"]["trim"] = {"block": "gain", "inputs": ["level"], "outputs": ["lv"]}
+    content["process_noise"] = {"trim": 0.1}
+    with pytest.raises(TwinTableError, match=r"^twin file: process_noise\.trim: 'trim' is neither"):
+        table_from_mapping(content)
 
 
 def test_a_missing_module_is_named():
@@ -412,8 +441,24 @@ def test_the_paper_config_gives_the_six_module_table():
     assert table.module("M2b").params == {"tau": 0.25, "gain": 1.0, "bias": 0.01}
     assert table.module("M3").params == pytest.approx({"w1": 0.6, "w2": 0.4})
     assert table.module("M4").params == {"w1": 1.0, "w2": 0.2}
-    assert table.noise == {"u_act": 0.005, "x": 0.04, "y_A": 0.03, "y_B": 0.02}
+    # the sensors' noise is measurement noise; the plant's (m/s²) is held over a step in the
+    # acceleration: dt times it on the velocity; the actuator's is a jump of its lag's state per
+    # sample, which a disturbance held over the sample gives at (dt/τ)/(1 − exp(−dt/τ)) times it
+    assert table.noise == {"y_A": 0.03, "y_B": 0.02}
+    steps = 0.02 / 0.15
+    assert table.process_noise == pytest.approx(
+        {"M0.y": 0.005 * steps / (1 - np.exp(-steps)), "M1.v": 0.04 * 0.02}, rel=1e-12
+    )
     assert table.dt == 0.02 and table.discretisation is None  # the config says euler
+
+
+def test_the_paper_chain_s_process_noise_needs_dt():
+    sections = yaml.safe_load((REPO / "config" / "config.yaml").read_text())["twin"]
+    del sections["dt"]
+    with pytest.raises(TwinTableError, match=r"^twin file: dt: must be a number > 0 \(got None"):
+        paper_table(sections)
+    del sections["noise"]["actuator"], sections["noise"]["plant"]
+    assert paper_table(sections).process_noise == {}
 
 
 def test_the_paper_chain_needs_every_section():
