@@ -408,6 +408,17 @@ def _with_process(twin: NoiseFloor | None, process: NoiseFloor | None) -> NoiseF
     return NoiseFloor(math.sqrt(total), "twin+process", acf, process=process.rms)
 
 
+def _recorded_noise(floor: NoiseFloor) -> float:
+    """Return the part of a floor that is noise on the recorded values (output units).
+
+    The declared process noise's part moved the asset itself: a unit driven by the recorded
+    signal sees it as the asset did (:func:`_input_noise_floor` leaves it out).
+    """
+    if not floor.process:
+        return floor.rms
+    return math.sqrt(max(floor.rms**2 - floor.process**2, 0.0))
+
+
 def _floors(data, fit, error, noise, settings, n_tests=1, input_noise=None, process_noise=None):
     """Return each output's noise floor and its normalised threshold on the choosing part.
 
@@ -910,9 +921,7 @@ def _diagnose_table(recording, table, calibrate, train_frac, settings, heldout) 
         work = _analyse_unit(spec, recording, table, parts, settings, calibrate, n_tests, levels)
         works[spec.name] = work
         for signal, floor in zip(spec.outputs, work.floors, strict=True):
-            # what the recording holds beyond the asset: the declared process noise moved it
-            own = math.sqrt(max(floor.rms**2 - floor.process**2, 0.0))
-            levels[signal] = table.noise.get(signal, own)
+            levels[signal] = table.noise.get(signal, _recorded_noise(floor))
     _loop_floors(works, table, settings, n_tests, levels)
     flagged = [w for w in works.values() if w.flagged]
     notes = [note for w in works.values() for note in getattr(w.data.model, "notes", ())]
