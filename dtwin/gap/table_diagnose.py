@@ -47,7 +47,13 @@ from dtwin.gap.noise import (
 )
 from dtwin.gap.recording import Recording
 from dtwin.gap.results import GapSettings
-from dtwin.gap.table_effects import candidate_variants, lattice_of, twin_variant
+from dtwin.gap.table_effects import (
+    candidate_variants,
+    lattice_of,
+    slew_probes,
+    twin_variant,
+    with_quantizer_starts,
+)
 from dtwin.gap.table_fit import (
     UnitData,
     VariantFit,
@@ -527,12 +533,18 @@ class _Candidate:
 
 
 def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candidate]:
-    """Screen every candidate with the twin's params held; re-fit the best with them."""
+    """Screen every candidate with the twin's params held; re-fit the best with them.
+
+    The best :data:`SCREENED` by screening cost are re-fitted, and with them a quantizer at an
+    output whose recorded values sit on a coarse lattice (:func:`_on_coarse_lattice`): its
+    step moves the cost only in jumps, so a screening fit of a few evaluations leaves it where
+    it started (a motor's quantized speed screened last of 17, its unit ``unexplained``).
+    """
     data = work.data
     blocks = {m.name: m.block for m in table.modules}
     produced = frozenset(signal for m in table.modules for signal in m.outputs)
     variants = candidate_variants(data, data.guess, blocks, calibrate=calibrate, produced=produced)
-    variants = [v for v in variants if _allowed(v, data, table)]
+    variants = [_with_data_starts(work, v) for v in variants if _allowed(v, data, table)]
     mode = "free" if calibrate else "band"
     windows = _screening_windows(work)
     screen_x0 = _screening_states(work, windows)
@@ -551,6 +563,7 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
     for cost, variant, _ in screened:
         progress.debug("screened %s at %s: %.6g", variant.name, variant.at, cost)
     chosen = [(v, s) for _, v, s in screened[:SCREENED]]
+    chosen += [(v, {}) for _, v, _ in screened[SCREENED:] if _on_coarse_lattice(work, v)]
     chosen += [(v, {}) for v in variants if v.refits_linear]
 
     def full(item):
@@ -570,6 +583,22 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
         n_params = len([p for p in variant.effect_params if p not in variant.fixed])
         out.append(_Candidate(fit, gap, n_params or len(fit.free), choose_error=error))
     return out
+
+
+def _with_data_starts(work: _UnitWork, variant):
+    """Return ``variant``, a quantizer at one of the unit's outputs starting from the data.
+
+    Its noise and input shift start from the output's floor and the twin's training
+    simulation (:func:`~dtwin.gap.table_effects.with_quantizer_starts`); other variants are
+    returned as is.
+    """
+    outputs = work.data.spec.outputs
+    if variant.name != "output_quantization" or variant.at not in outputs:
+        return variant
+    o = outputs.index(variant.at)
+    recorded = work.data.outputs[:, o]
+    simulated = recorded + work.train_error[:, o]
+    return with_quantizer_starts(variant, simulated, recorded, work.floors[o].rms)
 
 
 def _allowed(variant, data: UnitData, table) -> bool:
@@ -634,6 +663,13 @@ PREFERENCE = ("input_", "output_", "parameter_mismatch", "state_limit")
 #: and a quantized speed were drifts removing 71 % and 74 % and leaving 6.3 and 3.0 floors.
 EXTRAPOLATED = frozenset({"output_bias_drift"})
 
+#: Share of the excess gap a candidate that leaves its unit flagged must remove to explain it:
+#: at a large gap, a form the catalogue writes differently (a hard clip for a soft saturation,
+#: a lagging sensor's gain) leaves a few percent of it, which is more than the unit's flag
+#: (a sensor gain removed 99.6 % and left 1.25 floors, flagged above 1.15). The causes outside
+#: the catalogue that the flag refused removed at most 91 %.
+FORM_SHARE = 0.95
+
 
 def _bic(candidate: _Candidate, n_eff: float) -> float:
     """``n_eff·ln(gap²) + k·ln(n_eff)`` on the choosing part (``k`` the candidate's params)."""
@@ -650,11 +686,16 @@ def _weights(candidates: list[_Candidate], n_eff: float) -> None:
         c.weight = float(value)
 
 
-def _ranked(candidates: list[_Candidate], n_eff: float) -> list[_Candidate]:
+def _ranked(
+    candidates: list[_Candidate], n_eff: float, suspects: frozenset[str] = frozenset()
+) -> list[_Candidate]:
     """Candidates by BIC; those within :data:`TIE_BIC` of the best first, by :data:`PREFERENCE`.
 
     Two effects the choosing part cannot tell apart (an input saturation of a lag and a limit
-    on its state) are named where a user would look first.
+    on its state) are named where a user would look first; before that, an output effect at
+    one of the ``suspects`` (signals other flagged units produce): one cause for two units (a
+    motor's speed sensor drifting flags its rotor and, read back through the back-EMF, its
+    armature, where a drift of the current fits as well as the speed read wrong).
     """
     best = min(_bic(c, n_eff) for c in candidates)
 
@@ -662,36 +703,39 @@ def _ranked(candidates: list[_Candidate], n_eff: float) -> list[_Candidate]:
         tied = _bic(c, n_eff) <= best + TIE_BIC
         name = c.fit.variant.name
         order = next((i for i, p in enumerate(PREFERENCE) if name.startswith(p)), len(PREFERENCE))
-        return (0, order, _bic(c, n_eff)) if tied else (1, 0, _bic(c, n_eff))
+        elsewhere = 0 if name.startswith("output_") and c.fit.variant.at in suspects else 1
+        return (0, elsewhere, order, _bic(c, n_eff)) if tied else (1, 0, 0, _bic(c, n_eff))
 
     return sorted(candidates, key=rank)
 
 
-def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, list[str], float]:
+def _choose(
+    work: _UnitWork, candidates, settings, suspects: frozenset[str] = frozenset()
+) -> tuple[_Candidate | None, list[str], float]:
     """Return the candidate that explains the choosing part's gap, or None (``unexplained``).
 
     The best by BIC (:func:`_ranked`; the re-fitted twin, ``parameter_mismatch``, is one of
     the candidates with all its params counted) must remove ``min_share`` of the excess gap
     (``min_linear_share`` for a linear form) and bring the unit back under its flag: its
     choosing gap at most the unit's threshold-to-floor ratio times the floor (the candidate's
-    own, :func:`_candidate_floor`, where higher), except an effect of :data:`EXTRAPOLATED`.
+    own, :func:`_candidate_floor`, where higher), except an effect of :data:`EXTRAPOLATED`
+    or one that removes :data:`FORM_SHARE` of the excess.
     Else the gap is unexplained: a heat transfer coefficient that switched mid-run was
     re-fitted to remove 81 % of the excess and left 6.9 floors (flagged above 1.16).
     """
     notes = []
     gap = combined(work.gaps)
     floor = work.floor
-    n_choose = work.data.parts["choose"][1] - work.data.parts["choose"][0]
-    n_eff = float(np.mean([effective_samples(f.acf, n_choose) for f in work.floors]))
+    n_eff = _effective_choose_samples(work)
     _weights(candidates, n_eff)
-    best = _ranked(candidates, n_eff)[0]
+    best = _ranked(candidates, n_eff, suspects)[0]
     variant = best.fit.variant
     floor = max(floor, _candidate_floor(work, best, settings))
     excess_before = max(excess_gap(gap, floor) ** 2, 1e-300)
     removed = 1.0 - excess_gap(best.gap_choose, floor) ** 2 / excess_before
     share = settings.min_linear_share if variant.linear_form else settings.min_share
     left, bar = best.gap_choose / floor, combined(work.thresholds) / work.floor
-    if removed >= share and left <= bar:
+    if (removed >= share and left <= bar) or removed >= FORM_SHARE:
         return best, notes, removed
     if removed >= settings.min_linear_share and variant.name in EXTRAPOLATED:
         notes.append(
@@ -704,6 +748,69 @@ def _choose(work: _UnitWork, candidates, settings) -> tuple[_Candidate | None, l
     if removed >= share:
         notes[-1] += f" and leaves {left:.2f}× its floor (the unit is flagged above {bar:.2f}×)"
     return None, notes, removed
+
+
+#: Chosen effects a slew-rate limit at an input looks like: a delay of its steps, a slower lag,
+#: a lag's input saturation (:func:`_outside_catalogue`).
+SLEW_LOOKALIKES = frozenset(
+    {"input_delay", "output_delay", "parameter_mismatch", "input_saturation"}
+)
+#: How much lower a probe's BIC must be than the chosen candidate's to say the cause is outside
+#: the catalogue (10: "very strong" on Kass and Raftery's scale).
+PROBE_BIC = 10.0
+
+
+def _outside_catalogue(work: _UnitWork, chosen, calibrate, settings) -> str | None:
+    """Return a note when a cause outside the catalogue explains the gap better than ``chosen``.
+
+    A slew-rate limit at an input (:func:`~dtwin.gap.table_effects.slew_probes`) is not in the
+    catalogue, so the diagnosis cannot name it, but it reads as a delay or a re-fitted time
+    constant that pass every test (a heater's slew limit named ``parameter_mismatch`` of its
+    lag's ``tau``). When the chosen effect is one of :data:`SLEW_LOOKALIKES`, each input's
+    slew limit is fitted as a full candidate is; if one's BIC on the choosing part is at least
+    :data:`PROBE_BIC` below the chosen one's, the gap is ``unexplained`` and the note says what
+    explained it. None otherwise.
+    """
+    if chosen is None or chosen.fit.variant.name not in SLEW_LOOKALIKES:
+        return None
+    data = work.data
+    probes = slew_probes(data)
+    refit = chosen.fit.variant.refits_linear  # a re-fit is bettered by a probe re-fitted too
+    mode = "free" if calibrate or refit else "band"
+
+    def full(variant):
+        fit = fit_variant(
+            data, variant, work.nominal.theta, mode=mode, band=settings.calibration_tolerance,
+            max_nfev=FULL_NFEV,
+        )  # fmt: skip
+        error, _ = part_error(data, fit, "choose")
+        return replace(fit, variant=None), error
+
+    n_eff = _effective_choose_samples(work)
+    bar = _bic(chosen, n_eff) - PROBE_BIC
+    for variant, (fit, error) in zip(probes, map_fits(full, probes), strict=True):
+        gap = combined(rms_by_output(error, slice(*data.parts["choose"]), data.norm))
+        probe = _Candidate(fit, gap, len(fit.free) if refit else len(variant.effect_params))
+        progress.debug(
+            "probe slew limit at %s: gap %.6g (chosen %.6g), BIC %.1f (chosen %.1f)", variant.at,
+            gap, chosen.gap_choose, _bic(probe, n_eff), _bic(chosen, n_eff),
+        )  # fmt: skip
+        if _bic(probe, n_eff) < bar:
+            (ramp,) = (fit.theta[p] for p in variant.effect_params)
+            lower = _bic(chosen, n_eff) - _bic(probe, n_eff)
+            return (
+                f"{chosen.fit.variant.name} at {chosen.fit.variant.at} is bettered by a slew-rate "
+                f"limit at {variant.at} (a full-span step in {ramp:.3g} s; choosing gap "
+                f"{gap:.4g} for {chosen.gap_choose:.4g}, BIC {lower:.1f} lower): a cause "
+                "outside the catalogue"
+            )
+    return None
+
+
+def _effective_choose_samples(work: _UnitWork) -> float:
+    """Return the choosing part's effective number of samples (its floors' correlation)."""
+    n_choose = work.data.parts["choose"][1] - work.data.parts["choose"][0]
+    return float(np.mean([effective_samples(f.acf, n_choose) for f in work.floors]))
 
 
 def _candidate_floor(work: _UnitWork, candidate: _Candidate, settings) -> float:
@@ -984,7 +1091,14 @@ def _source(flagged: list[_UnitWork], table, calibrate, settings, works) -> tupl
     for work in flagged[:MAX_SOURCES]:
         candidates = _fit_candidates(work, table, calibrate, settings)
         candidates = _producers_agree(work, candidates, works)
-        chosen, notes, removed = _choose(work, candidates, settings)
+        suspects = frozenset(
+            s for other in flagged if other is not work for s in other.data.spec.outputs
+        )
+        chosen, notes, removed = _choose(work, candidates, settings, suspects)
+        outside = _outside_catalogue(work, chosen, calibrate, settings)
+        if outside is not None:
+            chosen = None
+            notes.append(outside)
         answers.append((work, candidates, chosen, notes, removed))
     explained = [a for a in answers if a[2] is not None]
     explained = _sensor_read_downstream(explained) or explained
@@ -1047,6 +1161,27 @@ def _nested_source(works: list[_UnitWork], table, calibrate, settings) -> tuple 
     return None
 
 
+def _lattice_step(work: _UnitWork, o: int) -> tuple[float, float]:
+    """Return ``(step, floor)``: output ``o``'s coarse lattice step (else 0) and its own floor.
+
+    The floor is the output's own noise, without the error its recorded inputs' noise causes
+    through the unit; the step is :func:`_coarse_lattice`'s against it (output units).
+    """
+    own = work.floors[o]
+    floor = own.measurement if own.source.endswith("+inputs") else own.rms
+    return _coarse_lattice(work.data, o, floor), floor
+
+
+def _on_coarse_lattice(work: _UnitWork, variant) -> bool:
+    """Whether ``variant`` is a quantizer at one of the unit's outputs that sits on a lattice."""
+    outputs = work.data.spec.outputs
+    return (
+        variant.name == "output_quantization"
+        and variant.at in outputs
+        and _lattice_step(work, outputs.index(variant.at))[0] > 0
+    )
+
+
 def _lattice_candidate(work: _UnitWork, table, calibrate, settings) -> tuple | None:
     """Return ``(candidate, note)`` for an output whose recorded values sit on a coarse lattice.
 
@@ -1058,9 +1193,7 @@ def _lattice_candidate(work: _UnitWork, table, calibrate, settings) -> tuple | N
     """
     data = work.data
     for o, signal in enumerate(data.spec.outputs):
-        own = work.floors[o]
-        floor = own.measurement if own.source.endswith("+inputs") else own.rms
-        step = _coarse_lattice(data, o, floor)
+        step, floor = _lattice_step(work, o)
         if not step:
             continue
         blocks = {m.name: m.block for m in table.modules}
@@ -1075,6 +1208,7 @@ def _lattice_candidate(work: _UnitWork, table, calibrate, settings) -> tuple | N
         )
         if variant is None:
             continue
+        variant = _with_data_starts(work, variant)
         fit = fit_variant(
             data, variant, work.nominal.theta, mode="free" if calibrate else "band",
             band=settings.calibration_tolerance, max_nfev=FULL_NFEV,
@@ -1085,7 +1219,8 @@ def _lattice_candidate(work: _UnitWork, table, calibrate, settings) -> tuple | N
             f"{signal}: recorded values on a lattice of step {step:.4g} (concentration >= "
             f"{LATTICE_CONCENTRATION}), {step / floor:.2f} noise floors (>= {LATTICE_MIN_STEP})"
         )
-        candidate = _Candidate(fit, gap, len(variant.effect_params), weight=1.0)
+        n_free = len([p for p in variant.effect_params if p not in variant.fixed])
+        candidate = _Candidate(fit, gap, n_free, weight=1.0)
         return candidate, note
     return None
 

@@ -2,7 +2,8 @@
 
 Specification: docs/gap.md §Twin file (Which, on any module). Effects attach
 
-- at a unit's **input** signal: ``input_saturation`` (symmetric limit ``U`` about 0),
+- at a unit's **input** signal: ``input_saturation`` (symmetric limit ``U`` about 0, its knee
+  as sharp as ``p`` says: ``u/(1 + |u/U|^p)^(1/p)``, a hard clip as ``p`` grows),
   ``input_deadzone`` (``sign(u)·max(|u| − D, 0)``), ``input_delay`` (``delay`` s, fractional);
 - at a recorded **output**: ``output_saturation`` (clipped to ``[low, high]``),
   ``output_bias_drift`` (``b0 + b1·τ + b2·τ²``, ``τ`` the time over the recording's length),
@@ -25,13 +26,23 @@ state), or nothing for a re-fit (the report names the param furthest off).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from dtwin.gap.effects import find_lattice
 from dtwin.gap.table_fit import UnitData, Variant
 from dtwin.twin.simulate import Assignment
 
-__all__ = ["STATE_TERMS", "candidate_variants", "lattice_of", "twin_variant"]
+__all__ = [
+    "STATE_TERMS",
+    "candidate_variants",
+    "lattice_of",
+    "twin_variant",
+    "quantizer_mean",
+    "slew_probes",
+    "with_quantizer_starts",
+]
 
 #: The missing terms of a state's derivative: name → the function of ``z`` (text).
 STATE_TERMS: dict[str, str] = {
@@ -103,10 +114,11 @@ def _input_variants(data: UnitData) -> list[Variant]:
         reach = float(np.max(np.abs(u)))
         spread = float(np.std(u)) or 1.0
         u_name, d_name, delay_name = f"_e_U_{i}", f"_e_D_{i}", f"_e_delay_{i}"
+        p_name = f"_e_p_{i}"
 
-        def saturate(values, theta, _data, i=i, name=u_name):
+        def saturate(values, theta, _data, i=i, name=u_name, sharpness=p_name):
             out = values.copy()
-            out[:, i] = np.clip(values[:, i], -theta[name], theta[name])
+            out[:, i] = soft_saturation(values[:, i], theta[name], theta[sharpness])
             return out
 
         def deadzone(values, theta, _data, i=i, name=d_name):
@@ -121,14 +133,37 @@ def _input_variants(data: UnitData) -> list[Variant]:
 
         model = data.model
         out += [
-            Variant("input_saturation", signal, model, (u_name,), {u_name: 0.8 * reach},
-                    {u_name: (1e-3 * spread, 2 * reach)}, {u_name: spread}, input_map=saturate),
+            Variant("input_saturation", signal, model, (u_name, p_name),
+                    {u_name: 0.8 * reach, p_name: SHARPNESS_START},
+                    {u_name: (1e-3 * spread, 2 * reach), p_name: SHARPNESS_BOUNDS},
+                    {u_name: spread, p_name: SHARPNESS_START / 2}, input_map=saturate),
             Variant("input_deadzone", signal, model, (d_name,), {d_name: 0.1 * spread},
                     {d_name: (0.0, reach)}, {d_name: spread}, input_map=deadzone),
             Variant("input_delay", signal, model, (delay_name,), {delay_name: data.dt},
                     {delay_name: (0.0, _max_delay(data))}, {delay_name: data.dt}, input_map=delay),
         ]  # fmt: skip
     return out
+
+
+#: The saturation's knee sharpness ``p``: its start (a clip rounded by 3.4 % of ``U`` at
+#: ``|u| = U``, by under 1 % beyond ±10 % of it) and bounds (a knee as round as ``tanh``'s to
+#: a clip rounded by 0.35 %).
+SHARPNESS_START, SHARPNESS_BOUNDS = 20.0, (1.5, 200.0)
+
+
+def soft_saturation(u: np.ndarray, limit: float, sharpness: float) -> np.ndarray:
+    """Return ``u/(1 + |u/U|^p)^(1/p)``: a saturation at ``±U`` whose knee is as sharp as ``p``.
+
+    Linear for ``|u| ≪ U`` and ``±U`` for ``|u| ≫ U`` whatever ``p``; a hard clip as ``p``
+    grows, a knee as round as ``tanh``'s at ``p ≈ 2``. A real actuator's limit is seldom the
+    clip the textbook draws (a drive's current limit, a pump's flow at full speed), and a
+    clip fitted to a rounded knee leaves an error that grows with the recording's length.
+    ``u`` shape ``(n,)`` (input units); written with ``logaddexp`` so that ``|u/U|^p`` never
+    overflows.
+    """
+    with np.errstate(divide="ignore"):
+        log_ratio = np.log(np.abs(u) / limit)
+    return u * np.exp(-np.logaddexp(0.0, sharpness * log_ratio) / sharpness)
 
 
 def _sensor_variants(data: UnitData, produced: frozenset[str]) -> list[Variant]:
@@ -247,23 +282,88 @@ def lattice_of(y: np.ndarray) -> tuple[float, float, float]:
 
 
 def _quantization_variant(data, o, signal, y, spread) -> list[Variant]:
-    """``output_quantization`` when the recorded values sit on a lattice (else nothing)."""
+    """``output_quantization`` when the recorded values sit on a lattice (else nothing).
+
+    The recorded values are a quantizer's of the output with its noise: the prediction is
+    their expectation (:func:`quantizer_mean`), with the lattice (step ``q``, phase ``c``)
+    read from the recorded values and held, and the quantizer's input shift ``b`` (0 for a
+    rounding quantizer, ``−q/2`` for one that truncates) and the noise before it ``σ``
+    fitted (their starts: :func:`with_quantizer_starts`).
+    """
     step, offset, concentration = lattice_of(y)
     if concentration < 0.5:
         return []
-    q_name, o_name = f"_e_q_{o}", f"_e_offset_{o}"
+    names = tuple(f"_e_{p}_{o}" for p in ("q", "offset", "shift", "sigma"))
+    q_name, c_name, b_name, s_name = names
 
     def quantize(values, theta, _data, o=o):
         out = values.copy()
-        q, c = theta[q_name], theta[o_name]
-        out[:, o] = c + q * np.round((values[:, o] - c) / q)
+        out[:, o] = quantizer_mean(
+            values[:, o], theta[q_name], theta[c_name], theta[b_name], theta[s_name]
+        )
         return out
 
-    fixed = {q_name: step, o_name: offset}
+    fixed = {q_name: step, c_name: offset}
+    starts = {**fixed, b_name: 0.0, s_name: 0.3 * step}
+    bounds = {b_name: (-step, step), s_name: (QUANTIZER_MIN_SIGMA * step, 2.0 * step)}
+    scales = {b_name: 0.25 * step, s_name: 0.25 * step}
     return [
-        Variant("output_quantization", signal, data.model, (q_name, o_name), fixed,
-                {}, {}, output_map=quantize, fixed=fixed)
+        Variant("output_quantization", signal, data.model, names, starts, bounds, scales,
+                output_map=quantize, fixed=fixed)
     ]  # fmt: skip
+
+
+#: Fourier terms of a quantizer's expected output (:func:`quantizer_mean`); with the noise
+#: at least :data:`QUANTIZER_MIN_SIGMA` of the step the last one is damped by ``e⁻⁵⁰``.
+QUANTIZER_TERMS = 32
+#: Smallest noise before a quantizer, as a fraction of its step (a noise-free quantizer's
+#: staircase, its edges rounded by 5 % of a step).
+QUANTIZER_MIN_SIGMA = 0.05
+
+
+def quantizer_mean(y: np.ndarray, q: float, c: float, b: float, sigma: float) -> np.ndarray:
+    """Return ``E[c + q·round((y + b + n − c)/q)]`` for Gaussian noise ``n`` of sd ``sigma``.
+
+    The quantizer's error is a sawtooth of ``y + b`` with Fourier series
+    ``q·Σₖ (−1)^(k+1) sin(2πk(y + b − c)/q)/(πk)``; the noise damps its ``k``-th term by
+    ``exp(−2π²k²σ²/q²)`` (the Gaussian's characteristic function). So the expectation is
+    ``y + b`` minus the damped sawtooth: a staircase for ``σ ≪ q``, a line with a bias for
+    ``σ ≳ q/2`` (the noise dithers the quantizer). Smooth in ``b`` and ``σ``, so a fit moves
+    them. ``y`` shape ``(n,)``, output units; :data:`QUANTIZER_TERMS` terms.
+    """
+    x = np.asarray(y, dtype=float) + b
+    k = np.arange(1, QUANTIZER_TERMS + 1)
+    weights = (-1.0) ** (k + 1) / (np.pi * k) * np.exp(-2.0 * (np.pi * k * sigma / q) ** 2)
+    keep = np.abs(weights) > 1e-6 / k
+    phase = 2.0 * np.pi * np.multiply.outer((x - c) / q, k[keep])
+    return x - q * (np.sin(phase) @ weights[keep])
+
+
+#: Input shifts a quantizer's fit starts from, as fractions of its step (one step's grid).
+QUANTIZER_SHIFTS = np.arange(-8, 8) / 16
+
+
+def with_quantizer_starts(
+    variant: Variant, simulated: np.ndarray, recorded: np.ndarray, noise: float
+) -> Variant:
+    """Return the quantizer ``variant`` starting from its noise and input shift read from data.
+
+    The noise before the quantizer starts at what the output's noise floor ``noise`` leaves
+    beyond the quantizer's own ``q²/12``; the shift at the one of :data:`QUANTIZER_SHIFTS`
+    (times ``q``) whose expected output is nearest the recorded values (least squares): the
+    cost is periodic in the shift, so a fit from 0 can stop in the wrong period's minimum.
+    ``simulated``, ``recorded``: the output's twin simulation and its recorded values, shape
+    ``(n,)`` (NaN where not simulated; output units).
+    """
+    q_name, c_name, b_name, s_name = variant.effect_params
+    q, c = variant.fixed[q_name], variant.fixed[c_name]
+    low, high = variant.bounds[s_name]
+    sigma = float(np.clip(np.sqrt(max(noise**2 - q**2 / 12.0, 0.0)), low, high))
+    rows = np.isfinite(simulated) & np.isfinite(recorded)
+    y, r = simulated[rows], recorded[rows]
+    costs = [np.sum(np.square(quantizer_mean(y, q, c, f * q, sigma) - r)) for f in QUANTIZER_SHIFTS]
+    shift = float(QUANTIZER_SHIFTS[int(np.argmin(costs))] * q) if len(y) else 0.0
+    return replace(variant, starts={**variant.starts, b_name: shift, s_name: sigma})
 
 
 def _local_name(assignment: Assignment, slot: str) -> str | None:
@@ -300,26 +400,43 @@ def _state_variants(data: UnitData, guess: np.ndarray, blocks: dict[str, str | N
 
 
 def _term_variant(data, assignment, state, source, values, term, form, rate, blocks) -> Variant:
-    """One missing term ``θ·f(z)`` of state ``source`` in the derivative of ``state``."""
+    """One missing term ``θ·f(z)`` of state ``source`` in the derivative of ``state``.
+
+    ``z = (s − c)/σ``: the cubic centred on the state's mean; the sign and ``|z|·z`` about 0
+    (a velocity's friction and drag), except an ``|z|·z`` that is not a mass-spring-damper's
+    named ``quadratic_damping``, whose centre ``c`` is fitted (``_e_centre``, state units),
+    started from 0 or, when the state never reaches 0, from the end of its range nearest 0 (a
+    body heated from the ambient: its coolest): a loss growing as the square of a temperature's
+    rise grows about the ambient, not about 0 °C, and ``|T|·T`` about 0 °C is a different
+    function that the twin's linear loss cannot take up.
+    """
     centre = float(np.nanmean(values)) if term == "state_cubic" else 0.0
     sigma = float(np.nanstd(values - centre)) or 1.0
     if term != "state_cubic":
         sigma = float(np.sqrt(np.nanmean(values**2))) or 1.0
     local = _local_name(assignment, source)
-    z = f"(({local} - {_number(centre)})/{_number(sigma)})"
-    theta = "_e_theta"
-    text = f"({assignment.text}) + {theta}*{form.format(z=z)}"
-    model = data.model.variant({assignment.target: text}, extra=(theta,))
     name, report = term, None
     module, own = state.split(".", 1)[0], state.split(".", 1)[1]
     if blocks.get(module) == "mass_spring_damper" and own == "v":
         named = MSD_NAMES.get((term, source.split(".", 1)[1]))
         if named is not None:
             name, report = named[0], (named[1], named[2], f"{module}.m", sigma)
+    theta, shift = "_e_theta", "_e_centre"
+    params, starts = (theta,), {theta: 0.0}
+    bounds, scales = {theta: (-np.inf, np.inf)}, {theta: rate}
+    z = f"(({local} - {_number(centre)})/{_number(sigma)})"
+    if term == "state_abs_square" and report is None:
+        low, high = float(np.nanmin(values)), float(np.nanmax(values))
+        z = f"(({local} - {shift})/{_number(sigma)})"
+        params, starts = (theta, shift), {theta: 0.0, shift: min(max(0.0, low), high)}
+        bounds[shift] = (min(low - (high - low), 0.0), max(high, 0.0))
+        scales[shift] = sigma
+    text = f"({assignment.text}) + {theta}*{form.format(z=z)}"
+    model = data.model.variant({assignment.target: text}, extra=params)
     slope = TERM_SLOPES[term] / sigma
     return Variant(
-        name, state, model, (theta,), {theta: 0.0}, {theta: (-np.inf, np.inf)}, {theta: rate},
-        report=report, stiffness=lambda values: abs(values[theta]) * slope,
+        name, state, model, params, starts, bounds, scales, report=report,
+        stiffness=lambda values: abs(values[theta]) * slope,
     )  # fmt: skip
 
 
@@ -342,6 +459,38 @@ def _limit_variants(data, state, j, path) -> list[Variant]:
         variant = Variant("state_limit", state, data.model, (name,), {name: float(start)},
                           {name: bounds}, {name: spread}, limits=limits)  # fmt: skip
         out.append(variant)
+    return out
+
+
+def slew_probes(data: UnitData) -> list[Variant]:
+    """Return a slew-rate limit at each of the unit's inputs: a cause outside the catalogue.
+
+    Not a candidate the diagnosis names: a probe (docs/gap.md §Your own twin) that tells an
+    ``unexplained`` gap from the catalogue effects a slew limit looks like (a delay of steps, a
+    slower lag, a lag's input saturation). The input moves at most ``span·dt/ramp`` a sample
+    (:func:`~dtwin.twin._kernels.slew_limited`), ``ramp`` (s) the time a full-span step takes,
+    from half a sample to half the recording (the follower runs over the whole recording, so a
+    ramp may span many windows).
+    """
+    from dtwin.twin._kernels import slew_limited
+
+    out = []
+    for i, signal in enumerate(data.spec.inputs):
+        u = data.inputs[:, i]
+        span = float(np.nanmax(u) - np.nanmin(u)) or 1.0
+        name = f"_e_ramp_{i}"
+
+        def slew(values, theta, data, i=i, name=name, span=span):
+            out = values.copy()
+            column = np.ascontiguousarray(values[:, i], dtype=float)
+            out[:, i] = slew_limited(column, span * data.dt / theta[name])
+            return out
+
+        ramp = (0.5 * data.dt, 0.5 * data.n_samples * data.dt)
+        out.append(
+            Variant("input_slew_limit", signal, data.model, (name,), {name: 5.0 * data.dt},
+                    {name: ramp}, {name: 5.0 * data.dt}, input_map=slew)
+        )  # fmt: skip
     return out
 
 

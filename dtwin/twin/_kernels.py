@@ -32,7 +32,7 @@ else:
         return value
 
 
-__all__ = ["run_program", "simulate_lanes", "chain_windows", "warm_up"]
+__all__ = ["run_program", "simulate_lanes", "chain_windows", "slew_limited", "warm_up"]
 
 
 @njit(cache=True)
@@ -369,6 +369,28 @@ def chain_windows(
     return y[0], states[0]
 
 
+@njit(cache=True)
+def slew_limited(u: np.ndarray, max_step: float) -> np.ndarray:  # pragma: no cover - compiled
+    """Return ``u`` (shape ``(n,)``) through a follower that moves at most ``max_step`` a sample.
+
+    ``v_k = v_(k−1) + clip(u_k − v_(k−1), −max_step, max_step)``, ``v`` starting at the first
+    value and restarting at the first value after each NaN run (NaN kept).
+    """
+    out = np.empty_like(u)
+    follower = math.nan
+    for k in range(u.shape[0]):
+        if math.isnan(u[k]):
+            out[k] = math.nan
+            follower = math.nan
+            continue
+        if math.isnan(follower):
+            follower = u[k]
+        else:
+            follower += min(max(u[k] - follower, -max_step), max_step)
+        out[k] = follower
+    return out
+
+
 def warm_up() -> None:
     """Compile the loops into numba's on-disk cache (``make venv`` calls this once)."""
     code = np.array([1, 2, 1, 1, 3, 0, 0, 0, 4, 0, 11, 3], dtype=np.int64)
@@ -388,6 +410,7 @@ def warm_up() -> None:
     inf = np.full((1, 1), np.inf)
     starts, stops = np.array([0], dtype=np.int64), np.array([4], dtype=np.int64)
     out = np.array([2], dtype=np.int64)
+    slew_limited(np.array([0.0, 1.0, math.nan, 2.0]), 0.5)
     for n_batch in (1, 2):  # one lane, and several
         simulate_lanes(
             program, np.zeros((n_batch, 4)), layout, u, np.zeros(n_batch, dtype=np.int64), out,

@@ -37,10 +37,14 @@ TANK = {
 }
 
 
-def _asset(n: int, seed: int, *, level_limit=None, overflow=None) -> pd.DataFrame:
-    """A valve and a tank with Torricelli outflow, integrated finely; random input steps."""
+def _asset(n: int, seed: int, *, level_limit=None, overflow=None, drive=None) -> pd.DataFrame:
+    """A valve and a tank with Torricelli outflow, integrated finely; random input steps.
+
+    ``drive`` maps the recorded command to what the valve receives (an actuator effect).
+    """
     rng = np.random.default_rng(seed)
     u = np.repeat(rng.uniform(0.3, 1.6, n // 40 + 1), 40)[:n]
+    received = u if drive is None else drive(u)
 
     def rhs(t, s):
         q, h = s
@@ -48,7 +52,7 @@ def _asset(n: int, seed: int, *, level_limit=None, overflow=None) -> pd.DataFram
         dh = q - 0.8 * np.sqrt(max(h, 0.0))
         if overflow is not None and h >= overflow and dh > 0:
             dh = 0.0
-        return [(u[k] - q) / 0.5, dh]
+        return [(received[k] - q) / 0.5, dh]
 
     times = np.arange(n) * DT
     sol = solve_ivp(rhs, (0, times[-1]), [0.5, 1.0], t_eval=times, max_step=DT / 4, rtol=1e-9)
@@ -95,6 +99,46 @@ def test_values_on_a_lattice_coarser_than_half_the_noise_read_quantization(step,
     if effect != "none":
         assert (result.module, result.at) == ("tank", "level")
         assert result.params["q"] == pytest.approx(step, rel=1e-3)
+
+
+@pytest.mark.parametrize("seed", [2, 3])
+def test_a_valve_command_saturating_with_a_round_knee_is_an_input_saturation(seed):
+    """tanh about a knee at 1.0 (the command reaches 1.6): a hard clip fitted to it leaves the
+    unit flagged; the saturation's knee sharpness takes it up."""
+
+    def knee(u):
+        return np.where(u > 0.8, 0.8 + 0.4 * np.tanh((u - 0.8) / 0.4), u)
+
+    result = _diagnose(_asset(1500, seed, drive=knee))
+    assert (result.module, result.effect, result.at) == ("valve", "input_saturation", "u")
+    assert result.params["p"] < 20.0  # rounder than the start, a near clip
+
+
+def test_a_slew_limited_valve_command_is_unexplained_and_the_note_names_the_slew_limit():
+    """A slew limit is outside the catalogue; its steps read as a delay of the command, which
+    the slew-limit probe betters (a full span, 1.3, in 1 s)."""
+    from dtwin.twin._kernels import slew_limited
+
+    def slew(u):
+        return slew_limited(u, 1.3 * DT / 1.0)
+
+    result = _diagnose(_asset(1500, 2, drive=slew))
+    assert (result.module, result.effect) == ("valve", "unexplained")
+    assert any("slew-rate limit at u" in note for note in result.notes), result.notes
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_a_truncating_level_sensor_coarse_enough_to_flag_its_unit_reads_quantization(seed):
+    """A step of 5 noise levels, truncating (q/2 below a rounding one): the unit is flagged,
+    and the quantizer's expected output (its noise and shift fitted) explains it."""
+    step = 0.05
+    frame = _asset(1500, seed)
+    frame["level"] = step * np.floor(frame["level"] / step)
+    result = _diagnose(frame)
+    assert result.units["tank"].flagged
+    assert (result.module, result.effect, result.at) == ("tank", "output_quantization", "level")
+    assert result.params["q"] == pytest.approx(step, rel=1e-3)
+    assert result.params["sigma"] == pytest.approx(0.01, rel=0.3)  # the level's noise
 
 
 def test_a_module_s_candidates_restrict_the_effects_tried_where_it_attaches():
@@ -199,6 +243,26 @@ def test_a_family_case_is_located_and_named(case_type, seed):
     answer = table_diagnosis_to_dict(diagnose_table(recording, table))
     scored = score_family_case(case.key, answer)
     assert scored["located"] and scored["named"], (case.key["at"], answer["effect"], answer["at"])
+
+
+@pytest.mark.slow
+def test_a_drifting_speed_sensor_read_back_by_the_armature_is_blamed_on_the_rotor():
+    """Both motor units are flagged; in the armature's a drift of the current fits as well as
+    the speed read wrong (a tie): the speed's, one cause for both units, is named."""
+    from dtwin.gap.table_report import table_diagnosis_to_dict
+    from dtwin.gap.twin_file import table_file
+    from dtwin.gapbench.families import generate_family_case
+
+    case = generate_family_case("motor_output_bias_drift", 108006)  # recorded i and w
+    table = table_file(case.twin)
+    recording = recording_with_columns(case.recording, (*table.signals, *table.exogenous))
+    answer = table_diagnosis_to_dict(diagnose_table(recording, table))
+    assert case.key["at"] == "w"
+    assert (answer["module"], answer["effect"], answer["at"]) == (
+        "mechanical",
+        "output_bias_drift",
+        "w",
+    )
 
 
 def test_screening_fits_hold_the_twin_s_params_as_fitted(monkeypatch):
