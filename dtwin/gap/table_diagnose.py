@@ -538,7 +538,10 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
     The best :data:`SCREENED` by screening cost are re-fitted, and with them a quantizer at an
     output whose recorded values sit on a coarse lattice (:func:`_on_coarse_lattice`): its
     step moves the cost only in jumps, so a screening fit of a few evaluations leaves it where
-    it started (a motor's quantized speed screened last of 17, its unit ``unexplained``).
+    it started (a motor's quantized speed screened last of 17, its unit ``unexplained``); and
+    a built-in block's named effects (a mass-spring-damper's friction, stiffness, damping):
+    the twin's params hold what they can of such a force while screening (a friction in the
+    calibrated damping: the EMPS axis's Coulomb friction screened fifth, by 2 %).
     """
     data = work.data
     blocks = {m.name: m.block for m in table.modules}
@@ -564,6 +567,7 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
         progress.debug("screened %s at %s: %.6g", variant.name, variant.at, cost)
     chosen = [(v, s) for _, v, s in screened[:SCREENED]]
     chosen += [(v, {}) for _, v, _ in screened[SCREENED:] if _on_coarse_lattice(work, v)]
+    chosen += [(v, start) for _, v, start in screened[SCREENED:] if v.report is not None]
     chosen += [(v, {}) for v in variants if v.refits_linear]
 
     def full(item):

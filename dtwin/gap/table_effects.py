@@ -61,6 +61,10 @@ MSD_NAMES = {
 TERM_SLOPES: dict[str, float] = {"state_cubic": 48.0, "state_abs_square": 8.0, "state_sign": 100.0}
 #: Built-in blocks whose states get no state effect (a lag's state is its filter's).
 NO_STATE_EFFECTS = frozenset({"lag"})
+#: (block, state) whose derivative is a definition (a mass-spring-damper's ``x' = v``): no
+#: missing term is added there (on the EMPS axis a cubic term of ``v`` in ``x'`` was named
+#: over the friction in ``v'``); its limits (an end stop) are kept.
+KINEMATIC_STATES = frozenset({("mass_spring_damper", "x")})
 #: Delays tried before fitting a delay, in samples.
 DELAY_GRID = (0.5, 1, 2, 4, 6, 9, 13, 18, 25)
 
@@ -388,6 +392,8 @@ def _state_variants(data: UnitData, guess: np.ndarray, blocks: dict[str, str | N
         path = guess[train, j]
         rate = float(np.nanstd(np.diff(path))) / data.dt or 1.0
         read = [s for s in spec.states if _local_name(assignment, s) is not None]
+        if (blocks.get(spec.module_of(state)), state.split(".", 1)[1]) in KINEMATIC_STATES:
+            read = []  # its derivative is a definition; a missing force is in the velocity's
         for source in read:
             i = spec.states.index(source)
             values = guess[train, i]

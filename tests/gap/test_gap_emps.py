@@ -41,3 +41,30 @@ def test_emps_names_coulomb_friction_in_the_plant():
     assert (result.module, result.effect) == ("M1", "coulomb_friction")
     assert abs(result.params["Fc"] / PUBLISHED_FC - 1) <= 0.30
     assert result.excess_shrink_pct >= 50 and result.own_shrink_pct >= 50
+
+
+@pytest.mark.slow
+def test_emps_written_as_a_user_s_table_names_coulomb_friction_in_the_axis():
+    """The axis as a user would write it: one mass-spring-damper block, no spring, calibrated."""
+    if not (EMPS / "recording_train.csv").is_file():
+        pytest.skip(f"EMPS data not found in {EMPS}: set DTWIN_EMPS_DIR (docs/gap.md: EMPS)")
+    from dtwin.gap.table_diagnose import diagnose_table
+    from dtwin.twin.table import table_from_mapping
+
+    table = table_from_mapping(
+        {
+            "dt": 0.001,
+            "modules": {
+                "axis": {
+                    "block": "mass_spring_damper",
+                    "inputs": ["u_act"],
+                    "outputs": ["x"],
+                    "params": {"m": 100.0, "c": 100.0, "k": 0.0},
+                }
+            },
+        }
+    )
+    recording = read_recording(EMPS / "recording_train.csv", columns=("u_act", "x"))
+    result = diagnose_table(recording, table, calibrate=True)
+    assert (result.module, result.effect, result.at) == ("axis", "coulomb_friction", "axis.v")
+    assert abs(result.params["Fc"] / PUBLISHED_FC - 1) <= 0.30
