@@ -2,13 +2,14 @@
 
 :func:`run_program` executes a unit's postfix program (:mod:`dtwin.twin.expressions`: opcodes
 ``OP_CONST`` … ``OP_STORE``) over a matrix of named slots, one column per **lane**;
-:func:`simulate_lanes` integrates a unit's states with the classical Runge-Kutta method over
-windows, every window restarted from given states, for a batch of param vectors at once, and
-records the unit's outputs at every sample. A lane is one (param vector, window) pair: all
-lanes advance in lockstep, so each opcode is dispatched once per step for every lane and the
-loop over lanes is tight (the interpreter's dispatch is paid once for the whole batch). Each
-lane's arithmetic is the same, in the same order, as a lane run alone. Without numba the same
-functions run in Python (:mod:`dtwin._jit`), with the same arithmetic.
+:func:`simulate_lanes` integrates a unit's states with the classical Runge-Kutta method over windows
+(a unit of discrete modules: one :func:`_discrete_step` per sample), every window restarted from
+given states, for a batch of param vectors at once, and records the unit's outputs at every sample.
+A lane is one (param vector, window) pair: all lanes advance in lockstep, so each opcode is
+dispatched once per step for every lane and the loop over lanes is tight (the interpreter's dispatch
+is paid once for the whole batch). Each lane's arithmetic is the same, in the same order, as a lane
+run alone. Without numba the same functions run in Python (:mod:`dtwin._jit`), with the same
+arithmetic.
 
 Slots: one float64 row per named slot (``t``, the unit's inputs, states, params, algebraic
 signals and state derivatives; :class:`dtwin.twin.simulate.UnitModel` lays it out), one column
@@ -198,8 +199,126 @@ def _clamp(work, lo, hi, lane_member, n_lanes):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _hold_integral(jac, dt, aug, power, term, out):  # pragma: no cover - compiled
+    """Write ``Γ = ∫₀^dt exp(J·s) ds`` of ``jac`` ``(n, n)`` to ``out`` ``(n, n)``.
+
+    The upper right block of ``exp([[J, I], [0, 0]]·dt)`` (Van Loan), by scaling the augmented
+    matrix to a 1-norm at most 0.5, 18 Taylor terms in Horner form (truncation below 1e-21 of
+    the norm) and as many squarings. ``aug``, ``power`` and ``term`` are ``(2n, 2n)`` scratch.
+    """
+    n = jac.shape[0]
+    m = 2 * n
+    for i in range(m):
+        for j in range(m):
+            aug[i, j] = 0.0
+    for i in range(n):
+        for j in range(n):
+            aug[i, j] = jac[i, j] * dt
+        aug[i, n + i] = dt
+    norm = 0.0
+    for j in range(m):
+        column = 0.0
+        for i in range(m):
+            column += abs(aug[i, j])
+        norm = max(norm, column)
+    squarings = 0
+    while norm > 0.5 and squarings < 1000:
+        norm *= 0.5
+        squarings += 1
+    scale = 0.5**squarings
+    for i in range(m):
+        for j in range(m):
+            aug[i, j] *= scale
+            power[i, j] = 1.0 if i == j else 0.0
+    for order in range(18, 0, -1):  # power = I + aug·power/order
+        for i in range(m):
+            for j in range(m):
+                total = 0.0
+                for r in range(m):
+                    total += aug[i, r] * power[r, j]
+                term[i, j] = total / order
+        for i in range(m):
+            for j in range(m):
+                power[i, j] = term[i, j] + (1.0 if i == j else 0.0)
+    for _ in range(squarings):
+        for i in range(m):
+            for j in range(m):
+                total = 0.0
+                for r in range(m):
+                    total += power[i, r] * power[r, j]
+                term[i, j] = total
+        for i in range(m):
+            for j in range(m):
+                power[i, j] = term[i, j]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = power[i, n + j]
+
+
+@njit(cache=True, inline="always")
+def _discrete_step(code, consts, slots, stack, times, work, layout, u, lane_set, k, n_lanes,
+                   stepping, jac, scratch):  # fmt: skip
+    # pragma: no cover - compiled
+    """Advance every lane's states by one sample of a discrete unit, in place in ``work[0]``.
+
+    ``work[5]`` holds the derivatives ``f(s[k], u[k])`` at the sample (each lane's). A state of
+    kind 1 (``euler``) becomes ``s + dt·f``; the states of a kind-2 module (``zoh``, states
+    ``first[j] … last[j] − 1``) become ``s + Γ·f`` with ``Γ = ∫₀^dt exp(J·s) ds`` and ``J`` the
+    module's Jacobian at the sample (one difference per state, exact for derivatives affine
+    in the module's states): the exact step of a linear module with its inputs held.
+    ``jac`` ``(n_states, n_states, n_lanes)`` and ``scratch`` are work space.
+    """
+    kinds, first, last = stepping
+    t0, dt = times[0], times[1]
+    n_states = work.shape[1]
+    for j in range(n_states):  # Jacobian columns of the zoh states
+        if kinds[j] != 2:
+            continue
+        for i in range(n_states):
+            for lane in range(n_lanes):
+                work[1, i, lane] = work[0, i, lane]
+        for lane in range(n_lanes):
+            work[1, j, lane] = work[0, j, lane] + (1.0 + abs(work[0, j, lane]))
+        _slope(code, consts, slots, stack, (t0, dt, 0.0, 0.0), 0.0, work, 1, 2, layout, u,
+               lane_set, k, n_lanes)  # fmt: skip
+        for i in range(first[j], last[j]):
+            for lane in range(n_lanes):
+                step = work[1, j, lane] - work[0, j, lane]
+                jac[i, j, lane] = (work[2, i, lane] - work[5, i, lane]) / step
+    aug, power, term, block, gamma = scratch
+    j = 0
+    while j < n_states:
+        if kinds[j] == 1:
+            for lane in range(n_lanes):
+                work[0, j, lane] = work[0, j, lane] + dt * work[5, j, lane]
+            j += 1
+            continue
+        a, b = first[j], last[j]
+        n = b - a
+        for lane in range(n_lanes):
+            if n == 1:
+                slope = jac[a, a, lane]
+                g = math.expm1(slope * dt) / slope if slope != 0.0 else dt
+                work[0, a, lane] = work[0, a, lane] + g * work[5, a, lane]
+                continue
+            for r in range(n):
+                for c in range(n):
+                    block[r, c] = jac[a + r, a + c, lane]
+            _hold_integral(block[:n, :n], dt, aug[: 2 * n, : 2 * n], power[: 2 * n, : 2 * n],
+                           term[: 2 * n, : 2 * n], gamma[:n, :n])  # fmt: skip
+            for r in range(n):
+                total = 0.0
+                for c in range(n):
+                    total += gamma[r, c] * work[5, a + c, lane]
+                work[2, r, lane] = total
+            for r in range(n):
+                work[0, a + r, lane] = work[0, a + r, lane] + work[2, r, lane]
+        j = b
+
+
+@njit(cache=True)
 def _integrate(code, consts, layout, u, lanes, out_slots, lo, hi, times, depth, slots, work, y,
-               states, one):  # fmt: skip
+               states, one, stepping):  # fmt: skip
     # pragma: no cover - compiled
     """Advance every lane over its samples in lockstep, recording outputs and states.
 
@@ -214,6 +333,11 @@ def _integrate(code, consts, layout, u, lanes, out_slots, lo, hi, times, depth, 
     ``one`` (a compile-time constant: ``True`` or ``False`` written at the call) says there is
     a single lane: its loops over lanes are then compiled away, which halves a lone window's
     time (a live stream's step, a chain of windows); the arithmetic is the same.
+
+    ``stepping = (kinds, first, last)`` per state: kind 0 continuous, 1 ``euler``, 2 ``zoh``
+    and the span of the state's module (:func:`_discrete_step`). A unit whose states are all
+    of kind 1 or 2 is **discrete**: each sample is one :func:`_discrete_step` from the states
+    and inputs of the previous sample instead of the Runge-Kutta steps (``substeps`` unused).
     """
     literally(one)
     member, lane_set, start, length, row = lanes
@@ -227,6 +351,19 @@ def _integrate(code, consts, layout, u, lanes, out_slots, lo, hi, times, depth, 
         longest = max(longest, length[lane])
     _clamp(work, lo, hi, member, n_lanes)
     h = dt / substeps
+    kinds = stepping[0]
+    discrete = n_states > 0
+    width = 1
+    for j in range(n_states):
+        if kinds[j] == 0:
+            discrete = False
+        else:
+            width = max(width, stepping[2][j] - stepping[1][j])
+    size = n_states if discrete else 0
+    jac = np.zeros((size, size, n_lanes))
+    scratch = (np.empty((2 * width, 2 * width)), np.empty((2 * width, 2 * width)),
+               np.empty((2 * width, 2 * width)), np.empty((width, width)),
+               np.empty((width, width)))  # fmt: skip
     for i in range(longest):
         for lane in range(n_lanes):
             k[lane] = start[lane] + min(i, length[lane] - 1)
@@ -241,6 +378,11 @@ def _integrate(code, consts, layout, u, lanes, out_slots, lo, hi, times, depth, 
                     states[b, r, j] = work[0, j, lane]
         if i == longest - 1:
             break
+        if discrete:
+            _discrete_step(code, consts, slots, stack, times, work, layout, u, lane_set, k,
+                           n_lanes, stepping, jac, scratch)  # fmt: skip
+            _clamp(work, lo, hi, member, n_lanes)
+            continue
         for step in range(substeps):
             f0 = step / substeps
             fm = (step + 0.5) / substeps
@@ -285,8 +427,9 @@ def _rows(starts, stops):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def simulate_lanes(
-    program, bases, layout, u, u_of, out_slots, lo, hi, starts, stops, x0, dt, t0, substeps, depth
-):  # pragma: no cover - compiled
+    program, bases, layout, u, u_of, out_slots, lo, hi, starts, stops, x0, dt, t0, substeps, depth,
+    stepping,
+):  # fmt: skip  # pragma: no cover - compiled
     """Integrate a unit over windows for a batch of param vectors; return outputs and states.
 
     Returns ``(outputs, states)``, shapes ``(n_batch, n_rows, n_outputs)`` and ``(n_batch,
@@ -299,7 +442,8 @@ def simulate_lanes(
     member ``b`` reading set ``u_of[b]``; ``lo``, ``hi`` ``(n_batch, n_states)`` state bounds;
     window ``w`` runs from sample ``starts[w]`` (state ``x0[b, w]``) to ``stops[w] - 1``. Each
     (member, window) is one lane of :func:`_integrate`; the inputs are held over a sample, or
-    linear to the next one where ``linear``.
+    linear to the next one where ``linear``; ``stepping = (kinds, first, last)`` says how each
+    state advances (:func:`_integrate`).
     """
     n_batch, n_windows, n_states = x0.shape
     n_lanes = n_batch * n_windows
@@ -323,23 +467,25 @@ def simulate_lanes(
     lanes = (member, lane_set, start, length, row)
     if n_lanes == 1:
         _integrate(program[0], program[1], layout, u, lanes, out_slots, lo, hi,
-                   (t0, dt, substeps), depth, slots, work, y, states, True)  # fmt: skip
+                   (t0, dt, substeps), depth, slots, work, y, states, True, stepping)  # fmt: skip
     else:
         _integrate(program[0], program[1], layout, u, lanes, out_slots, lo, hi,
-                   (t0, dt, substeps), depth, slots, work, y, states, False)  # fmt: skip
+                   (t0, dt, substeps), depth, slots, work, y, states, False, stepping)  # fmt: skip
     return y, states
 
 
 @njit(cache=True)
 def chain_windows(
-    program, base, layout, u, out_slots, starts, stops, x0, reset, values, dt, t0, substeps, depth
-):  # pragma: no cover - compiled
+    program, base, layout, u, out_slots, starts, stops, x0, reset, values, dt, t0, substeps, depth,
+    stepping,
+):  # fmt: skip  # pragma: no cover - compiled
     """Integrate windows one after the other, each from the end of the previous one.
 
     Returns ``(outputs, states)`` as :func:`simulate_lanes` for one member (without the batch
     axis). The first window starts from ``x0`` ``(n_states,)``; at each window's start the
     states ``reset`` (indices) are set to ``values[w]``; a window whose end is not finite
-    passes on its own start instead (per state). ``u`` ``(n_samples, n_inputs)``; no bounds.
+    passes on its own start instead (per state). ``u`` ``(n_samples, n_inputs)``; no bounds;
+    ``stepping`` as :func:`simulate_lanes`.
     """
     n_windows, n_states = starts.shape[0], x0.shape[0]
     offsets, n_rows = _rows(starts, stops)
@@ -361,7 +507,7 @@ def chain_windows(
         lanes = (zero, zero, starts[w : w + 1], stops[w : w + 1] - starts[w : w + 1],
                  offsets[w : w + 1])  # fmt: skip
         _integrate(program[0], program[1], layout, sets, lanes, out_slots, lo, hi,
-                   (t0, dt, substeps), depth, slots, work, y, states, True)  # fmt: skip
+                   (t0, dt, substeps), depth, slots, work, y, states, True, stepping)  # fmt: skip
         end = offsets[w] + stops[w] - starts[w] - 1
         for j in range(n_states):
             if math.isfinite(states[0, end, j]):
@@ -411,13 +557,16 @@ def warm_up() -> None:
     starts, stops = np.array([0], dtype=np.int64), np.array([4], dtype=np.int64)
     out = np.array([2], dtype=np.int64)
     slew_limited(np.array([0.0, 1.0, math.nan, 2.0]), 0.5)
-    for n_batch in (1, 2):  # one lane, and several
-        simulate_lanes(
-            program, np.zeros((n_batch, 4)), layout, u, np.zeros(n_batch, dtype=np.int64), out,
-            np.repeat(-inf, n_batch, axis=0), np.repeat(inf, n_batch, axis=0), starts, stops,
-            np.zeros((n_batch, 1, 1)), 0.1, 0.0, 2, 3,
-        )  # fmt: skip
+    one = np.ones(1, dtype=np.int64)
+    for kind in (0, 1, 2):  # continuous, euler, zoh: one compiled loop
+        stepping = (kind * one, 0 * one, one)
+        for n_batch in (1, 2):  # one lane, and several
+            simulate_lanes(
+                program, np.zeros((n_batch, 4)), layout, u, np.zeros(n_batch, dtype=np.int64),
+                out, np.repeat(-inf, n_batch, axis=0), np.repeat(inf, n_batch, axis=0), starts,
+                stops, np.zeros((n_batch, 1, 1)), 0.1, 0.0, 2, 3, stepping,
+            )  # fmt: skip
     chain_windows(
         program, np.zeros(4), layout, u[0], out, starts, stops, np.zeros(1),
-        np.zeros(1, dtype=np.int64), np.zeros((1, 1)), 0.1, 0.0, 2, 3,
+        np.zeros(1, dtype=np.int64), np.zeros((1, 1)), 0.1, 0.0, 2, 3, stepping,
     )  # fmt: skip

@@ -34,6 +34,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from dtwin.twin.paper_modules import EULER
 from dtwin.twin.table import TwinTable, TwinTableError, table_from_mapping
 
 __all__ = ["PAPER_NOISE_SIGNALS", "PAPER_PROCESS_NOISE_STATES", "paper_table"]
@@ -63,10 +64,10 @@ def _value(sections: Any, section: str, field: str) -> Any:
     return value
 
 
-def _paper_modules(sections: Any) -> dict[str, dict[str, Any]]:
+def _paper_modules(sections: Any, steps: dict[str, str]) -> dict[str, dict[str, Any]]:
     def sensor(name: str, output: str) -> dict[str, Any]:
         params = {k: _value(sections, name, k) for k in ("tau", "bias")}
-        return {"block": "lag", "inputs": ["x"], "outputs": [output], "params": params}
+        return {"block": "lag", "inputs": ["x"], "outputs": [output], "params": params, **steps}
 
     alpha = _value(sections, "fusion", "alpha")
     if isinstance(alpha, bool) or not isinstance(alpha, (int, float)):
@@ -74,9 +75,10 @@ def _paper_modules(sections: Any) -> dict[str, dict[str, Any]]:
                              token=str(alpha))  # fmt: skip
     return {
         "M0": {"block": "lag", "inputs": ["u_cmd"], "outputs": ["u_act"],
-               "params": {"tau": _value(sections, "actuator", "tau")}},
+               "params": {"tau": _value(sections, "actuator", "tau")}, **steps},
         "M1": {"block": "mass_spring_damper", "inputs": ["u_act"], "outputs": ["x", "v"],
-               "params": {k: _value(sections, "plant", k) for k in ("m", "c", "k")}},
+               "params": {k: _value(sections, "plant", k) for k in ("m", "c", "k")},
+               **({"discretisation": "euler"} if steps else {})},
         "M2a": sensor("sensor_A", "y_A"),
         "M2b": sensor("sensor_B", "y_B"),
         "M3": {"block": "weighted_sum", "inputs": ["y_A", "y_B"], "outputs": ["y_fused"],
@@ -150,7 +152,9 @@ def paper_table(sections: Any) -> TwinTable:
     (['M0', 'M1', 'M2a', 'M2b', 'M3', 'M4'], ('u_cmd',), {'w1': 0.6, 'w2': 0.4})
     """
     noise = _get(sections, "noise")
-    mapping: dict[str, Any] = {"modules": _paper_modules(sections)}
+    discretisation = _get(sections, "discretisation")
+    steps = {"discretisation": "zoh"} if discretisation == EULER else {}
+    mapping: dict[str, Any] = {"modules": _paper_modules(sections, steps)}
     if noise is not None:
         mapping["noise"] = {
             signal: _get(noise, channel)
@@ -158,7 +162,6 @@ def paper_table(sections: Any) -> TwinTable:
             if _get(noise, channel) is not None
         }
         mapping["process_noise"] = _process_noise(sections, noise)
-    discretisation = _get(sections, "discretisation")
     if discretisation in ("zoh", "foh"):
         mapping["discretisation"] = discretisation
     return table_from_mapping(mapping, dt=_get(sections, "dt"))

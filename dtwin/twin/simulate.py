@@ -32,6 +32,7 @@ import numpy as np
 from dtwin._validation import DtwinValueError
 from dtwin.twin._kernels import chain_windows, simulate_lanes
 from dtwin.twin.expressions import OP_STORE, parse_expression
+from dtwin.twin.table import DISCRETE_STEPS, TwinTableError
 
 __all__ = [
     "STEP_RHO",
@@ -92,6 +93,10 @@ class UnitSpec:
         Every module is a linear built-in block.
     defaults : frozenset of str
         Qualified params left at a block's default (:attr:`ModuleSpec.defaults`).
+    stepping : dict of str to str
+        Qualified state → ``"euler"`` or ``"zoh"`` for the states of discrete modules
+        (:attr:`ModuleSpec.discretisation`); empty for a unit of continuous modules. A unit's
+        states are all discrete or all continuous (:func:`units_of`).
     """
 
     modules: tuple[str, ...]
@@ -105,6 +110,7 @@ class UnitSpec:
     internal: tuple[str, ...] = ()
     linear: bool = False
     defaults: frozenset[str] = frozenset()
+    stepping: dict[str, str] = field(default_factory=dict)
 
     @property
     def name(self) -> str:
@@ -209,12 +215,30 @@ def units_of(table, recorded: Sequence[str]) -> list[UnitSpec]:
     return [u for u in units if u.outputs]
 
 
+def _check_stepping(modules: list, internal: tuple[str, ...]) -> None:
+    """Refuse a unit whose modules with states are not all discrete or all continuous."""
+    stepped = [m for m in modules if m.states and m.fmu is None]
+    discrete = [m for m in stepped if m.discretisation in DISCRETE_STEPS]
+    if not discrete or len(discrete) == len(stepped):
+        return
+    first = discrete[0]
+    others = ", ".join(m.name for m in stepped if m not in discrete)
+    raise TwinTableError(
+        f"{first.discretisation} is a discrete module's step, and module(s) {others} of its "
+        f"unit (joined by the signal(s) {', '.join(internal)} the recording lacks) are "
+        "continuous: record those signals, or give the unit's modules discretisations of one "
+        "kind (euler/zoh, or continuous)", module=first.name, key="discretisation",
+        token=first.discretisation,
+    )  # fmt: skip
+
+
 def _unit_spec(modules: list, recorded: set[str]) -> UnitSpec:
     """One unit from its modules (table order)."""
     produced = {s for m in modules for s in m.outputs}
     inputs = tuple(dict.fromkeys(s for m in modules for s in m.inputs if s not in produced))
     outputs = tuple(s for m in modules for s in m.outputs if s in recorded)
     internal = tuple(s for m in modules for s in m.outputs if s not in recorded)
+    _check_stepping(modules, internal)
     assignments = [a for m in modules for a in _module_assignments(m, produced)]
     algebraic = _order_algebraic([a for a in assignments if not a.target.startswith("d/")])
     derivatives = [a for a in assignments if a.target.startswith("d/")]
@@ -236,6 +260,12 @@ def _unit_spec(modules: list, recorded: set[str]) -> UnitSpec:
         internal=internal,
         linear=all(m.linear for m in modules),
         defaults=frozenset(f"{m.name}.{p}" for m in modules for p in m.defaults),
+        stepping={
+            f"{m.name}.{s}": m.discretisation
+            for m in modules
+            if m.discretisation in DISCRETE_STEPS
+            for s in m.states
+        },
     )
 
 
@@ -256,6 +286,15 @@ class UnitModel:
     out_slots: np.ndarray = field(repr=False)
     depth: int = 1
     assignments: tuple[Assignment, ...] = ()
+
+    @property
+    def stepping(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(kinds, first, last)`` per state, shape ``(n_states,)`` each (int64).
+
+        ``kinds``: 0 continuous (Runge-Kutta), 1 ``euler``, 2 ``zoh``; ``first``/``last`` the
+        span of the state's module among the unit's states (states ``first … last − 1``).
+        """
+        return _stepping(self.spec)
 
     @classmethod
     def from_spec(
@@ -488,6 +527,7 @@ class UnitModel:
             float(t0),
             int(substeps),
             int(self.depth),
+            self.stepping,
         )
 
     def simulate_chained(
@@ -526,7 +566,7 @@ class UnitModel:
             np.asarray(x0, dtype=np.float64).reshape(n_states).copy(),
             np.asarray(reset, dtype=np.int64),
             np.ascontiguousarray(values, dtype=np.float64).reshape(len(starts), len(reset)),
-            float(dt), 0.0, int(substeps), int(self.depth),
+            float(dt), 0.0, int(substeps), int(self.depth), self.stepping,
         )  # fmt: skip
         return states
 
@@ -543,6 +583,21 @@ class UnitModel:
                 expr.evaluate({n: values[a.symbols[n]] for n in expr.names})
             )
         return np.array([out[_derivative_slot(s)] for s in self.spec.states])
+
+
+_KINDS = {"euler": 1, "zoh": 2}
+
+
+def _stepping(spec: UnitSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the kernels' per-state stepping arrays of a unit (:attr:`UnitModel.stepping`)."""
+    n = len(spec.states)
+    kinds = np.array([_KINDS.get(spec.stepping.get(q, ""), 0) for q in spec.states], np.int64)
+    first, last = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    modules = [spec.module_of(q) for q in spec.states]
+    for j, module in enumerate(modules):
+        first[j] = modules.index(module)
+        last[j] = n - modules[::-1].index(module)
+    return kinds, first, last
 
 
 def _with_symbols(assignment: Assignment, extra: Mapping[str, str]) -> Assignment:

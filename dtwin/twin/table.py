@@ -54,12 +54,13 @@ module, the key and the token::
   ``[A-Za-z][A-Za-z0-9_]*``; a signal, state or param named ``t`` (time), like a function of
   the expressions (``sqrt``, ``max``…) or a Python keyword.
 - *A module*: not a mapping; a key other than ``block``, ``inputs``, ``outputs``, ``states``,
-  ``initial``, ``params``, ``derivatives``, ``equations``, ``candidates`` (a list of effect
-  names, kept as given); ``inputs``/``outputs``/``states`` not a list of names or with a name
-  twice; a signal that is both an input and an output of the module; an unknown ``block``;
-  ``block`` with ``states``, ``derivatives`` or ``equations``; ``initial`` for a name that is
-  not a state; a param or an initial state that is not a finite number (a YAML ``true`` is not
-  a number); ``candidates`` not a list of names.
+  ``initial``, ``params``, ``derivatives``, ``equations``, ``candidates`` (a list of effect names,
+  kept as given), ``discretisation`` (one of ``continuous``, ``euler``, ``zoh``; not on a module
+  without states, nor on an FMU module); ``inputs``/``outputs``/``states`` not a list of names or
+  with a name twice; a signal that is both an input and an output of the module; an unknown
+  ``block``; ``block`` with ``states``, ``derivatives`` or ``equations``; ``initial`` for a name
+  that is not a state; a param or an initial state that is not a finite number (a YAML ``true`` is
+  not a number); ``candidates`` not a list of names.
 - *An FMU module* (keys ``fmu``, ``interface``, ``inputs``, ``outputs``, ``params``,
   ``candidates``): ``fmu`` not a text; ``inputs``/``outputs`` not a mapping of signal names to
   FMU variable names (a list means the same names); no outputs; a file that is missing, not a
@@ -100,6 +101,19 @@ module, the key and the token::
 - *Against a recording* (:func:`check_recorded`): an input that is neither a recording column
   nor produced by a module.
 
+**Discretisation** (a module's ``discretisation:``). ``continuous`` (the default): the
+module's derivatives are integrated between samples (:mod:`dtwin.twin.simulate`, Runge-Kutta).
+``euler`` and ``zoh`` make it a **discrete** module, advanced once per sample from the previous
+sample's states ``s`` and inputs ``u`` (a signal another module produces, at that sample): ``euler``
+by one explicit Euler step ``s[k] = s[k−1] + dt·f(s[k−1], u[k−1])``; ``zoh`` by the exact step of
+its linear dynamics with the inputs held, ``s[k] = s[k−1] + Γ·f(s[k−1], u[k−1])``, ``Γ =
+∫₀^dt exp(J·σ) dσ``, ``J`` the Jacobian of the module's derivatives in its states at ``k−1`` (a
+``lag``: ``y[k] = a·y[k−1] + (1 − a)·gain·u[k−1]``, ``a = exp(−dt/tau)``; exact when the
+derivatives are affine in the module's states, the exponential Euler step otherwise). A unit
+(:func:`dtwin.twin.simulate.units_of`) that joins a discrete module with states to a continuous
+one through signals the recording lacks is refused when the recording is read (record the
+signals, or give the modules discretisations of one kind).
+
 **Order.** :attr:`TwinTable.modules` lists each module after the producers of its inputs,
 in declaration order when that allows it; in a loop through states, the earliest declared
 module of the loop comes first.
@@ -127,6 +141,8 @@ __all__ = [
     "NAME_PATTERN",
     "RESERVED_NAMES",
     "START_PROBES",
+    "MODULE_STEPS",
+    "DISCRETE_STEPS",
     "ModuleSpec",
     "TwinTable",
     "TwinTableError",
@@ -144,10 +160,14 @@ START_PROBES = (0.0, 1.0, 10.0)
 _TOP_KEYS = ("dt", "discretisation", "modules", "noise", "process_noise")
 _LEGACY_KEYS = ("actuator", "plant", "sensor_A", "sensor_B", "fusion", "kpi", "twin")
 _MODULE_KEYS = ("block", "inputs", "outputs", "states", "initial", "params", "derivatives",
-                "equations", "candidates", "fmu", "interface")  # fmt: skip
+                "equations", "candidates", "discretisation", "fmu", "interface")  # fmt: skip
 _FMU_KEYS = ("fmu", "interface", "inputs", "outputs", "params", "candidates")
 _EQUATION_KEYS = ("states", "derivatives", "equations")
 _DISCRETISATIONS = ("zoh", "foh")
+#: A module's ``discretisation``: how its states advance from one sample to the next.
+MODULE_STEPS = ("continuous", "euler", "zoh")
+#: The steps of a discrete module (once per sample, from the previous sample).
+DISCRETE_STEPS = ("euler", "zoh")
 
 
 class TwinTableError(DtwinValueError):
@@ -202,6 +222,9 @@ class ModuleSpec:
     defaults : frozenset of str
         A block's params the file does not write (``gain`` = 1 and ``bias`` = 0 of a ``lag``):
         structure, not a declared value with a calibration tolerance.
+    discretisation : str
+        How its states advance between samples (module docstring, Discretisation):
+        ``"continuous"`` (the default), ``"euler"`` or ``"zoh"``.
     """
 
     name: str
@@ -219,6 +242,7 @@ class ModuleSpec:
     candidates: tuple[str, ...] | None = None
     fmu: FmuInfo | None = None
     defaults: frozenset[str] = frozenset()
+    discretisation: str = "continuous"
 
     @property
     def symbols(self) -> frozenset[str]:
@@ -446,6 +470,21 @@ def _block_parts(module: str, entry: Mapping, inputs, outputs) -> Lowered:
                              token=error.token) from None  # fmt: skip
 
 
+def _module_step(module: str, value: Any, states: tuple[str, ...]) -> str:
+    """Return a module's ``discretisation``, validated (module docstring, Discretisation)."""
+    if not isinstance(value, str) or value not in MODULE_STEPS:
+        raise TwinTableError(
+            f"must be one of {', '.join(MODULE_STEPS)} (got {_shown(value)})", module=module,
+            key="discretisation", token=_token(value),
+        )  # fmt: skip
+    if value != "continuous" and not states:
+        raise TwinTableError(
+            f"the module has no states to step (got {value}; an algebraic module reads its "
+            "inputs at each sample)", module=module, key="discretisation", token=value,
+        )  # fmt: skip
+    return value
+
+
 def _defaults(entry: Mapping, params: Mapping[str, float]) -> frozenset[str]:
     """Return a block module's scalar params the file leaves at the block's default."""
     written = entry.get("params") or {}
@@ -612,7 +651,9 @@ def _module_spec(name: Any, entry: Any, base_dir: Path | None = None) -> ModuleS
         source=f"block {entry['block']}" if is_block else "equations",
         candidates=_candidates(name, entry.get("candidates")),
         defaults=_defaults(entry, parts.params) if is_block else frozenset(),
-    )
+        discretisation=_module_step(name, entry.get("discretisation", "continuous"),
+                                    parts.states),
+    )  # fmt: skip
     _check_expressions(spec)
     return spec
 
