@@ -169,10 +169,10 @@ def test_an_unknown_discretisation_is_refused_in_one_line(entry, message):
 
 
 def test_a_module_without_states_takes_no_discretisation():
+    gain = {"block": "gain", "inputs": ["u"], "outputs": ["y"], "discretisation": "euler"}
     with pytest.raises(TwinTableError, match=r"module 'g': discretisation: the module has no "
                                              r"states to step \(got euler"):  # fmt: skip
-        table_from_mapping({"modules": {"g": {"block": "gain", "inputs": ["u"],
-                                              "outputs": ["y"], "discretisation": "euler"}}})
+        table_from_mapping({"modules": {"g": gain}})
 
 
 def test_a_unit_joining_discrete_and_continuous_modules_is_refused():
