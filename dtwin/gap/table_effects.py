@@ -19,7 +19,8 @@ Specification: docs/gap.md §Twin file (Which, on any module). Effects attach
 
 A ``mass_spring_damper`` block keeps its named effects: the sign, cubic and ``|v|·v`` terms of
 its own states in its velocity's derivative are ``coulomb_friction`` (``Fc``),
-``cubic_stiffness`` (``k3``) and ``quadratic_damping`` (``c2``), reported in force units.
+``cubic_stiffness`` (``k3``) and ``quadratic_damping`` (``c2``), reported in force units; the
+cubic stiffness is centred on the spring's rest ``x = 0`` (the block's ``k·x``), not on the mean.
 ``Variant.at`` names the signal, the state whose derivative gains the term (or the limited
 state), or nothing for a re-fit (the report names the param furthest off).
 """
@@ -408,25 +409,27 @@ def _state_variants(data: UnitData, guess: np.ndarray, blocks: dict[str, str | N
 def _term_variant(data, assignment, state, source, values, term, form, rate, blocks) -> Variant:
     """One missing term ``θ·f(z)`` of state ``source`` in the derivative of ``state``.
 
-    ``z = (s − c)/σ``: the cubic centred on the state's mean; the sign and ``|z|·z`` about 0
-    (a velocity's friction and drag), except an ``|z|·z`` that is not a mass-spring-damper's
-    named ``quadratic_damping``, whose centre ``c`` is fitted (``_e_centre``, state units),
-    started from 0 or, when the state never reaches 0, from the end of its range nearest 0 (a
-    body heated from the ambient: its coolest): a loss growing as the square of a temperature's
-    rise grows about the ambient, not about 0 °C, and ``|T|·T`` about 0 °C is a different
-    function that the twin's linear loss cannot take up.
+    ``z = (s − c)/σ``: the cubic centred on the state's mean (a mass-spring-damper's named
+    ``cubic_stiffness`` on the spring's rest ``x = 0``, its ``k·x``'s); the sign and ``|z|·z`` about
+    0 (a velocity's friction and drag), except an ``|z|·z`` that is not a mass-spring-damper's named
+    ``quadratic_damping``, whose centre ``c`` is fitted (``_e_centre``, state units), started from 0
+    or, when the state never reaches 0, from the end of its range nearest 0 (a body heated from the
+    ambient: its coolest): a loss growing as the square of a temperature's rise grows about the
+    ambient, not about 0 °C, and ``|T|·T`` about 0 °C is a different function that the twin's linear
+    loss cannot take up.
     """
-    centre = float(np.nanmean(values)) if term == "state_cubic" else 0.0
+    module, own = state.split(".", 1)[0], state.split(".", 1)[1]
+    named = None
+    if blocks.get(module) == "mass_spring_damper" and own == "v":
+        named = MSD_NAMES.get((term, source.split(".", 1)[1]))
+    centre = float(np.nanmean(values)) if term == "state_cubic" and named is None else 0.0
     sigma = float(np.nanstd(values - centre)) or 1.0
     if term != "state_cubic":
         sigma = float(np.sqrt(np.nanmean(values**2))) or 1.0
     local = _local_name(assignment, source)
     name, report = term, None
-    module, own = state.split(".", 1)[0], state.split(".", 1)[1]
-    if blocks.get(module) == "mass_spring_damper" and own == "v":
-        named = MSD_NAMES.get((term, source.split(".", 1)[1]))
-        if named is not None:
-            name, report = named[0], (named[1], named[2], f"{module}.m", sigma)
+    if named is not None:
+        name, report = named[0], (named[1], named[2], f"{module}.m", sigma)
     theta, shift = "_e_theta", "_e_centre"
     params, starts = (theta,), {theta: 0.0}
     bounds, scales = {theta: (-np.inf, np.inf)}, {theta: rate}

@@ -199,3 +199,35 @@ def test_continuous_said_or_silent_gives_the_same_bits():
                                                   substeps=2)  # fmt: skip
         runs.append(y)
     assert np.array_equal(runs[0], runs[1])
+
+
+def test_a_spring_s_cubic_candidate_is_the_paper_s_cubic_spring_away_from_rest():
+    """The ``cubic_stiffness`` term is centred on the spring's rest ``x = 0``, so at its ``k3``
+    it is the force ``k3·x³`` however far the recording's mean lies from rest."""
+    import pandas as pd
+
+    from dtwin.gap.recording import recording_with_columns
+    from dtwin.gap.results import GapSettings
+    from dtwin.gap.table_diagnose import _prepare_unit, _split
+    from dtwin.gap.table_effects import candidate_variants, twin_variant
+    from dtwin.gap.table_fit import state_guess
+
+    n, k3 = 3000, 2.0
+    u = _command(n, 9) + 1.5  # x sits about 0.37 from rest
+    plant = plant_response(u, 1.0, 0.4, 4.0, DT, force=lambda x, v: k3 * x**3)
+    frame = pd.DataFrame({"t": np.arange(n) * DT, "u_act": u, "x": plant.x, "v": plant.v})
+    table = table_from_mapping({"dt": DT, "modules": {"M1": {
+        "block": "mass_spring_damper", "inputs": ["u_act"], "outputs": ["x", "v"],
+        "params": {"m": 1.0, "c": 0.4, "k": 4.0}, "discretisation": "euler"}}})  # fmt: skip
+    recording = recording_with_columns(frame, ["u_act", "x", "v"])
+    (spec,) = units_of(table, list(recording.signals))
+    data = _prepare_unit(spec, recording, table, _split(n, 0.5, 0.5), GapSettings(), False)
+    guess = state_guess(data, dict(spec.params), twin_variant(data))
+    assert abs(np.nanmean(guess[:, 0])) > 0.3
+    variants = candidate_variants(data, guess, {"M1": "mass_spring_damper"}, calibrate=False)
+    cubic = next(v for v in variants if v.name == "cubic_stiffness")
+    _, per_theta, _, sigma = cubic.report
+    theta = k3 / per_theta(1.0, sigma)
+    y, _ = cubic.model.simulate(u[:, None], [1.0, 0.4, 4.0, theta], [0], [n],
+                                np.zeros((1, 2)), DT)  # fmt: skip
+    assert np.max(np.abs(y[:, 0] - plant.x)) <= 1e-9 * np.max(np.abs(plant.x))
