@@ -20,12 +20,17 @@ with measurement noise ``sensor_A → y_A``, ``sensor_B → y_B`` (``noise``: wh
 sensors' readings, as the paper's simulator adds it) and process noise ``actuator → M0.y``,
 ``plant → M1.v`` (``process_noise``: the paper adds ``w_k`` to the lag's recursion and ``ξ_k``
 (m/s²) to the plant's acceleration; levels converted to the table's in :func:`_process_noise`).
-The table's modules are continuous-time (the lags' and the plant's derivatives); the paper's
-simulator is their explicit Euler discretisation. So a ``discretisation`` of ``zoh`` or
-``foh`` is kept and ``euler`` or ``bandlimited`` (the plant's, for the ``twin:`` shape) becomes
-None. M3's two weights are separate params of the table (a re-fit does not keep them summing
-to 1). The package stays below :mod:`dtwin.params`: it takes plain sections, a mapping of
-mappings, or any object with those attributes (a :class:`dtwin.params.TwinParams`).
+The ``discretisation`` of the ``twin:`` shape says how the modules step: ``euler`` (the paper
+simulator's, which ``config/config.yaml`` and the generator's twin files declare) makes M1 an
+``euler`` module and the lags M0, M2a, M2b ``zoh`` modules (a module's ``discretisation``,
+:mod:`dtwin.twin.table`), so the table is the paper's simulator: ``x_k = x_{k−1} + dt·v_{k−1}``,
+``v_k = v_{k−1} + dt·a_{k−1}`` and ``y_k = a·y_{k−1} + (1 − a)·u_{k−1}``, each module reading its
+input one sample late (the plant bit for bit, the lags to rounding:
+``tests/gap/test_table_euler.py``). Otherwise the modules are continuous: ``zoh`` or ``foh`` is kept
+as the table's hold of the recorded inputs, ``bandlimited`` or a silent file becomes None (chosen
+from data). M3's two weights are separate params of the table (a re-fit does not keep them summing
+to 1). The package stays below :mod:`dtwin.params`: it takes plain sections, a mapping of mappings,
+or any object with those attributes (a :class:`dtwin.params.TwinParams`).
 """
 
 from __future__ import annotations
@@ -131,7 +136,8 @@ def paper_table(sections: Any) -> TwinTable:
         ``sensor_A.tau/bias``, ``sensor_B.tau/bias``, ``fusion.alpha``, ``kpi.w1/w2``;
         optional ``noise`` (std devs by channel: ``actuator`` per sample, ``plant`` m/s²,
         ``sensor_A``/``sensor_B`` in the reading's units), ``dt`` (s, needed with
-        ``noise.plant``) and ``discretisation``.
+        ``noise.plant``) and ``discretisation`` (``euler``: the paper simulator's discrete
+        modules; otherwise continuous ones, module docstring).
 
     Returns
     -------

@@ -13,8 +13,11 @@ signals, derivatives) and one postfix program of assignments (algebraic equation
 order, then each state's derivative), integrated by :func:`dtwin.twin._kernels.simulate_lanes`
 with the classical Runge-Kutta method over ``substeps`` steps per sample. Recorded inputs are
 held over a sample (``zoh``) or linear between samples (``foh``, and always for a signal another
-module produces). A unit's variants (a candidate effect: an extra term in a derivative, a wrapped
-signal, a state limit, extra params) are :meth:`UnitModel.variant`.
+module produces). A unit of **discrete** modules (a module's ``discretisation`` ``euler`` or
+``zoh``, :mod:`dtwin.twin.table`) is stepped once per sample from the previous sample's states and
+inputs instead (:attr:`UnitModel.stepping`; ``substeps`` and holds unused). A unit's variants (a
+candidate effect: an extra term in a derivative, a wrapped signal, a state limit, extra params)
+are :meth:`UnitModel.variant`; they keep the unit's stepping.
 
 Accuracy: the step ``h = dt/substeps`` is chosen so that ``h·ρ ≤`` :data:`STEP_RHO`, with ``ρ``
 the largest magnitude of an eigenvalue of the unit's Jacobian over its recorded operating points
