@@ -1161,6 +1161,9 @@ def _nested_source(works: list[_UnitWork], table, calibrate, settings) -> tuple 
             continue
         chosen, note = _nested_test(work, candidates, settings, len(works))
         if chosen is not None:
+            outside = _outside_catalogue(work, chosen, calibrate, settings)
+            if outside is not None:
+                return work, candidates, None, f"{note}; but {outside}"
             return work, candidates, chosen, note
     return None
 

@@ -89,12 +89,17 @@ def channel_names(units: Sequence[FrozenUnit]) -> list[str]:
 
 
 def _fingerprint(spec: UnitSpec) -> str:
-    """Return a digest of the unit's equations (targets, texts, bound names) and params."""
-    text = repr(
-        [(a.target, a.text, sorted(a.symbols.items())) for a in spec.assignments]
-        + [sorted(spec.params), list(spec.output_states.items())]
-    )
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    """Return a digest of the unit's equations (targets, texts, bound names) and params.
+
+    A unit with discrete modules (``discretisation: euler | zoh``) adds how each state steps:
+    params fitted under one stepping rule do not continue under another. A continuous unit's
+    digest is as before it could say so.
+    """
+    parts = [(a.target, a.text, sorted(a.symbols.items())) for a in spec.assignments]
+    parts += [sorted(spec.params), list(spec.output_states.items())]
+    if spec.stepping:
+        parts.append(sorted(spec.stepping.items()))
+    return hashlib.sha256(repr(parts).encode()).hexdigest()[:16]
 
 
 @dataclass(frozen=True)

@@ -284,6 +284,24 @@ def test_cli_regimes_then_monitor_and_a_foreign_model_is_refused(tmp_path, monke
     assert len(err) == 1 and "does not match the twin" in err[0]
 
 
+def test_a_regimes_file_fitted_under_one_stepping_rule_does_not_match_another():
+    """A unit's digest says how its states step once a module is discrete (euler or zoh)."""
+    from dtwin.monitor.causal_twin import _fingerprint
+    from dtwin.twin.simulate import units_of
+
+    def digest(twin):
+        (unit,) = [u for u in units_of(table_from_mapping(twin), ["u", "q", "level"])
+                   if u.modules == ("tank",)]  # fmt: skip
+        return _fingerprint(unit)
+
+    tank = TWIN["modules"]["tank"]
+    stepped = {m: dict(TWIN, modules={**TWIN["modules"], "tank": {**tank, "discretisation": m}})
+               for m in ("euler", "zoh", "continuous")}  # fmt: skip
+    digests = {m: digest(twin) for m, twin in stepped.items()}
+    assert len({digests["euler"], digests["zoh"], digest(TWIN)}) == 3
+    assert digests["continuous"] == digest(TWIN)  # the default: as before it could say so
+
+
 def test_a_followed_file_is_read_across_a_rotation(tmp_path):
     path = tmp_path / "live.csv"
     path.write_text("t,u,level\n0,1,2\n0.1,1,2\n")
