@@ -874,7 +874,12 @@ def _free_run(data: UnitData, fit: VariantFit) -> float | None:
 
 
 def _reported(fit: VariantFit, nominal: Mapping[str, float]) -> tuple[dict, str | None]:
-    """Return the answer's params in report units and ``at`` for a re-fit (furthest param)."""
+    """Return the answer's params in report units and ``at`` for a re-fit (furthest param).
+
+    The furthest param is the one whose relative change is largest among those declared
+    nonzero; a param declared 0 (an offset) has no relative change and is named only when no
+    other moved (an orifice 20 % off had been reported at the tank's offset, re-fitted from 0).
+    """
     variant = fit.variant
     if variant.refits_linear:
         changes = {
@@ -883,9 +888,9 @@ def _reported(fit: VariantFit, nominal: Mapping[str, float]) -> tuple[dict, str 
             if abs(fit.theta[name] - nominal[name]) > 1e-9 * max(abs(nominal[name]), 1e-12)
         }
         relative = {
-            n: abs(v - nominal[n]) / max(abs(nominal[n]), 1e-12) for n, v in changes.items()
+            n: abs(v - nominal[n]) / abs(nominal[n]) for n, v in changes.items() if nominal[n]
         }
-        at = max(relative, key=relative.get) if relative else None
+        at = max(relative, key=relative.get) if relative else next(iter(changes), None)
         return changes, at
     params = {_label(name): float(fit.theta[name]) for name in variant.effect_params}
     if variant.report is not None:

@@ -450,13 +450,20 @@ def _term_variant(data, assignment, state, source, values, term, form, rate, blo
 
 
 def _limit_variants(data, state, j, path) -> list[Variant]:
+    """Return an upper and a lower bound on ``state`` (``path``: the twin's state, recording).
+
+    Each starts at the 97 % (3 %) quantile of the twin's path and may reach its 10 % (90 %)
+    quantile: a tank that overflows half of the time has a limit below the median of the path
+    the twin, which has no limit, draws for it (one at ``h1 = 3.0`` where the twin's ``h1``
+    had its median above 3 could not be reached from the median the bound was).
+    """
     n_states = len(data.spec.states)
-    low_q, mid, high_q = np.nanquantile(path, [0.03, 0.5, 0.97])
+    low_q, reach_low, reach_high, high_q = np.nanquantile(path, [0.03, 0.1, 0.9, 0.97])
     spread = float(np.nanstd(path)) or 1.0
     out = []
     for side, start, bounds in (
-        ("upper", high_q, (mid, float(np.nanmax(path)) + spread)),
-        ("lower", low_q, (float(np.nanmin(path)) - spread, mid)),
+        ("upper", high_q, (reach_low, float(np.nanmax(path)) + spread)),
+        ("lower", low_q, (float(np.nanmin(path)) - spread, reach_high)),
     ):
         name = f"_e_limit_{side}"
 

@@ -245,6 +245,49 @@ def test_a_family_case_is_located_and_named(case_type, seed):
     assert scored["located"] and scored["named"], (case.key["at"], answer["effect"], answer["at"])
 
 
+TWO_TANKS = {
+    "dt": 4.0,
+    "modules": {
+        "pump": {"block": "lag", "inputs": ["u"], "outputs": ["q"],
+                 "params": {"tau": 8.0, "gain": 0.05}},
+        "tanks": {
+            "inputs": ["q"], "outputs": ["level"], "states": ["h1", "h2"],
+            "initial": {"h1": 1.0}, "params": {"a1": 0.04, "a2": 0.03, "offset": 0.0},
+            "derivatives": {"h1": "q - a1*sqrt(max(h1, 0))",
+                            "h2": "a1*sqrt(max(h1, 0)) - a2*sqrt(max(h2, 0))"},
+            "equations": {"level": "h2 + offset"},
+        },
+    },
+    "noise": {"level": 0.02},
+}  # fmt: skip
+
+
+@pytest.mark.slow
+def test_the_two_tank_example_overflowing_half_of_the_time_is_a_state_limit_of_h1():
+    """docs/gap.md §Your own twin: the upper tank overflows at h1 = 3.0 in 53 % of the samples,
+    below the median of the path the twin (no limit) draws for h1; flow and h1 not recorded."""
+    n, dt = 4000, 4.0
+    rng = np.random.default_rng(7)
+    u = np.repeat(rng.uniform(0.5, 2.5, n // 100 + 1), 100)[:n]
+
+    def rhs(t, s):
+        q, h1, h2 = s
+        k = min(int(t / dt), n - 1)
+        d1 = q - 0.04 * np.sqrt(max(h1, 0.0))
+        d1 = 0.0 if h1 >= 3.0 and d1 > 0 else d1
+        return [(0.05 * u[k] - q) / 8.0, d1, 0.04 * np.sqrt(max(h1, 0.0)) - 0.03 * np.sqrt(h2)]
+
+    times = np.arange(n) * dt
+    sol = solve_ivp(rhs, (0, times[-1]), [0.0, 1.0, 1.0], t_eval=times, max_step=dt / 4,
+                    rtol=1e-9, atol=1e-12)  # fmt: skip
+    frame = pd.DataFrame({"t": times, "u": u, "level": sol.y[2] + 0.02 * rng.standard_normal(n)})
+    table = table_from_mapping(TWO_TANKS)
+    result = diagnose_table(recording_with_columns(frame, ("u", "level")), table)
+    assert result.modules == ("pump", "tanks")
+    assert (result.module, result.effect, result.at) == ("tanks", "state_limit", "tanks.h1")
+    assert result.params["limit_upper"] == pytest.approx(3.0, rel=0.1)  # a1, a2 within 5 %
+
+
 @pytest.mark.slow
 def test_a_drifting_speed_sensor_read_back_by_the_armature_is_blamed_on_the_rotor():
     """Both motor units are flagged; in the armature's a drift of the current fits as well as
