@@ -14,13 +14,14 @@ from dtwin.twin.paper_chain import paper_table
 from dtwin.twin.paper_modules import ZOH, plant_response
 from dtwin.twin.simulate import UnitModel, units_of, window_rows
 from dtwin.twin.table import TwinTableError, table_from_mapping
+from tests.conftest import paper_twin
 
-DT = 0.02
+#: The paper's twin (config/config.yaml), noise-free, stepped as the paper's simulator steps.
 SECTIONS = {
-    "actuator": {"tau": 0.15}, "plant": {"m": 1.0, "c": 0.4, "k": 4.0},
-    "sensor_A": {"tau": 0.08, "bias": 0.0}, "sensor_B": {"tau": 0.25, "bias": 0.01},
-    "fusion": {"alpha": 0.6}, "kpi": {"w1": 1.0, "w2": 0.2}, "dt": DT, "discretisation": "euler",
-}  # fmt: skip
+    **{k: v for k, v in paper_twin().items() if k != "noise"},
+    "discretisation": "euler",
+}
+DT = SECTIONS["dt"]
 
 
 def _command(n: int, seed: int) -> np.ndarray:
@@ -29,12 +30,13 @@ def _command(n: int, seed: int) -> np.ndarray:
 
 
 def _paper_signals(u_cmd: np.ndarray, accel_noise=None) -> dict[str, np.ndarray]:
-    u_act = actuator_lpf(u_cmd, 0.15, DT)
-    plant = plant_msd(u_act, 1.0, 0.4, 4.0, DT, accel_noise)
+    plant, a, b = SECTIONS["plant"], SECTIONS["sensor_A"], SECTIONS["sensor_B"]
+    u_act = actuator_lpf(u_cmd, SECTIONS["actuator"]["tau"], DT)
+    moved = plant_msd(u_act, plant["m"], plant["c"], plant["k"], DT, accel_noise)
     return {
-        "u_cmd": u_cmd, "u_act": u_act, "x": plant.x, "v": plant.v,
-        "y_A": sensor_first_order(plant.x, 0.08, DT, 0.0),
-        "y_B": sensor_first_order(plant.x, 0.25, DT, 0.01),
+        "u_cmd": u_cmd, "u_act": u_act, "x": moved.x, "v": moved.v,
+        "y_A": sensor_first_order(moved.x, a["tau"], DT, a["bias"]),
+        "y_B": sensor_first_order(moved.x, b["tau"], DT, b["bias"]),
     }  # fmt: skip
 
 
