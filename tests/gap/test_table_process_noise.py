@@ -29,30 +29,13 @@ from dtwin.gap.table_diagnose import (
 from dtwin.gap.table_fit import state_guess
 from dtwin.twin.simulate import units_of
 from dtwin.twin.table import table_from_mapping
+from tests.gap.test_table_diagnose import TANK as TWO_MODULE_TANK
 
 DT = 0.1
 #: The valve's and the tank's disturbances (per sample, state units) and the sensors' noise.
 PROCESS = {"valve.y": 0.01, "tank.h": 0.01}
 MEASUREMENT = {"q": 0.005, "level": 0.01}
-TANK = {
-    "dt": DT,
-    "modules": {
-        "valve": {
-            "block": "lag",
-            "inputs": ["u"],
-            "outputs": ["q"],
-            "params": {"tau": 0.5, "gain": 1.0},
-        },
-        "tank": {
-            "inputs": ["q"],
-            "outputs": ["level"],
-            "states": ["h"],
-            "params": {"a": 0.8},
-            "derivatives": {"h": "q - a*sqrt(max(h, 0))"},
-            "equations": {"level": "h"},
-        },
-    },
-}
+TANK = {k: v for k, v in TWO_MODULE_TANK.items() if k != "noise"}  # no noise declared
 
 
 def _asset(n: int, seed: int, *, level_limit=None) -> pd.DataFrame:
