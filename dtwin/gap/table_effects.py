@@ -486,26 +486,37 @@ def slew_probes(data: UnitData) -> list[Variant]:
     slower lag, a lag's input saturation). The input moves at most ``span·dt/ramp`` a sample
     (:func:`~dtwin.twin._kernels.slew_limited`), ``ramp`` (s) the time a full-span step takes,
     from half a sample to half the recording (the follower runs over the whole recording, so a
-    ramp may span many windows).
+    ramp may span many windows). The follower's value before the first sample (``start``, in
+    the input's units) is the slew limiter's state, fitted as the windows' states are: an
+    actuator need not sit at its command when the recording starts (a heater's follower at 0 %
+    under a first command of 92 %, with a 547 s ramp, slews through the first 200 samples; a
+    follower started at the command left the true ramp and lag a training error of 7.7 W,
+    33 times the noise's 0.23 W).
     """
     from dtwin.twin._kernels import slew_limited
 
     out = []
     for i, signal in enumerate(data.spec.inputs):
         u = data.inputs[:, i]
-        span = float(np.nanmax(u) - np.nanmin(u)) or 1.0
-        name = f"_e_ramp_{i}"
+        low, high = float(np.nanmin(u)), float(np.nanmax(u))
+        span = high - low or 1.0
+        name, first = f"_e_ramp_{i}", f"_e_slew_start_{i}"
+        u0 = float(u[np.isfinite(u)][0]) if np.isfinite(u).any() else 0.0
 
-        def slew(values, theta, data, i=i, name=name, span=span):
+        def slew(values, theta, data, i=i, name=name, first=first, span=span):
             out = values.copy()
-            column = np.ascontiguousarray(values[:, i], dtype=float)
-            out[:, i] = slew_limited(column, span * data.dt / theta[name])
+            column = np.concatenate([[theta[first]], values[:, i]]).astype(float)
+            out[:, i] = slew_limited(column, span * data.dt / theta[name])[1:]
             return out
 
         ramp = (0.5 * data.dt, 0.5 * data.n_samples * data.dt)
+        # the start within a span beyond the recorded range: the actuator may sit outside the
+        # commands recorded (the heater's at 0 % below commands of 8-92 %)
+        starts = (low - span, high + span)
         out.append(
-            Variant("input_slew_limit", signal, data.model, (name,), {name: 5.0 * data.dt},
-                    {name: ramp}, {name: 5.0 * data.dt}, input_map=slew)
+            Variant("input_slew_limit", signal, data.model, (name, first),
+                    {name: 5.0 * data.dt, first: u0}, {name: ramp, first: starts},
+                    {name: 5.0 * data.dt, first: span}, input_map=slew)
         )  # fmt: skip
     return out
 
