@@ -269,7 +269,9 @@ def lattice_of(y: np.ndarray) -> tuple[float, float, float]:
     when its concentration ``|mean(exp(2πi·y/q))|`` is at least 0.9, which holds however many
     levels the values span. Otherwise the log-grid search of
     :func:`~dtwin.gap.effects.find_lattice` (steps 10⁻⁴ to 0.5 of the spread; its 2 % grid
-    resolves a lattice of up to about 25 levels). ``y`` shape ``(n,)``, output units.
+    resolves a lattice of up to about 25 levels), whose concentration counts only when the
+    values visited are concentrated too (:data:`VISITED_MIN`, :func:`_visited_concentration`).
+    ``y`` shape ``(n,)``, output units.
     """
     y = np.asarray(y, dtype=float)
     spread = float(np.ptp(y))
@@ -283,7 +285,32 @@ def lattice_of(y: np.ndarray) -> tuple[float, float, float]:
         phasor = np.mean(np.exp(2j * np.pi * y / step))
         if abs(phasor) >= 0.9:
             return step, float(np.angle(phasor) * step / (2 * np.pi)), float(abs(phasor))
-    return find_lattice(y, 1e-4 * spread, 0.5 * spread)
+    q, offset, concentration = find_lattice(y, 1e-4 * spread, 0.5 * spread)
+    visited = _visited_concentration(y, q)
+    return q, offset, concentration if visited >= VISITED_MIN else visited
+
+
+#: Cells per lattice step in which :func:`_visited_concentration` reads the values visited.
+VISIT_CELLS = 16
+#: Least concentration of the visited values for a lattice the log-grid search found: a
+#: quantizer blurred by noise of 5 % (8 %) of its step visits values of concentration 0.85
+#: (0.70; 3,000 samples of a random walk); a heater's power on three plateaus, 0.14.
+VISITED_MIN = 0.5
+
+
+def _visited_concentration(y: np.ndarray, q: float) -> float:
+    """Return the lattice concentration of the values ``y`` visits, not of the time spent there.
+
+    Each visited cell (width ``q/``:data:`VISIT_CELLS`) counts once. A quantizer blurred by
+    noise visits only cells near its lattice; a lag driven by steps spends most of its time on
+    a few plateaus, which any step dividing their spacing fits, but visits every cell between
+    them on its way (a heater's power at three plateaus read as a lattice of step 12.4 with
+    concentration above 0.9 and was named ``output_quantization`` on a clean recording).
+    """
+    if not q > 0:
+        return 0.0
+    cells = np.unique(np.round(np.asarray(y, dtype=float) * VISIT_CELLS / q))
+    return float(abs(np.mean(np.exp(2j * np.pi * cells / VISIT_CELLS))))
 
 
 def _quantization_variant(data, o, signal, y, spread) -> list[Variant]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dtwin.gap.table_effects import _shift, quantizer_mean, soft_saturation
+from dtwin.gap.table_effects import _shift, lattice_of, quantizer_mean, soft_saturation
 
 
 def test_a_delay_shifts_each_window_of_a_capped_fit_within_that_window():
@@ -63,3 +63,21 @@ def test_a_slew_limited_input_moves_at_most_its_step_and_restarts_after_a_gap():
 
     u = np.array([0.0, 3.0, 3.0, 3.0, np.nan, 5.0, 0.0])
     np.testing.assert_array_equal(slew_limited(u, 1.0), [0.0, 1.0, 2.0, 3.0, np.nan, 5.0, 4.0])
+
+
+def test_a_lag_resting_on_a_few_plateaus_is_not_a_lattice_but_a_blurred_quantizer_is():
+    # a first-order lag driven by three input levels, with little noise: nearly all its time
+    # on three plateaus, which a coarse step fits, but its ramps visit every value between
+    rng = np.random.default_rng(4)
+    levels = np.repeat(rng.choice([1.1, 13.0, 27.4], size=30), 100)
+    y = np.zeros(len(levels))
+    for k in range(1, len(y)):
+        y[k] = y[k - 1] + 0.3 * (levels[k] - y[k - 1])
+    y += 0.01 * rng.standard_normal(len(y))
+    assert lattice_of(y)[2] < 0.9
+    # a quantizer of step 0.5 before noise of 4 % of its step: values near its lattice only
+    walk = np.cumsum(rng.standard_normal(3000)) * 0.15
+    blurred = 0.5 * np.round(walk / 0.5) + 0.02 * rng.standard_normal(3000)
+    q, _, concentration = lattice_of(blurred)
+    assert q == pytest.approx(0.5, rel=0.03)
+    assert concentration >= 0.9
