@@ -1185,12 +1185,61 @@ def _diagnose_table(recording, table, calibrate, train_frac, settings, heldout) 
         source, candidates, chosen, nested_note = found
         notes.append(nested_note)
         return _answer(source, candidates, chosen, base, notes, (), table)
-    source, candidates, chosen, choose_notes = _source(
-        flagged, table, calibrate, settings, list(works.values())
+    source, candidates, chosen, choose_notes = _flagged_source(
+        flagged, list(works.values()), table, calibrate, settings
     )
-    also = tuple(w.data.spec.name for w in flagged if w is not source)
     notes.extend(choose_notes)
+    also = tuple(w.data.spec.name for w in flagged if w is not source)
     return _answer(source, candidates, chosen, base, notes, also, table)
+
+
+def _flagged_source(flagged, works, table, calibrate, settings) -> tuple:
+    """Return ``(unit, candidates, chosen, notes)`` when some unit is flagged.
+
+    :func:`_source`; when it explains nothing, a quantized signal a flagged unit reads
+    (:func:`_quantized_reading`).
+    """
+    source, candidates, chosen, notes = _source(flagged, table, calibrate, settings, works)
+    if chosen is None:
+        read = _quantized_reading(flagged, works, table, calibrate, settings)
+        if read is not None:
+            source, candidates, chosen, note = read
+            notes = [*notes, note]
+    return source, candidates, chosen, notes
+
+
+def _quantized_reading(flagged, works, table, calibrate, settings) -> tuple | None:
+    """Return ``(unit, candidates, chosen, note)`` of a quantizer that flagged its readers.
+
+    When no candidate of a flagged unit explains its gap and that unit reads a recorded signal
+    whose producer is not flagged and whose values sit on a coarse lattice
+    (:func:`_lattice_candidate`, the direct evidence :func:`_nested_source` reads first), the
+    answer is that quantizer, in its producer: the quantizer's error is neither white nor
+    zero-mean, so a unit reading the signal sees more than its floor allows for (a motor's
+    speed quantized by a sensor that floors, read back through the back-EMF, flagged the
+    armature at twice its threshold, where no candidate is a quantizer: ``unexplained``).
+    None when no such signal exists.
+    """
+    by_output = {s: w for w in works for s in w.data.spec.outputs}
+    for reader in flagged:
+        for signal in reader.data.spec.inputs:
+            producer = by_output.get(signal)
+            if producer is None or producer.flagged:
+                continue
+            lattice = _lattice_candidate(producer, table, calibrate, settings)
+            if lattice is None or lattice[0].fit.variant.at != signal:
+                continue
+            candidate, note = lattice
+            return (
+                producer,
+                [candidate],
+                candidate,
+                (
+                    f"{note}; {reader.data.spec.name} reads it and is flagged, which none of its "
+                    "candidates explains"
+                ),
+            )
+    return None
 
 
 def _loop_floors(works, table, settings, n_tests: int, levels: Mapping[str, float]) -> None:
