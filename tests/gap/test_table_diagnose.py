@@ -377,3 +377,27 @@ def test_screening_fits_hold_the_twin_s_params_as_fitted(monkeypatch):
     frame["level"] = np.minimum(frame["level"], float(np.quantile(frame["level"], 0.85)))
     _diagnose(frame)
     assert modes and set(modes) == {"fixed"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("case_type", "seed", "expected"),
+    [
+        # a speed sensor that floors in steps of 8.2 rad/s: read back through the back-EMF it
+        # flags the armature, which none of the armature's candidates explains
+        ("motor_output_quantization", 107000, ("mechanical", "output_quantization", "w")),
+        # a heater's power resting on three plateaus is not a quantizer's lattice
+        ("thermal_none", 115006, (None, "none", None)),
+    ],
+)
+def test_benchmark_cases_once_misread_read_right(case_type, seed, expected):
+    """Development cases of the families (``<case_type>_NN`` of config/gap_full.yaml)."""
+    from dtwin.gap.table_report import table_diagnosis_to_dict
+    from dtwin.gap.twin_file import table_file
+    from dtwin.gapbench.families import generate_family_case
+
+    case = generate_family_case(case_type, seed)
+    table = table_file(case.twin)
+    recording = recording_with_columns(case.recording, (*table.signals, *table.exogenous))
+    answer = table_diagnosis_to_dict(diagnose_table(recording, table))
+    assert (answer["module"], answer["effect"], answer["at"]) == expected
