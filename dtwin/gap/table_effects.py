@@ -126,15 +126,9 @@ def _input_variants(data: UnitData) -> list[Variant]:
             out[:, i] = soft_saturation(values[:, i], theta[name], theta[sharpness])
             return out
 
-        bipolar = float(np.min(u)) < 0.0 < float(np.max(u))
-        dn_name = f"_e_D_neg_{i}"
-        # on a bipolar input each direction has its own width (D, and D_neg below zero)
-        widths = (d_name, dn_name) if bipolar else (d_name,)
-
-        def deadzone(values, theta, _data, i=i, widths=widths):
+        def deadzone(values, theta, _data, i=i, name=d_name):
             out = values.copy()
-            width = np.where(values[:, i] < 0, theta[widths[-1]], theta[widths[0]])
-            out[:, i] = np.sign(values[:, i]) * np.maximum(np.abs(values[:, i]) - width, 0)
+            out[:, i] = np.sign(values[:, i]) * np.maximum(np.abs(values[:, i]) - theta[name], 0)
             return out
 
         def delay(values, theta, data, i=i, name=delay_name):
@@ -148,9 +142,8 @@ def _input_variants(data: UnitData) -> list[Variant]:
                     {u_name: 0.8 * reach, p_name: SHARPNESS_START},
                     {u_name: (1e-3 * spread, 2 * reach), p_name: SHARPNESS_BOUNDS},
                     {u_name: spread, p_name: SHARPNESS_START / 2}, input_map=saturate),
-            Variant("input_deadzone", signal, model, widths, dict.fromkeys(widths, 0.1 * spread),
-                    dict.fromkeys(widths, (0.0, reach)), dict.fromkeys(widths, spread),
-                    input_map=deadzone),
+            Variant("input_deadzone", signal, model, (d_name,), {d_name: 0.1 * spread},
+                    {d_name: (0.0, reach)}, {d_name: spread}, input_map=deadzone),
             Variant("input_delay", signal, model, (delay_name,), {delay_name: data.dt},
                     {delay_name: (0.0, _max_delay(data))}, {delay_name: data.dt}, input_map=delay),
         ]  # fmt: skip
