@@ -76,6 +76,24 @@ progress = logging.getLogger("dtwin.gap.diagnose.progress")
 SCREENED = 4
 #: Most residual evaluations of a full candidate fit.
 FULL_NFEV = 40
+#: How the screening fits treat the twin's params, by ``calibrate``: held (``fixed``) and, as
+#: a second screening, re-fitted within the calibration band (``band``). With them held, an
+#: effect whose share the twin's own fit had taken up in its params is screened on that
+#: compromise and screened out: a thermal node's missing loss ``θ·|T1 − Ta|^2.19``
+#: (thermal_state_abs_square_05, SNR 38) screened seventh of 29 (cost 0.356, the best 0.179)
+#: and its unit read ``unexplained``; in full its gap was 0.0167 with the params held, 0.0108
+#: with them in the band (floor 0.0106); screened in the band it was first (0.124) and named.
+#: The band alone is not enough: in 12 evaluations the same term at another node
+#: (thermal_state_abs_square_08, SNR 38), its centre traded against the node's loss and
+#: ambient, ended above the twin's cost (0.2229 for 0.2221) and last of 29, where screening
+#: with the params held had started its full fit on the right term. So the best
+#: :data:`SCREENED` of the second screening are fitted in full too, but only those that screen
+#: below the first screening's best: every one added, a ``|z|·z`` term with its centre far
+#: below the state's range took a 15 % sensor gain and a node's loss mismatch, both read as a
+#: re-fit before (thermal_output_scale_error_05: its band screening cost 1.20, the held
+#: screening's best 0.077). With ``calibrate`` the params are not in a band (a free re-fit):
+#: held only, as before (the benchmark's cases are not calibrated: a free screening untested).
+SCREEN_MODES = {False: ("fixed", "band"), True: ("fixed",)}
 #: Training samples of a screening fit.
 SCREEN_SAMPLES = 1000
 #: Samples of the scoring part drawn in ``gap.png``.
@@ -533,7 +551,7 @@ class _Candidate:
 
 
 def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candidate]:
-    """Screen every candidate with the twin's params held; re-fit the best with them.
+    """Screen every candidate (:data:`SCREEN_MODES`); re-fit the best with the twin's params.
 
     The best :data:`SCREENED` by screening cost are re-fitted, and with them a quantizer at an
     output whose recorded values sit on a coarse lattice (:func:`_on_coarse_lattice`): its
@@ -552,23 +570,33 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
     windows = _screening_windows(work)
     screen_x0 = _screening_states(work, windows)
 
-    def screen(variant):
+    def screen(item):
+        variant, screen_mode = item
         fit = fit_variant(
-            data, variant, work.nominal.theta, mode="fixed", max_nfev=12, x0=screen_x0,
-            windows=windows,
+            data, variant, work.nominal.theta, mode=screen_mode, max_nfev=12, x0=screen_x0,
+            windows=windows, band=settings.calibration_tolerance,
         )  # fmt: skip
         return fit.cost, {p: fit.theta[p] for p in variant.effect_params}
 
     plain = [v for v in variants if not v.refits_linear]
-    fits = map_fits(screen, plain)
-    screened = [(cost, v, start) for v, (cost, start) in zip(plain, fits, strict=True)]
-    screened.sort(key=lambda item: item[0])
-    for cost, variant, _ in screened:
-        progress.debug("screened %s at %s: %.6g", variant.name, variant.at, cost)
+    items = [(v, m) for m in SCREEN_MODES[bool(calibrate)] for v in plain]
+    by_mode: dict[str, list] = {m: [] for m in SCREEN_MODES[bool(calibrate)]}
+    for (v, m), (cost, start) in zip(items, map_fits(screen, items), strict=True):
+        by_mode[m].append((cost, v, start))
+    for screen_mode, screened in by_mode.items():
+        screened.sort(key=lambda item: item[0])
+        for cost, variant, _ in screened:
+            progress.debug("screened %s at %s (%s): %.6g", variant.name, variant.at, screen_mode,
+                           cost)  # fmt: skip
+    screened = by_mode["fixed"]
     chosen = [(v, s) for _, v, s in screened[:SCREENED]]
     chosen += [(v, {}) for _, v, _ in screened[SCREENED:] if _on_coarse_lattice(work, v)]
     chosen += [(v, start) for _, v, start in screened[SCREENED:] if v.report is not None]
     chosen += [(v, {}) for v in variants if v.refits_linear]
+    best_fixed = screened[0][0] if screened else math.inf
+    for cost, v, start in by_mode.get("band", [])[:SCREENED]:
+        if cost < best_fixed and all(v is not c for c, _ in chosen):
+            chosen.append((v, start))
 
     def full(item):
         variant, start = item
