@@ -572,11 +572,7 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
 
     def screen(item):
         variant, screen_mode = item
-        fit = fit_variant(
-            data, variant, work.nominal.theta, mode=screen_mode, max_nfev=12, x0=screen_x0,
-            windows=windows, band=settings.calibration_tolerance,
-        )  # fmt: skip
-        return fit.cost, {p: fit.theta[p] for p in variant.effect_params}
+        return _screen_fit(work, variant, screen_mode, windows, screen_x0, settings)
 
     plain = [v for v in variants if not v.refits_linear]
     items = [(v, m) for m in SCREEN_MODES[bool(calibrate)] for v in plain]
@@ -612,6 +608,19 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
         n_params = len([p for p in variant.effect_params if p not in variant.fixed])
         out.append(_Candidate(fit, gap, n_params or len(fit.free), choose_error=error))
     return out
+
+
+def _screen_fit(work: _UnitWork, variant, mode: str, windows, x0, settings, start=None) -> tuple:
+    """Return ``(cost, effect params)`` of a screening fit: 12 evaluations on ``windows``.
+
+    The twin's params ``mode`` (held, or within the calibration band), the windows' states
+    started at ``x0``, the effect's params at ``start`` (default ``variant.starts``).
+    """
+    fit = fit_variant(
+        work.data, variant, work.nominal.theta, mode=mode, max_nfev=12, x0=x0, windows=windows,
+        band=settings.calibration_tolerance, start=start,
+    )  # fmt: skip
+    return fit.cost, {p: fit.theta[p] for p in variant.effect_params}
 
 
 #: Effects whose threshold param is fitted again from :data:`THRESHOLD_RESTARTS` times its
@@ -892,11 +901,7 @@ def _probe_candidates(
 
     def screen(item):
         variant, start = item
-        fit = fit_variant(
-            data, variant, work.nominal.theta, mode="fixed", max_nfev=12, x0=screen_x0,
-            windows=windows, start=start,
-        )  # fmt: skip
-        return fit.cost, {p: fit.theta[p] for p in variant.effect_params}
+        return _screen_fit(work, variant, "fixed", windows, screen_x0, settings, start)
 
     def best(items) -> dict:
         out = {}
