@@ -1310,7 +1310,10 @@ def _source(flagged: list[_UnitWork], table, calibrate, settings, works) -> tupl
     motor's recorded speed, read back through the back-EMF in a loop); where a reader's own
     candidates explain it too (a re-fit of the back-EMF constant for a speed sensor's gain
     error), the producer's output effect is the source (:func:`_sensor_read_downstream`).
-    With no unit explained, the first flagged one is the source (``unexplained``).
+    With no unit explained, the source is the flagged unit furthest above its threshold
+    (``unexplained``), as in the paper's chain (§Where): a motor's backlash put its rotor at
+    7.4 times its threshold and, read back through the back-EMF, its armature at 1.01; the
+    armature, first in the table, was named.
     """
     answers = []
     for work in flagged[:MAX_SOURCES]:
@@ -1327,8 +1330,9 @@ def _source(flagged: list[_UnitWork], table, calibrate, settings, works) -> tupl
         answers.append((work, candidates, chosen, notes, removed))
     explained = [a for a in answers if a[2] is not None]
     explained = _sensor_read_downstream(explained) or explained
-    best = max(explained, key=lambda a: a[4]) if explained else answers[0]
-    return best[:4]
+    if explained:
+        return max(explained, key=lambda a: a[4])[:4]
+    return max(answers, key=lambda a: a[0].excess)[:4]
 
 
 def _sensor_read_downstream(explained: list[tuple]) -> list[tuple]:

@@ -397,6 +397,9 @@ def test_screening_fits_hold_the_twin_s_params_and_screen_again_within_their_ban
         # a clean motor whose speed, read by the armature, a slew-limit probe fits: removing
         # 0.0021 of the spread, it is held to min_gap (a cause outside the catalogue)
         ("motor_none", 101062, (None, "none", None)),
+        # backlash flags the rotor at 7.4 times its threshold and the armature reading its
+        # speed at 1.01: with neither explained, the source is the unit furthest above it
+        ("motor_backlash", 113007, ("mechanical", "unexplained", None)),
     ],
 )
 def test_benchmark_cases_once_misread_read_right(case_type, seed, expected):
