@@ -119,16 +119,21 @@ def _input_variants(data: UnitData) -> list[Variant]:
         reach = float(np.max(np.abs(u)))
         spread = float(np.std(u)) or 1.0
         u_name, d_name, delay_name = f"_e_U_{i}", f"_e_D_{i}", f"_e_delay_{i}"
-        p_name = f"_e_p_{i}"
+        p_name, s_name = f"_e_p_{i}", f"_e_skew_{i}"
+        # on an input that takes both signs the widths may differ by direction: the skew is held
+        # at 0 (a symmetric dead zone) until the full fit frees it (table_diagnose._full_fit)
+        skewed = bipolar(u)
 
         def saturate(values, theta, _data, i=i, name=u_name, sharpness=p_name):
             out = values.copy()
             out[:, i] = soft_saturation(values[:, i], theta[name], theta[sharpness])
             return out
 
-        def deadzone(values, theta, _data, i=i, name=d_name):
+        def deadzone(values, theta, _data, i=i, name=d_name, skew=s_name):
             out = values.copy()
-            out[:, i] = np.sign(values[:, i]) * np.maximum(np.abs(values[:, i]) - theta[name], 0)
+            direction = np.sign(values[:, i])
+            width = theta[name] * (1.0 + theta.get(skew, 0.0) * direction)
+            out[:, i] = direction * np.maximum(np.abs(values[:, i]) - width, 0)
             return out
 
         def delay(values, theta, data, i=i, name=delay_name):
@@ -142,12 +147,40 @@ def _input_variants(data: UnitData) -> list[Variant]:
                     {u_name: 0.8 * reach, p_name: SHARPNESS_START},
                     {u_name: (1e-3 * spread, 2 * reach), p_name: SHARPNESS_BOUNDS},
                     {u_name: spread, p_name: SHARPNESS_START / 2}, input_map=saturate),
-            Variant("input_deadzone", signal, model, (d_name,), {d_name: 0.1 * spread},
-                    {d_name: (0.0, reach)}, {d_name: spread}, input_map=deadzone),
+            _deadzone_variant(signal, model, d_name, s_name if skewed else None, spread, reach,
+                              deadzone),
             Variant("input_delay", signal, model, (delay_name,), {delay_name: data.dt},
                     {delay_name: (0.0, _max_delay(data))}, {delay_name: data.dt}, input_map=delay),
         ]  # fmt: skip
     return out
+
+
+def _deadzone_variant(signal, model, d_name, s_name, spread, reach, deadzone) -> Variant:
+    """Return the ``input_deadzone`` variant: width ``d_name``; ``s_name``, its skew, held at 0."""
+    names, starts = (d_name,), {d_name: 0.1 * spread}
+    bounds, scales = {d_name: (0.0, reach)}, {d_name: spread}
+    fixed = {}
+    if s_name is not None:
+        names, fixed = (d_name, s_name), {s_name: 0.0}
+        starts[s_name], bounds[s_name], scales[s_name] = 0.0, (-SKEW_LIMIT, SKEW_LIMIT), 0.1
+    return Variant("input_deadzone", signal, model, names, starts, bounds, scales,
+                   input_map=deadzone, fixed=fixed)  # fmt: skip
+
+
+#: Largest relative difference of a dead zone's widths by direction: ``D·(1 ± skew)``.
+SKEW_LIMIT = 0.6
+#: Share of an input's largest magnitude it must reach on each side of zero to be bipolar.
+BIPOLAR_SHARE = 0.1
+
+
+def bipolar(u: np.ndarray) -> bool:
+    """Return whether ``u`` (``(n,)``) reaches :data:`BIPOLAR_SHARE` of its reach both ways."""
+    finite = u[np.isfinite(u)]
+    if finite.size == 0:
+        return False
+    reach = float(np.max(np.abs(finite)))
+    share = BIPOLAR_SHARE * reach
+    return bool(reach > 0 and finite.min() < -share and finite.max() > share)
 
 
 #: The saturation's knee sharpness ``p``: its start (a clip rounded by 3.4 % of ``U`` at

@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dtwin.gap.table_effects import _shift, lattice_of, quantizer_mean, soft_saturation
+from dtwin.gap.table_effects import (
+    _shift,
+    bipolar,
+    lattice_of,
+    quantizer_mean,
+    soft_saturation,
+)
 
 
 def test_a_delay_shifts_each_window_of_a_capped_fit_within_that_window():
@@ -81,3 +87,11 @@ def test_a_lag_resting_on_a_few_plateaus_is_not_a_lattice_but_a_blurred_quantize
     q, _, concentration = lattice_of(blurred)
     assert q == pytest.approx(0.5, rel=0.03)
     assert concentration >= 0.9
+
+
+def test_an_input_is_bipolar_when_it_reaches_a_tenth_of_its_reach_on_both_sides():
+    """Only then may a dead zone's widths differ by direction (its skew is fitted)."""
+    assert bipolar(np.array([-3.0, 0.0, 12.0]))
+    assert not bipolar(np.array([-1.0, 0.0, 12.0]))  # one twelfth below zero
+    assert not bipolar(np.array([0.0, 2.0, 5.0]))
+    assert not bipolar(np.array([np.nan, 0.0, 0.0]))
