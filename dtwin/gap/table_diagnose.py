@@ -50,6 +50,7 @@ from dtwin.gap.results import GapSettings
 from dtwin.gap.table_effects import (
     candidate_variants,
     lattice_of,
+    skew_freed,
     slew_probes,
     twin_variant,
     with_quantizer_starts,
@@ -599,12 +600,12 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
         progress.info("%s: fitting %s at %s", data.spec.name, variant.name, variant.at)
         fit = _full_fit(work, variant, start, "free" if variant.refits_linear else mode, settings)
         error, _ = part_error(data, fit, "choose")
-        freed = bool(variant.fixed) and not fit.variant.fixed  # a dead zone's skew (_skewed)
+        freed = fit.variant.effect_params != variant.effect_params  # a dead zone's skew
         return replace(fit, variant=None), error, freed  # a variant's maps do not pickle
 
     out = []
     for (variant, _), (fit, error, freed) in zip(chosen, map_fits(full, chosen), strict=True):
-        fit = replace(fit, variant=replace(variant, fixed={}) if freed else variant)
+        fit = replace(fit, variant=skew_freed(variant) if freed else variant)
         variant = fit.variant
         gap = combined(rms_by_output(error, slice(*data.parts["choose"]), data.norm))
         n_params = len([p for p in variant.effect_params if p not in variant.fixed])
@@ -660,12 +661,13 @@ def _full_fit(work: _UnitWork, variant, start, mode: str, settings) -> VariantFi
         other = from_start({**start, threshold: value})
         if other.cost < fit.cost:
             fit = other
-    if variant.name == "input_deadzone" and variant.fixed:
-        fit = _skewed(work, fit, mode, settings)
+    freed = skew_freed(variant)
+    if freed is not None:
+        fit = _skewed(work, fit, freed, mode, settings)
     return fit
 
 
-def _skewed(work: _UnitWork, fit: VariantFit, mode: str, settings) -> VariantFit:
+def _skewed(work: _UnitWork, fit: VariantFit, freed, mode: str, settings) -> VariantFit:
     """Return the dead zone ``fit`` with its widths by direction freed, when BIC prefers it.
 
     A dead zone on an input that takes both signs is screened and fitted symmetric (its skew
@@ -675,15 +677,14 @@ def _skewed(work: _UnitWork, fit: VariantFit, mode: str, settings) -> VariantFit
     dead zone 4.2 V wide, 30 % wider one way, left 5.7 floors symmetric and read
     ``unexplained``.
     """
-    variant = fit.variant
-    freed = replace(variant, fixed={})
-    start = {p: fit.theta[p] for p in variant.effect_params}
+    start = {p: fit.theta[p] for p in freed.effect_params}
     other = fit_variant(
         work.data, freed, work.nominal.theta, mode=mode, band=settings.calibration_tolerance,
         start=start, max_nfev=FULL_NFEV,
     )  # fmt: skip
     n = max(other.n_residuals, 1)
-    if other.cost > 0 and n * math.log(fit.cost / other.cost) > len(variant.fixed) * math.log(n):
+    price = (len(freed.effect_params) - len(fit.variant.effect_params)) * math.log(n)
+    if other.cost > 0 and n * math.log(fit.cost / other.cost) > price:
         return other
     return fit
 

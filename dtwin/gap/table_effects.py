@@ -43,6 +43,7 @@ __all__ = [
     "quantizer_mean",
     "slew_probes",
     "with_quantizer_starts",
+    "skew_freed",
 ]
 
 #: The missing terms of a state's derivative: name → the function of ``z`` (text).
@@ -156,15 +157,24 @@ def _input_variants(data: UnitData) -> list[Variant]:
 
 
 def _deadzone_variant(signal, model, d_name, s_name, spread, reach, deadzone) -> Variant:
-    """Return the ``input_deadzone`` variant: width ``d_name``; ``s_name``, its skew, held at 0."""
-    names, starts = (d_name,), {d_name: 0.1 * spread}
-    bounds, scales = {d_name: (0.0, reach)}, {d_name: spread}
-    fixed = {}
+    """Return the ``input_deadzone`` variant: width ``d_name``; ``s_name``, its skew, held at 0.
+
+    The skew is not a param of the variant (its start, bounds and scale are kept for
+    :func:`skew_freed`): the dead zone is screened and first fitted symmetric.
+    """
+    starts, bounds, scales = {d_name: 0.1 * spread}, {d_name: (0.0, reach)}, {d_name: spread}
     if s_name is not None:
-        names, fixed = (d_name, s_name), {s_name: 0.0}
         starts[s_name], bounds[s_name], scales[s_name] = 0.0, (-SKEW_LIMIT, SKEW_LIMIT), 0.1
-    return Variant("input_deadzone", signal, model, names, starts, bounds, scales,
-                   input_map=deadzone, fixed=fixed)  # fmt: skip
+    return Variant("input_deadzone", signal, model, (d_name,), starts, bounds, scales,
+                   input_map=deadzone)  # fmt: skip
+
+
+def skew_freed(variant: Variant) -> Variant | None:
+    """Return a dead zone ``variant`` with its widths by direction free, or None (no skew)."""
+    extra = tuple(name for name in variant.bounds if name not in variant.effect_params)
+    if variant.name != "input_deadzone" or not extra:
+        return None
+    return replace(variant, effect_params=(*variant.effect_params, *extra))
 
 
 #: Largest relative difference of a dead zone's widths by direction: ``D·(1 ± skew)``.
