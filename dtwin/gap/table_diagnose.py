@@ -573,7 +573,12 @@ def _fit_candidates(work: _UnitWork, table, calibrate, settings) -> list[_Candid
 
     def screen(item):
         variant, screen_mode = item
-        return _screen_fit(work, variant, screen_mode, windows, screen_x0, settings)
+        starts = (None, *variant.screen_starts)  # a state limit's other starts
+        fits = [
+            _screen_fit(work, variant, screen_mode, windows, screen_x0, settings, start)
+            for start in starts
+        ]
+        return min(fits, key=lambda fit: fit[0])
 
     plain = [v for v in variants if not v.refits_linear]
     items = [(v, m) for m in SCREEN_MODES[bool(calibrate)] for v in plain]

@@ -519,6 +519,13 @@ def _term_variant(data, assignment, state, source, values, term, form, rate, blo
     )  # fmt: skip
 
 
+#: Quantiles of the twin's path an upper limit's screening also starts from (a lower limit's:
+#: one minus them): from the 97 % quantile a limit above every screening window's path has no
+#: gradient (a thermal node held at 60.2 °C for 15 % of the run, the twin's path above it,
+#: screened at the twin's own cost from 65.4 and at 0.065 of it from 50 to 62).
+LIMIT_SCREEN_QUANTILES = (0.8, 0.5)
+
+
 def _limit_variants(data, state, j, path) -> list[Variant]:
     """Return an upper and a lower bound on ``state`` (``path``: the twin's state, recording).
 
@@ -529,11 +536,13 @@ def _limit_variants(data, state, j, path) -> list[Variant]:
     """
     n_states = len(data.spec.states)
     low_q, reach_low, reach_high, high_q = np.nanquantile(path, [0.03, 0.1, 0.9, 0.97])
+    above = np.nanquantile(path, LIMIT_SCREEN_QUANTILES)
+    below = np.nanquantile(path, [1.0 - q for q in LIMIT_SCREEN_QUANTILES])
     spread = float(np.nanstd(path)) or 1.0
     out = []
-    for side, start, bounds in (
-        ("upper", high_q, (reach_low, float(np.nanmax(path)) + spread)),
-        ("lower", low_q, (float(np.nanmin(path)) - spread, reach_high)),
+    for side, start, bounds, alternatives in (
+        ("upper", high_q, (reach_low, float(np.nanmax(path)) + spread), above),
+        ("lower", low_q, (float(np.nanmin(path)) - spread, reach_high), below),
     ):
         name = f"_e_limit_{side}"
 
@@ -543,7 +552,8 @@ def _limit_variants(data, state, j, path) -> list[Variant]:
             return lo, hi
 
         variant = Variant("state_limit", state, data.model, (name,), {name: float(start)},
-                          {name: bounds}, {name: spread}, limits=limits)  # fmt: skip
+                          {name: bounds}, {name: spread}, limits=limits,
+                          screen_starts=tuple({name: float(v)} for v in alternatives))  # fmt: skip
         out.append(variant)
     return out
 

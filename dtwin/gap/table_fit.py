@@ -155,6 +155,9 @@ class Variant:
         The candidate keeps the twin's model class (a re-fit or an output gain).
     fixed : dict
         Effect params set, not fitted (a quantizer's lattice).
+    screen_starts : tuple of dict
+        Other starts of effect params the screening also fits from (a state limit's), the
+        lowest cost kept.
     report : tuple or None
         A named effect's ``(param, factor(m, σ), mass param, σ)``: its reported param is
         ``factor·θ`` (a mass-spring-damper's force).
@@ -178,6 +181,7 @@ class Variant:
     fixed: Mapping[str, float] = field(default_factory=dict)
     report: tuple | None = None
     stiffness: Callable | None = None
+    screen_starts: tuple = ()
 
 
 @dataclass

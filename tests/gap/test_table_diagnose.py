@@ -403,6 +403,9 @@ def test_screening_fits_hold_the_twin_s_params_and_screen_again_within_their_ban
         # a drive's dead zone 4.18 V wide, 30 % wider one way: fitted symmetric it left 5.7
         # floors and read unexplained; its widths by direction freed, it is named
         ("motor_input_deadzone", 105039, ("electrical", "input_deadzone", "V")),
+        # a thermal node held at 60.2 °C for 15 % of the run: its limit, screened only from the
+        # 97 % quantile of the twin's path (65.4), screened at the twin's own cost
+        ("thermal_state_limit", 116035, ("body", "state_limit", "body.T1")),
     ],
 )
 def test_benchmark_cases_once_misread_read_right(case_type, seed, expected):
