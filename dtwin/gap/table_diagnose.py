@@ -1565,9 +1565,9 @@ def _nested_test(work: _UnitWork, candidates, settings, n_units: int, among=None
     whichever is less: the paper diagnoser's nested test (docs/gap.md §Where) with a bar for a
     quiet sensor (a slew-limit probe, a cause outside the catalogue, keeps ``min_gap``: a clean
     motor's speed read as slewing removed 0.0021, 0.31 of its floor). When the best effect
-    fails only because the re-fitted twin is better, the re-fitted twin is tested against the
-    twin as fitted: a motor's friction coefficient 29 % low was best fitted as a ``sign(w)``
-    torque, which the re-fit beat.
+    fails, the re-fitted twin (when it is not the best) is tested against the twin as fitted:
+    a motor's friction coefficient 29 % low was best fitted as a ``sign(w)`` torque, which the
+    re-fit beat.
     ``among`` (a subset of ``candidates``) restricts the best to it: the slew-limit probes,
     with ``K`` still counting every candidate (:func:`_probe_below_floor`).
     """
@@ -1575,11 +1575,10 @@ def _nested_test(work: _UnitWork, candidates, settings, n_units: int, among=None
     _weights(candidates, n_eff)
     best = _ranked(among or candidates, n_eff)[0]
     refit = next((c for c in candidates if c.fit.variant.refits_linear), None)
-    tests = [(best, [work.nominal])]
-    if refit is not None and refit is not best:
-        tests[0][1].append(refit.fit)
-        if among is None:
-            tests.append((refit, [work.nominal]))
+    other_refit = refit is not None and refit is not best
+    tests = [(best, [work.nominal, refit.fit] if other_refit else [work.nominal])]
+    if other_refit and among is None:
+        tests.append((refit, [work.nominal]))
     bar = settings.min_gap
     if among is None:  # a cause outside the catalogue keeps the whole bar
         bar = min(bar, NESTED_FLOOR_SHARE * work.floor)
