@@ -252,15 +252,18 @@ def _second_effect_columns(key: Mapping[str, Any], diagnosis: Mapping[str, Any])
 
     A two-effect case's key names both effects (``effect = "two__<a>+<b>"``) and expects the
     larger; ``second_named`` is True when ``also_needed`` names the other one (any module),
-    None for every other case.
+    None for every other case. A twin table's diagnosis (``dtwin.gap.table/1``) lists the other
+    units with a gap of their own by name only, which ``also_needed`` keeps as they are.
     """
     others = diagnosis.get("also_needed") or []
-    named = [f"{o['module']}:{o['effect']}" for o in others]
+    named = [o if isinstance(o, str) else f"{o['module']}:{o['effect']}" for o in others]
     second = None
     if key.get("arm") == TWO_ARM:
         pair = str(key["effect"]).split("__")[-1].split("+")
         rest = [e for e in pair if e != key["expected_effect"]] or pair[1:]
-        second = bool(rest) and any(o["effect"] == rest[0] for o in others)
+        second = bool(rest) and any(
+            isinstance(o, Mapping) and o["effect"] == rest[0] for o in others
+        )
     return {"also_needed": "; ".join(named), "second_named": second}
 
 

@@ -295,3 +295,20 @@ def test_calibration_is_scored_on_the_cases_the_confidence_was_not_fitted_on():
     healthy = table.assign(effect_ok=[True] * 25 + [True] * 19 + [False] + [False] * 5)
     assert calibration_metrics(healthy)["checking"]["max_gap"] == pytest.approx(0.0)
     assert calibration_metrics(table.drop(columns="case")) is None
+
+
+def test_a_family_case_whose_diagnosis_names_other_units_is_scored():
+    """A twin table's ``also_needed`` lists unit names (``dtwin.gap.table/1``), not dicts."""
+    from dtwin.gapbench.families import generate_family_case
+
+    key = {"case": "tanks_none_00", **generate_family_case("tanks_none", 3, n_samples=400).key}
+    answer = {"module": None, "modules": [], "effect": "none", "at": None, "confidence": 1.0}
+    table = score_cases(
+        [
+            ("quiet", key, answer),
+            ("other units", key, {**answer, "also_needed": ["pump", "tanks"]}),
+        ]
+    )
+    assert table["also_needed"].tolist() == ["", "pump; tanks"]
+    assert table["second_named"].isna().all()
+    assert table["effect_ok"].all()
