@@ -50,7 +50,15 @@ from scipy.signal import lfilter
 
 from dtwin._validation import DtwinValueError
 from dtwin.gap.effects import NONE, UNEXPLAINED
-from dtwin.gapbench.family_assets import MOTOR, TANKS, THERMAL, Asset, Derivative, Family
+from dtwin.gapbench.family_assets import (
+    BATTERY,
+    MOTOR,
+    TANKS,
+    THERMAL,
+    Asset,
+    Derivative,
+    Family,
+)
 from dtwin.gapbench.family_effects import Context, OutputView, Placed
 from dtwin.gapbench.generator import GeneratedCase
 from dtwin.proportions import wilson_interval
@@ -72,7 +80,7 @@ __all__ = [
 ]
 
 #: The families, by case-type prefix (without its underscore).
-FAMILIES: dict[str, Family] = {family.name: family for family in (TANKS, MOTOR, THERMAL)}
+FAMILIES: dict[str, Family] = {family.name: family for family in (TANKS, MOTOR, THERMAL, BATTERY)}
 #: Each family's effects, ``none`` first.
 FAMILY_EFFECTS: dict[str, tuple[str, ...]] = {
     name: (NONE, *family.effects) for name, family in FAMILIES.items()

@@ -1,4 +1,4 @@
-"""The assets of the other-physics families: a two-tank process, a DC motor, a thermal network.
+"""The assets of the other-physics families: two tanks, a DC motor, a thermal network, a battery.
 
 Specification: docs/gap.md §Benchmark. Each :class:`Family` holds one real asset's physics (its
 states, derivative, state at rest and what its sensors read), the draw of its parameters and
@@ -17,6 +17,11 @@ does.
 - ``thermal``: heater command ``u`` (%, 0–100) → heater lag → power ``P`` (W) → two thermal
   nodes ``T1, T2`` (°C, ``C·T' = Σ flows``, ambient ``Ta``) → a lagging sensor ``y`` on
   ``T2`` (°C); ``Ts`` 1–5 s.
+- ``battery``: current set-point ``I_set`` (A, bipolar, positive discharging) → cycler's
+  current loop (lag) → current ``I`` → cell: state of charge ``soc' = −I/Q``, polarisation
+  ``v1' = I/C1 − v1/(R1·C1)``, terminal voltage ``V = OCV(soc) − v1 − R0·I`` (V; an
+  integrating state, an algebraic output with a nonlinear curve and a direct feed-through);
+  ``Ts`` 0.5–2 s.
 
 A derivative here is a plain-float closure ``f(t, x, u) -> list`` (``t`` s, ``x`` the state
 list, ``u`` the input held over the sub-step), the fastest form the engine's Runge-Kutta loop
@@ -52,7 +57,7 @@ from dtwin.gapbench.family_effects import (
     state_limit,
 )
 
-__all__ = ["Asset", "Family", "TANKS", "MOTOR", "THERMAL"]
+__all__ = ["Asset", "Family", "TANKS", "MOTOR", "THERMAL", "BATTERY"]
 
 #: ``f(t, x, u) -> dx``: an asset's derivative on plain floats.
 Derivative = Callable[[float, Sequence[float], float], list[float]]
@@ -671,5 +676,187 @@ THERMAL = Family(
         ),
         "rate_limiter": FamilyEffect("unexplained", "heater", "u", rate_limiter()),
         "fan_switch": FamilyEffect("unexplained", "body", "R1a", parameter_step("R1a")),
+    },
+)
+
+
+# --- battery -------------------------------------------------------------------------------
+
+#: The battery's state of charge is kept within these bounds by the experiment (a cycler's
+#: profile turns a pulse's sign when it would leave them).
+_SOC_BOUNDS = (0.2, 0.8)
+
+
+def _current_pulses(rng, n, dt, i_max, capacity, soc0, hold) -> np.ndarray:
+    """Return a current set-point of bipolar pulses ``(n,)`` (A, positive discharging).
+
+    Levels uniform in ``[−i_max, i_max]``, each held ``hold`` samples; a pulse that would take
+    the state of charge (from ``soc0``, capacity ``capacity`` A·s) out of :data:`_SOC_BOUNDS`
+    is played with the other sign. The second half plays the first half's pulses again in
+    another order (both halves reach about the same extremes, as :func:`_steps`).
+    """
+    low_hold, high_hold = max(int(hold[0]), 2), max(int(hold[1]), 3)
+    drawn, total = [], 0
+    while total < n // 2:
+        drawn.append((rng.uniform(-i_max, i_max), int(rng.integers(low_hold, high_hold + 1))))
+        total += drawn[-1][1]
+    again = [drawn[k] for k in rng.permutation(len(drawn))]
+    soc, levels = soc0, []
+    for level, length in [*drawn, *again, *again]:
+        after = soc - level * length * dt / capacity
+        if not _SOC_BOUNDS[0] <= after <= _SOC_BOUNDS[1]:
+            level = -level
+            after = soc - level * length * dt / capacity
+        if _SOC_BOUNDS[0] <= after <= _SOC_BOUNDS[1]:
+            soc = after
+        else:  # neither sign fits: rest
+            level = 0.0
+        levels.append(np.full(length, level))
+        if sum(len(a) for a in levels) >= n:
+            break
+    return np.concatenate(levels)[:n]
+
+
+def _draw_battery(rng: np.random.Generator, n_samples: int | None) -> Asset:
+    """Draw a lithium-ion cell (Thevenin model) on a cycler, and current pulses."""
+    dt = rng.uniform(0.5, 2.0)
+    n = _length(rng, 3000, 10000, n_samples)
+    capacity_ah = rng.uniform(2.0, 5.0)
+    p = {
+        "tau_c": rng.uniform(1.0, 4.0) * dt,  # s: the cycler's current loop
+        "Q": capacity_ah * 3600.0,  # A·s
+        "R0": rng.uniform(0.01, 0.08),  # ohm: ohmic resistance
+        "R1": rng.uniform(0.01, 0.06),  # ohm: polarisation resistance
+        "E0": rng.uniform(3.4, 3.8),  # V: open-circuit voltage at half charge
+        "k1": rng.uniform(0.3, 0.8),  # V per unit of charge
+        "k3": rng.uniform(2.0, 6.0),  # V: the curve's steep ends
+        "soc0": rng.uniform(0.35, 0.65),
+    }
+    tau1 = rng.uniform(20.0, 120.0) * dt
+    p["C1"] = tau1 / p["R1"]  # F
+    i_max = rng.uniform(1.0, 3.0) * capacity_ah  # A: 1–3 C
+    u = _current_pulses(rng, n, dt, i_max, p["Q"], p["soc0"], (0.2 * tau1 / dt, 2.0 * tau1 / dt))
+    return Asset(dt, u, p, tau1, "pulses")
+
+
+def _battery_states(placed: Placed) -> tuple[str, ...]:
+    return ("I", "soc", "v1")
+
+
+def _battery_derivative(p: dict[str, float], placed: Placed) -> Derivative:
+    tau_c, q, r1, c1 = p["tau_c"], p["Q"], p["R1"], p["C1"]
+
+    def f(t: float, x: Sequence[float], u: float) -> list[float]:
+        current, v1 = x[0], x[2]
+        return [(u - current) / tau_c, -current / q, current / c1 - v1 / (r1 * c1)]
+
+    return f
+
+
+def _battery_rest(p: dict[str, float], placed: Placed) -> list[float]:
+    return [0.0, p["soc0"], 0.0]
+
+
+def _ocv(p: dict[str, float], soc: np.ndarray) -> np.ndarray:
+    """Return the open-circuit voltage (V) at state of charge ``soc``."""
+    return p["E0"] + p["k1"] * (soc - 0.5) + p["k3"] * (soc - 0.5) ** 3
+
+
+def _battery_observe(p: dict[str, float], placed: Placed, X: np.ndarray) -> dict[str, np.ndarray]:
+    current, soc, v1 = X[:, 0], X[:, 1], X[:, 2]
+    terminal = _ocv(p, soc) - v1 - p["R0"] * current
+    return {"I": current, "soc": soc, "v1": v1, "V": terminal}
+
+
+def _battery_twin(p: dict[str, float]) -> dict[str, Any]:
+    """Return the battery twin: cycler (lag) → cell (charge, polarisation, terminal voltage)."""
+    return {
+        "cycler": {
+            "block": "lag",
+            "inputs": ["I_set"],
+            "outputs": ["I"],
+            "params": {"tau": p["tau_c"]},
+        },
+        "cell": {
+            "inputs": ["I"],
+            "outputs": ["V"],
+            "states": ["soc", "v1"],
+            "params": {k: p[k] for k in ("Q", "R0", "R1", "C1", "E0", "k1", "k3")},
+            "derivatives": {"soc": "-I/Q", "v1": "I/C1 - v1/(R1*C1)"},
+            "equations": {"V": "E0 + k1*(soc - 0.5) + k3*(soc - 0.5)**3 - v1 - R0*I"},
+        },
+    }
+
+
+def _butler_volmer(rng: np.random.Generator, level: float, ctx: Context) -> Placed:
+    """Draw a polarisation current ``(v0/R1)·sinh(v1/v0)`` for the twin's linear ``v1/R1``.
+
+    The missing term of ``v1``'s derivative, ``−(v0·sinh(v1/v0) − v1)/(R1·C1)``, is odd and
+    about cubic (``v1³/(6·v0²)``) while ``v1 ≪ v0``; at rms(v1) it is 1–60 % of the linear
+    relaxation (``v0 = rms(v1)/√(6·share)``).
+    """
+    share = log_between(0.01, 0.6, level)
+    r1, c1 = ctx.params["R1"], ctx.params["C1"]
+    spread = float(np.sqrt(np.mean(ctx.clean["v1"] ** 2))) or 1.0
+    v0 = spread / math.sqrt(6.0 * share)
+
+    def term(t: float, x: Sequence[float]) -> float:
+        z = x[2] / v0
+        return -(v0 * math.sinh(z) - x[2]) / (r1 * c1)
+
+    return Placed("sinh", {"v0": v0, "share": share}, term=("v1", term))
+
+
+BATTERY = Family(
+    name="battery",
+    input="I_set",
+    internal=("I",),
+    outputs=("V",),
+    draw=_draw_battery,
+    states=_battery_states,
+    derivative=_battery_derivative,
+    rest=_battery_rest,
+    observe=_battery_observe,
+    twin=_battery_twin,
+    effects={
+        "state_limit": FamilyEffect("state_limit", "cell", "soc", state_limit("soc")),
+        "state_cubic": FamilyEffect("state_cubic", "cell", "v1", _butler_volmer),
+        "input_saturation": FamilyEffect("input_saturation", "cycler", "I_set", input_saturation()),
+        "input_delay": FamilyEffect(
+            "input_delay",
+            "cycler",
+            "I_set",
+            input_delay(),
+            equivalent=("output_delay",),
+            equivalent_bare_only=True,
+        ),
+        **{
+            name: FamilyEffect(name, "cell", "V", draw("V"))
+            for name, draw in (
+                ("output_saturation", output_saturation),
+                ("output_bias_drift", output_bias_drift),
+                ("output_quantization", output_quantization),
+            )
+        },
+        "output_scale_error": FamilyEffect(  # E0, k1, k3, R0, R1 times g and C1/g: the same
+            "output_scale_error", "cell", "V", output_scale_error("V"),
+            equivalent=("parameter_mismatch",),
+        ),  # fmt: skip
+        "output_delay": FamilyEffect(
+            "output_delay",
+            "cell",
+            "V",
+            output_delay("V"),
+            equivalent=("input_delay",),
+            equivalent_bare_only=True,
+        ),
+        "parameter_mismatch": FamilyEffect(
+            "parameter_mismatch",
+            "cell",
+            None,
+            parameter_mismatch({"R0": "cell", "R1": "cell", "Q": "cell"}),
+        ),
+        "rate_limiter": FamilyEffect("unexplained", "cycler", "I_set", rate_limiter()),
+        "warming": FamilyEffect("unexplained", "cell", "R1", parameter_drift("R1")),
     },
 )

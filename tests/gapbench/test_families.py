@@ -199,3 +199,16 @@ def test_the_summary_gives_wilson_intervals_per_family_and_arm():
     assert 0.0 < summary["effect"]["low"] < 0.5 < summary["effect"]["high"] < 1.0
     assert summary["arms"]["bare"]["effect"]["n"] == 2
     assert math.isnan(summary["arms"]["bare"]["none"]["low"])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_battery_cycled_by_pulses_keeps_its_charge_within_bounds(seed):
+    """The cycler's pulses turn sign rather than take the charge out of 0.2–0.8 (an integrating
+    state: nothing else would bring it back), both directions in either half."""
+    from dtwin.gapbench.family_assets import BATTERY
+
+    asset = BATTERY.draw(np.random.default_rng(seed), 6000)
+    charge = asset.params["soc0"] - np.cumsum(asset.u) * asset.dt / asset.params["Q"]
+    assert 0.2 - 1e-9 <= charge.min() and charge.max() <= 0.8 + 1e-9
+    for half in (asset.u[:3000], asset.u[3000:]):
+        assert half.min() < 0.0 < half.max()
