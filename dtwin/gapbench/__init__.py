@@ -6,8 +6,8 @@ Specification: docs/gap.md §Generator, §Benchmark.
 Modules: :mod:`~dtwin.gapbench.generator` (a case: recording, twin file and key from the paper's
 asset with one effect), :mod:`~dtwin.gapbench.arms` (the arms' harder cases),
 :mod:`~dtwin.gapbench.rigs` (the rig families), :mod:`~dtwin.gapbench.families` (families of
-other physics whose twin is a ``modules:`` table: tanks, a DC motor, a thermal network; their
-assets in :mod:`~dtwin.gapbench.family_assets`, their effects' real forms in
+other physics whose twin is a ``modules:`` table: tanks, a DC motor, a thermal network, a
+battery; their assets in :mod:`~dtwin.gapbench.family_assets`, their effects' real forms in
 :mod:`~dtwin.gapbench.family_effects`), :mod:`~dtwin.gapbench.batch` (a chunk of cases
 written to and diagnosed from folders), :mod:`~dtwin.gapbench.scores` (diagnoses scored
 against their keys, the benchmark's metrics and checks) and :mod:`~dtwin.gapbench.power` (the

@@ -1,4 +1,4 @@
-"""Benchmark families of other physics for the table diagnoser: tanks, a motor, a thermal network.
+"""Benchmark families of other physics for the table diagnoser: tanks, motor, thermal, battery.
 
 Specification: docs/gap.md §Benchmark. The paper family (:mod:`dtwin.gapbench.generator`) and
 the rig families (:mod:`dtwin.gapbench.rigs`) record one chain of modules; these families record
@@ -20,7 +20,7 @@ and a key holding the truth:
   log-uniformly, in real forms that differ from the catalogue's
   (:mod:`dtwin.gapbench.family_effects`);
 - with ``internal`` the internal signals are recorded too (tanks: ``q, h1``; motor: ``i``;
-  thermal: ``P, T1``); without, modules joined by unrecorded signals form one unit, whose
+  thermal: ``P, T1``; battery: ``I``); without, modules joined by unrecorded signals form one unit, whose
   modules the key's ``group`` lists.
 
 Case types ``<family>_<effect>`` (``tanks_state_limit``), with ``internal`` drawn (half of

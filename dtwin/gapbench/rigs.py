@@ -491,8 +491,8 @@ def _rig_key(effect, seed, magnitude, rig, params, n) -> dict:
 def generate_any_case(case_type: str, seed: int, **paper_options) -> GeneratedCase:
     """Generate a benchmark case: a rig family's, another physics' family's, else the paper's.
 
-    Prefixes ``rig_``, ``hardrig_`` (this module); ``tanks_``, ``motor_``, ``thermal_``
-    (:mod:`dtwin.gapbench.families`); anything else is the paper asset's case type.
+    Prefixes ``rig_``, ``hardrig_`` (this module); ``tanks_``, ``motor_``, ``thermal_``,
+    ``battery_`` (:mod:`dtwin.gapbench.families`); anything else is the paper asset's case type.
     A paper-asset case type may carry an arm (``no_noise__none``, dtwin/gapbench/arms.py).
     ``paper_options`` go to :func:`dtwin.gapbench.generator.generate_case` (``nominal``, the
     nominal twin, is needed; ``miscalibration``, ``noise_error``); the other families have none.

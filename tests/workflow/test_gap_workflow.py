@@ -17,7 +17,7 @@ def test_full_gap_benchmark_override_plans_ten_cases_per_effect(tmp_path):
     full = ["-n", "--cores", "2", "gap_benchmark", "--configfile", "config/gap_full.yaml"]
     # one case per chunk (--set-scatter gap=0): 14 case types of the paper asset, 4 of the
     # rig family, 5 of the harder rig family, 64 of the arms (a)-(g) and 12 of arm (h)
-    # (dtwin/gapbench/arms.py) and 39 of the families of other physics, 10 each
+    # (dtwin/gapbench/arms.py) and 52 of the families of other physics, 10 each
     counts = job_counts(snakemake(workdir, *full, "--set-scatter", "gap=0").stdout)
-    assert counts["gap_cases"] == counts["gap_diagnoses"] == 10 * (14 + 4 + 5 + 64 + 12 + 39)
+    assert counts["gap_cases"] == counts["gap_diagnoses"] == 10 * (14 + 4 + 5 + 64 + 12 + 52)
     assert counts["gap_benchmark"] == 1
