@@ -20,8 +20,8 @@ and a key holding the truth:
   log-uniformly, in real forms that differ from the catalogue's
   (:mod:`dtwin.gapbench.family_effects`);
 - with ``internal`` the internal signals are recorded too (tanks: ``q, h1``; motor: ``i``;
-  thermal: ``P, T1``; battery: ``I``); without, modules joined by unrecorded signals form one unit, whose
-  modules the key's ``group`` lists.
+  thermal: ``P, T1``; battery: ``I``); without, modules joined by unrecorded signals form one
+  unit, whose modules the key's ``group`` lists.
 
 Case types ``<family>_<effect>`` (``tanks_state_limit``), with ``internal`` drawn (half of
 the cases), or ``<family>_internal_<effect>`` / ``<family>_bare_<effect>`` to fix it;

@@ -839,9 +839,12 @@ BATTERY = Family(
             )
         },
         "output_scale_error": FamilyEffect(  # E0, k1, k3, R0, R1 times g and C1/g: the same
-            "output_scale_error", "cell", "V", output_scale_error("V"),
+            "output_scale_error",
+            "cell",
+            "V",
+            output_scale_error("V"),
             equivalent=("parameter_mismatch",),
-        ),  # fmt: skip
+        ),
         "output_delay": FamilyEffect(
             "output_delay",
             "cell",

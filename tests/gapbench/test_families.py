@@ -209,6 +209,6 @@ def test_a_battery_cycled_by_pulses_keeps_its_charge_within_bounds(seed):
 
     asset = BATTERY.draw(np.random.default_rng(seed), 6000)
     charge = asset.params["soc0"] - np.cumsum(asset.u) * asset.dt / asset.params["Q"]
-    assert 0.2 - 1e-9 <= charge.min() and charge.max() <= 0.8 + 1e-9
+    assert charge.min() >= 0.2 - 1e-9 and charge.max() <= 0.8 + 1e-9
     for half in (asset.u[:3000], asset.u[3000:]):
         assert half.min() < 0.0 < half.max()
