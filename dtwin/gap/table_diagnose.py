@@ -433,6 +433,61 @@ def _with_process(twin: NoiseFloor | None, process: NoiseFloor | None) -> NoiseF
     return NoiseFloor(math.sqrt(total), "twin+process", acf, process=process.rms)
 
 
+#: A floor's ``source`` when the recording contradicts the declared level
+#: (:func:`_declared_contradicted`).
+NOT_DECLARED = "data-not-declared"
+
+
+def _contradicted_noise_notes(works, declared: Mapping[str, float]) -> list[str]:
+    """Return one note per output whose declared noise level the recording contradicts."""
+    return [
+        f"{signal}: the declared noise {declared[signal]:.3g} is not the recording's (the twin's "
+        f"training residual is noise of {floor.rms:.3g}); its floor is the recording's"
+        for work in works
+        for signal, floor in zip(work.data.spec.outputs, work.floors, strict=True)
+        if floor.source.startswith(NOT_DECLARED) and signal in declared
+    ]
+
+
+#: Standard errors of a residual's noise level by which it must pass the declared level's
+#: tolerance to contradict it: a level 9 % above a declared one (a sensor's drift at
+#: signal-to-noise 2.8 behind noise declared 0.0370, the residual 0.0408)
+#: is within the tolerance and its estimate's scatter.
+CONTRADICTION_ERRORS = 2.0
+
+
+def _declared_contradicted(
+    twin: NoiseFloor | None,
+    whole: NoiseFloor | None,
+    spectral: NoiseFloor,
+    noise_tolerance: float,
+    n_samples: int,
+) -> bool:
+    """Return whether the recording contradicts a declared measurement noise level (``twin``).
+
+    ``whole`` is the training residual (``n_samples`` finite values) taken as AR(1) noise,
+    given only when that model whitens it (:func:`~dtwin.gap.noise.residual_noise_floor`):
+    under the null of no effect, the consistent estimate of the output's noise. ``spectral`` is
+    the level read above the unit's fastest mode (:func:`~dtwin.gap.noise.spectral_noise_floor`),
+    where a slow effect leaves little. The declared level (without process noise) is
+    contradicted beyond ``noise_tolerance`` and :data:`CONTRADICTION_ERRORS` standard errors of
+    the estimate (relative ``1/√(2·n_eff)``): below it, by ``whole`` alone, whatever the residual
+    holds (an effect only adds to it); above it, by both: a slow effect raises the whole
+    residual's level but not the high band's (a tank's outlet clogging by 1.5 % over the run
+    raised it to 1.17 times the declared level, the high band read 0.43 times), whereas a level
+    declared a quarter low is seen in both (a clean tank, white noise declared 0.0157 for
+    0.0215: 0.0224 and 0.0221; a paper-chain sensor with AR(1) noise declared 0.015 for 0.02:
+    0.0200, 0.0199).
+    """
+    if twin is None or whole is None or twin.source != "twin" or twin.rms <= 0.0:
+        return False
+    scatter = CONTRADICTION_ERRORS / math.sqrt(2.0 * effective_samples(whole.acf, n_samples))
+    if whole.rms < twin.rms / (1.0 + noise_tolerance) * (1.0 - scatter):
+        return True
+    high = twin.rms * (1.0 + noise_tolerance) * (1.0 + scatter)
+    return whole.rms > high and spectral.rms > high
+
+
 def _recorded_noise(floor: NoiseFloor) -> float:
     """Return the part of a floor that is noise on the recorded values (output units).
 
@@ -463,15 +518,17 @@ def _floors(data, fit, error, noise, settings, n_tests=1, input_noise=None, proc
     for o, signal in enumerate(data.spec.outputs):
         gapped = error[train, o]
         residual = gapped[np.isfinite(gapped)]
-        measured = spectral_noise_floor(residual, data.dt, max(data.bandwidth, 1e-12))
+        spectral = spectral_noise_floor(residual, data.dt, max(data.bandwidth, 1e-12))
         # the whole residual as AR(1) noise when its innovations are white: the twin is right
         # and its error is noise, whatever its colour (a spectral floor misses coloured noise)
         whole = residual_noise_floor(gapped, settings.significance)
-        if whole is not None and whole.rms > measured.rms:
-            measured = whole
+        measured = whole if whole is not None and whole.rms > spectral.rms else spectral
         twin = NoiseFloor(noise[signal], "twin", np.ones(1)) if signal in noise else None
         twin = _with_process(twin, process[o])
         floor = reconcile_noise_floor(twin, measured, settings.noise_tolerance)
+        n_residual = int(np.count_nonzero(np.isfinite(gapped)))
+        if _declared_contradicted(twin, whole, spectral, settings.noise_tolerance, n_residual):
+            floor = NoiseFloor(whole.rms, NOT_DECLARED, whole.acf)
         step = _coarse_lattice(data, o, floor.rms)
         # a data floor already holds the quantizer's noise
         if step and floor.source in ("twin", "twin+process"):
@@ -1237,10 +1294,12 @@ def _diagnose_table(recording, table, calibrate, train_frac, settings, heldout) 
         work = _analyse_unit(spec, recording, table, parts, settings, calibrate, n_tests, levels)
         works[spec.name] = work
         for signal, floor in zip(spec.outputs, work.floors, strict=True):
-            levels[signal] = table.noise.get(signal, _recorded_noise(floor))
+            declared = signal in table.noise and not floor.source.startswith(NOT_DECLARED)
+            levels[signal] = table.noise[signal] if declared else _recorded_noise(floor)
     _loop_floors(works, table, settings, n_tests, levels)
     flagged = [w for w in works.values() if w.flagged]
     notes = [note for w in works.values() for note in getattr(w.data.model, "notes", ())]
+    notes += _contradicted_noise_notes(works.values(), table.noise)
     units = {name: _unit_report(w) for name, w in works.items()}
     base = dict(units=units, n_samples=recording.n_samples, n_train=parts["train"][1],
                 n_choose=parts["choose"][1], dt=recording.dt)  # fmt: skip
