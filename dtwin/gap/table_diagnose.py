@@ -1411,6 +1411,7 @@ def _source(flagged: list[_UnitWork], table, calibrate, settings, works) -> tupl
     for work in flagged[:MAX_SOURCES]:
         candidates = _fit_candidates(work, table, calibrate, settings)
         candidates = _producers_agree(work, candidates, works)
+        candidates = _readers_agree(work, candidates, works, settings, calibrate)
         suspects = frozenset(
             s for other in flagged if other is not work for s in other.data.spec.outputs
         )
@@ -1474,6 +1475,7 @@ def _nested_source(works: list[_UnitWork], table, calibrate, settings) -> tuple 
         candidates = _producers_agree(
             work, _fit_candidates(work, table, calibrate, settings), works
         )
+        candidates = _readers_agree(work, candidates, works, settings, calibrate)
         if not candidates:
             continue
         chosen, note = _nested_test(work, candidates, settings, len(works))
@@ -1709,6 +1711,75 @@ def _producers_agree(work: _UnitWork, candidates: list, works: list[_UnitWork]) 
                 work.data.spec.name, variant.name, variant.at, before, after,
             )  # fmt: skip
     return kept
+
+
+#: Growth of a reader's choosing-part error, driven by the recorded signal with a producer's
+#: output effect undone instead of as recorded, above which that effect is dropped.
+READER_TOLERANCE = PRODUCER_TOLERANCE
+
+
+def _readers_agree(
+    work: _UnitWork, candidates: list, works: list[_UnitWork], settings, calibrate: bool
+) -> list:
+    """Drop the output effects at a recorded signal that another unit's fit contradicts.
+
+    An output effect at a signal another unit reads (an ``output_delay`` at a motor's recorded
+    current) says the recording differs from the signal itself: the reader, whose twin is driven
+    by the signal itself, must then fit no worse on the recording with the effect undone than
+    on the recording (:func:`_reader_errors`, within :data:`READER_TOLERANCE`). An effect
+    upstream of the signal (a delay of the drive's command) delays the signal itself, which
+    the reader follows: a motor's current delayed at the command had been read as an
+    ``output_delay`` of the recorded current, which the rotor's twin, fed the current taken
+    back by that delay, fitted twice as badly (``motor_input_delay_03``: 0.0126 → 0.0247).
+    """
+    readers = [w for w in works if w is not work]
+    kept = []
+    for candidate in candidates:
+        variant = candidate.fit.variant
+        if variant.output_inverse is None or variant.at not in work.data.spec.outputs:
+            kept.append(candidate)
+            continue
+        errors = [
+            _reader_errors(work, candidate.fit, reader, settings, calibrate)
+            for reader in readers
+            if variant.at in reader.data.spec.inputs
+        ]
+        if all(clean <= (1.0 + READER_TOLERANCE) * seen for seen, clean in errors):
+            kept.append(candidate)
+            continue
+        progress.debug(
+            "%s: %s at %s dropped: a reader's error %s (as recorded -> the effect undone)",
+            work.data.spec.name, variant.name, variant.at,
+            ", ".join(f"{seen:.4g} -> {clean:.4g}" for seen, clean in errors),
+        )  # fmt: skip
+    return kept
+
+
+def _reader_errors(
+    producer: _UnitWork, fit: VariantFit, reader: _UnitWork, settings, calibrate: bool
+) -> tuple:
+    """Return a reader's choosing-part RMS error on the signal as recorded and as itself.
+
+    The signal itself is the recording with the producer's output effect ``fit`` undone
+    (``Variant.output_inverse``: a drift subtracted, a gain divided out, a delay taken back);
+    both carry the recording's noise, so neither is favoured by it. The reader's twin is fitted
+    on each as its nominal twin is (:func:`_nominal_fit`): fitted on the recording, its params
+    take up within their band what a signal read wrong does to it (a motor's back-EMF constant
+    5 % low for a speed read 8 ms late), which the signal itself would then pay.
+    """
+    signal = fit.variant.at
+    o = producer.data.spec.outputs.index(signal)
+    i = reader.data.spec.inputs.index(signal)
+    rows = slice(*reader.data.parts["choose"])
+    itself = fit.variant.output_inverse(producer.data.outputs, fit.theta, producer.data)[:, o]
+    out = []
+    for column in (reader.data.inputs[:, i], itself):
+        inputs = reader.data.inputs.copy()
+        inputs[:, i] = np.where(np.isfinite(column), column, inputs[:, i])
+        view = replace(reader.data, inputs=inputs)
+        error, _ = part_error(view, _nominal_fit(view, settings, calibrate), "choose")
+        out.append(combined(rms_by_output(error, rows, reader.data.norm)))
+    return tuple(out)
 
 
 def _producer_errors(producer: _UnitWork, signal: str, corrected: np.ndarray):

@@ -28,6 +28,7 @@ state), or nothing for a re-fit (the report names the param furthest off).
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -279,9 +280,20 @@ def _output_variants(data: UnitData) -> list[Variant]:
             out[:, o] *= theta[gain]
             return out
 
-        def lag(values, theta, data, o=o, delay=delay):
+        def lag(values, theta, data, o=o, delay=delay, sign=1.0):
             out = values.copy()
-            out[:, o] = _shift(values[:, o], theta[delay], data.dt)
+            out[:, o] = _shift(values[:, o], sign * theta[delay], data.dt)
+            return out
+
+        def undrift(values, theta, data, o=o, b=(b0, b1, b2)):
+            tau = np.arange(len(values)) * data.dt / duration
+            out = values.copy()
+            out[:, o] -= theta[b[0]] + theta[b[1]] * tau + theta[b[2]] * tau**2
+            return out
+
+        def unscale(values, theta, _data, o=o, gain=gain):
+            out = values.copy()
+            out[:, o] /= theta[gain] or 1.0
             return out
 
         wide = (float(np.min(y)) - spread, float(np.max(y)) + spread)
@@ -294,11 +306,12 @@ def _output_variants(data: UnitData) -> list[Variant]:
                     output_map=clip),
             Variant("output_bias_drift", signal, model, drifts, dict.fromkeys(drifts, 0.0),
                     dict.fromkeys(drifts, (-np.inf, np.inf)), dict.fromkeys(drifts, spread),
-                    output_map=drift),
+                    output_map=drift, output_inverse=undrift),
             Variant("output_scale_error", signal, model, (gain,), {gain: 1.0}, {gain: (0.0, 10.0)},
-                    {gain: 0.1}, output_map=scale, linear_form=True),
+                    {gain: 0.1}, output_map=scale, linear_form=True, output_inverse=unscale),
             Variant("output_delay", signal, model, (delay,), {delay: data.dt},
-                    {delay: (0.0, _max_delay(data))}, {delay: data.dt}, output_map=lag),
+                    {delay: (0.0, _max_delay(data))}, {delay: data.dt}, output_map=lag,
+                    output_inverse=partial(lag, sign=-1.0)),
         ]  # fmt: skip
         out += _quantization_variant(data, o, signal, y, spread)
     return out

@@ -164,6 +164,9 @@ class Variant:
     stiffness : callable or None
         ``theta → ρ``, the largest rate (1/s) the effect's term adds to the unit's Jacobian:
         the Runge-Kutta sub-steps grow with it (:func:`substeps_for`).
+    output_inverse : callable or None
+        ``(values, theta, data) → values``: the recorded outputs as the signals themselves, an
+        output effect undone where it has an inverse (a drift, a gain, a delay); None else.
     """
 
     name: str
@@ -182,6 +185,7 @@ class Variant:
     report: tuple | None = None
     stiffness: Callable | None = None
     screen_starts: tuple = ()
+    output_inverse: Callable | None = None
 
 
 @dataclass

@@ -412,6 +412,14 @@ def test_screening_fits_hold_the_twin_s_params_and_screen_again_within_their_ban
         # a sensor's drift at signal-to-noise 2.8 behind noise declared 0.0370: the residual's
         # 0.0408 is within the tolerance and the estimate's scatter, the declared level stands
         ("thermal_output_bias_drift", 119001, ("sensor", "output_bias_drift", "y")),
+        # a drive's command 4 ms late, its current recorded: read as an output delay of the
+        # current, which the rotor's twin fed the current taken back fits twice as badly
+        ("motor_input_delay", 106003, ("electrical", "input_delay", "V")),
+        # a speed sensor drifting, read back through the back-EMF: the current's drift that
+        # explained the armature, undone, fits the rotor eleven times as badly
+        ("motor_output_bias_drift", 108003, ("mechanical", "output_bias_drift", "w")),
+        # a speed read 8 ms late: taken back, the armature fits it better, the delay stays
+        ("motor_output_delay", 110000, ("mechanical", "output_delay", "w")),
     ],
 )
 def test_benchmark_cases_once_misread_read_right(case_type, seed, expected):
