@@ -1744,7 +1744,7 @@ def _readers_agree(
             for reader in readers
             if variant.at in reader.data.spec.inputs
         ]
-        if all(clean <= (1.0 + READER_TOLERANCE) * seen for seen, clean in errors):
+        if all(_reader_agrees(seen, clean) for seen, clean in errors):
             kept.append(candidate)
             continue
         progress.debug(
@@ -1753,6 +1753,23 @@ def _readers_agree(
             ", ".join(f"{seen:.4g} -> {clean:.4g}" for seen, clean in errors),
         )  # fmt: skip
     return kept
+
+
+def _reader_agrees(seen: float, itself: float) -> bool:
+    """Return whether a reader's error on the signal itself is within tolerance of as recorded.
+
+    A reader whose twin does not simulate (an error that is not finite) has no say.
+
+    Examples
+    --------
+    >>> _reader_agrees(0.0126, 0.0130), _reader_agrees(0.0126, 0.0247)
+    (True, False)
+    >>> _reader_agrees(float("nan"), 0.0247)
+    True
+    """
+    if not (math.isfinite(seen) and math.isfinite(itself)):
+        return True
+    return itself <= (1.0 + READER_TOLERANCE) * seen
 
 
 def _reader_errors(
