@@ -442,7 +442,8 @@ def _contradicted_noise_notes(works, declared: Mapping[str, float]) -> list[str]
     """Return one note per output whose declared noise level the recording contradicts."""
     return [
         f"{signal}: the declared noise {declared[signal]:.3g} is not the recording's (the twin's "
-        f"training residual is noise of {floor.rms:.3g}); its floor is the recording's"
+        f"training residual is noise of {_residual_level(floor):.3g}); its floor is the "
+        "recording's"
         for work in works
         for signal, floor in zip(work.data.spec.outputs, work.floors, strict=True)
         if floor.source.startswith(NOT_DECLARED) and signal in declared
@@ -456,12 +457,18 @@ def _contradicted_noise_notes(works, declared: Mapping[str, float]) -> list[str]
 CONTRADICTION_ERRORS = 2.0
 
 
+def _residual_level(floor: NoiseFloor) -> float:
+    """Return a floor's level before the recorded inputs' noise was added (``+inputs``)."""
+    return floor.measurement if floor.source.endswith("+inputs") else floor.rms
+
+
 def _declared_contradicted(
     twin: NoiseFloor | None,
     whole: NoiseFloor | None,
     spectral: NoiseFloor,
     noise_tolerance: float,
     n_samples: int,
+    inputs_noise: float = 0.0,
 ) -> bool:
     """Return whether the recording contradicts a declared measurement noise level (``twin``).
 
@@ -477,14 +484,17 @@ def _declared_contradicted(
     raised it to 1.17 times the declared level, the high band read 0.43 times), whereas a level
     declared a quarter low is seen in both (a clean tank, white noise declared 0.0157 for
     0.0215: 0.0224 and 0.0221; a paper-chain sensor with AR(1) noise declared 0.015 for 0.02:
-    0.0200, 0.0199).
+    0.0200, 0.0199). Above, the level expected is the declared one with ``inputs_noise`` (what
+    the recorded inputs' noise adds through the unit, :func:`_input_noise_floor`) in
+    quadrature, which the residual holds too: a battery's voltage, whose recorded current's
+    noise passes straight through its series resistance, read 1.5 times its declared level.
     """
     if twin is None or whole is None or twin.source != "twin" or twin.rms <= 0.0:
         return False
     scatter = CONTRADICTION_ERRORS / math.sqrt(2.0 * effective_samples(whole.acf, n_samples))
     if whole.rms < twin.rms / (1.0 + noise_tolerance) * (1.0 - scatter):
         return True
-    high = twin.rms * (1.0 + noise_tolerance) * (1.0 + scatter)
+    high = math.hypot(twin.rms, inputs_noise) * (1.0 + noise_tolerance) * (1.0 + scatter)
     return whole.rms > high and spectral.rms > high
 
 
@@ -527,7 +537,9 @@ def _floors(data, fit, error, noise, settings, n_tests=1, input_noise=None, proc
         twin = _with_process(twin, process[o])
         floor = reconcile_noise_floor(twin, measured, settings.noise_tolerance)
         n_residual = int(np.count_nonzero(np.isfinite(gapped)))
-        if _declared_contradicted(twin, whole, spectral, settings.noise_tolerance, n_residual):
+        if _declared_contradicted(
+            twin, whole, spectral, settings.noise_tolerance, n_residual, propagated[o]
+        ):
             floor = NoiseFloor(whole.rms, NOT_DECLARED, whole.acf)
         step = _coarse_lattice(data, o, floor.rms)
         # a data floor already holds the quantizer's noise
