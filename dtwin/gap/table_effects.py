@@ -215,6 +215,28 @@ def soft_saturation(u: np.ndarray, limit: float, sharpness: float) -> np.ndarray
     return u * np.exp(-np.logaddexp(0.0, sharpness * log_ratio) / sharpness)
 
 
+def _with_drift(values, theta, data, *, column: int, names, sign: float) -> np.ndarray:
+    """Return ``values`` with a drift added (``sign`` 1) or removed (−1) in one column.
+
+    The drift is ``b0 + b1·τ + b2·τ²`` (``names`` its three params, signal units), ``τ`` the
+    time over the run's duration; ``values`` shape ``(n_samples, n_columns)``.
+    """
+    tau = np.arange(len(values)) * data.dt / (data.n_samples * data.dt)
+    out = values.copy()
+    out[:, column] += sign * (theta[names[0]] + theta[names[1]] * tau + theta[names[2]] * tau**2)
+    return out
+
+
+def _with_gain(values, theta, _data, *, column: int, name: str, inverse: bool) -> np.ndarray:
+    """Return ``values`` with one column times the gain ``theta[name]`` (or divided by it)."""
+    out = values.copy()
+    if inverse:
+        out[:, column] /= theta[name] or 1.0
+    else:
+        out[:, column] *= theta[name]
+    return out
+
+
 def _sensor_variants(data: UnitData, produced: frozenset[str]) -> list[Variant]:
     """Return the candidates of a recorded input another module produces being read wrong.
 
@@ -224,24 +246,14 @@ def _sensor_variants(data: UnitData, produced: frozenset[str]) -> list[Variant]:
     feeds another module is blamed on the module that produces it).
     """
     out = []
-    duration = data.n_samples * data.dt
     for i, signal in enumerate(data.spec.inputs):
         if signal not in produced:
             continue
         spread = float(np.std(data.inputs[slice(*data.parts["train"]), i])) or 1.0
         drifts = tuple(f"_e_{p}_in{i}" for p in ("b0", "b1", "b2"))
         gain = f"_e_gain_in{i}"
-
-        def drift(values, theta, data, i=i, b=drifts):
-            tau = np.arange(len(values)) * data.dt / duration
-            out = values.copy()
-            out[:, i] -= theta[b[0]] + theta[b[1]] * tau + theta[b[2]] * tau**2
-            return out
-
-        def scale(values, theta, _data, i=i, gain=gain):
-            out = values.copy()
-            out[:, i] /= theta[gain]
-            return out
+        drift = partial(_with_drift, column=i, names=drifts, sign=-1.0)
+        scale = partial(_with_gain, column=i, name=gain, inverse=True)
 
         out += [
             Variant("output_bias_drift", signal, data.model, drifts, dict.fromkeys(drifts, 0.0),
@@ -256,7 +268,6 @@ def _sensor_variants(data: UnitData, produced: frozenset[str]) -> list[Variant]:
 def _output_variants(data: UnitData) -> list[Variant]:
     out = []
     train = slice(*data.parts["train"])
-    duration = data.n_samples * data.dt
     for o, signal in enumerate(data.spec.outputs):
         y = data.outputs[train, o]
         spread = float(np.std(y)) or 1.0
@@ -269,32 +280,17 @@ def _output_variants(data: UnitData) -> list[Variant]:
             out[:, o] = np.clip(values[:, o], theta[low], theta[high])
             return out
 
-        def drift(values, theta, data, o=o, b=(b0, b1, b2)):
-            tau = np.arange(len(values)) * data.dt / duration
-            out = values.copy()
-            out[:, o] += theta[b[0]] + theta[b[1]] * tau + theta[b[2]] * tau**2
-            return out
-
-        def scale(values, theta, _data, o=o, gain=gain):
-            out = values.copy()
-            out[:, o] *= theta[gain]
-            return out
-
         def lag(values, theta, data, o=o, delay=delay, sign=1.0):
             out = values.copy()
             out[:, o] = _shift(values[:, o], sign * theta[delay], data.dt)
             return out
 
-        def undrift(values, theta, data, o=o, b=(b0, b1, b2)):
-            tau = np.arange(len(values)) * data.dt / duration
-            out = values.copy()
-            out[:, o] -= theta[b[0]] + theta[b[1]] * tau + theta[b[2]] * tau**2
-            return out
-
-        def unscale(values, theta, _data, o=o, gain=gain):
-            out = values.copy()
-            out[:, o] /= theta[gain] or 1.0
-            return out
+        drift, undrift = (
+            partial(_with_drift, column=o, names=(b0, b1, b2), sign=sign) for sign in (1.0, -1.0)
+        )
+        scale, unscale = (
+            partial(_with_gain, column=o, name=gain, inverse=inverse) for inverse in (False, True)
+        )
 
         wide = (float(np.min(y)) - spread, float(np.max(y)) + spread)
         drifts = (b0, b1, b2)
